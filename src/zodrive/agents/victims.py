@@ -1,0 +1,60 @@
+"""Black-box victims: a model becomes a query function (observation batch -> outputs).
+
+Attacks only ever see a `Victim`: a callable over numpy arrays plus how outputs map to the
+action taken. SB3 models are wrapped here; any plain callable works the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Literal
+
+import numpy as np
+import torch
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+QueryFn = Callable[[np.ndarray], np.ndarray]
+"""Observation batch (B, *obs_shape) -> outputs (B, k): Q-values or actions."""
+
+
+@dataclass(frozen=True)
+class Victim:
+    """A query function and what its outputs are.
+
+    `kind="discrete"`: outputs are per-action scores (e.g. Q-values); the action taken is
+    their argmax. `kind="continuous"`: outputs are the action itself.
+    """
+
+    query: QueryFn
+    kind: Literal["discrete", "continuous"]
+    obs_shape: tuple[int, ...]
+    differentiable: Callable[[torch.Tensor], torch.Tensor] | None = None
+    """White-box access (torch forward with gradients); only FGSM/PGD baselines use it."""
+
+    def actions(self, outputs: np.ndarray) -> np.ndarray:
+        """The action(s) the victim takes given its outputs."""
+        return outputs.argmax(axis=-1) if self.kind == "discrete" else outputs
+
+
+def sb3_victim(model: BaseAlgorithm) -> Victim:
+    """Wrap an SB3 DQN (Q-values) or DDPG (deterministic action) as a black-box victim."""
+    obs_shape = tuple(model.observation_space.shape)
+    policy = model.policy
+    policy.set_training_mode(False)
+    name = type(model).__name__
+    if name == "DQN":
+        net, kind = policy.q_net, "discrete"
+    elif name in ("DDPG", "TD3"):
+        net, kind = policy.actor, "continuous"
+    else:
+        raise TypeError(f"no victim adapter for {name}")
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            batch = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, *obs_shape))
+            return net(batch).numpy()
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return net(obs.reshape(-1, *obs_shape).float())
+
+    return Victim(query=query, kind=kind, obs_shape=obs_shape, differentiable=forward)

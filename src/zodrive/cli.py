@@ -1,0 +1,182 @@
+"""The `zodrive` command line. Every user-facing failure is one line on stderr, exit 2."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import yaml
+
+from zodrive.errors import ZodriveError
+
+log = logging.getLogger("zodrive")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2, like every other error
+        raise ZodriveError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="zodrive", description="Black-box attacks on deep-RL driving policies.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    env = sub.add_parser("env", help="environment presets")
+    env_sub = env.add_subparsers(dest="env_command", required=True, parser_class=_Parser)
+    show = env_sub.add_parser("show", help="print a preset's resolved config")
+    show.add_argument("preset")
+    show.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (deep merge)")
+    env_sub.add_parser("list", help="list presets")
+
+    train = sub.add_parser("train", help="train a DQN or DDPG agent")
+    train.add_argument("--algo", choices=["dqn", "ddpg"], required=True)
+    train.add_argument("--recipe", help="recipe name or YAML (default: the tuned recipe of --algo)")
+    train.add_argument("--seed", type=int, help="training seed (default: the recipe's)")
+    train.add_argument("--steps", type=_positive_int, help="total timesteps (default: the recipe's budget)")
+    train.add_argument("--out", type=Path, required=True, help="run folder")
+    train.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="recipe override")
+    train.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    train.add_argument("--tensorboard", action="store_true")
+    train.add_argument("--no-progress", action="store_true")
+
+    ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
+    ev.add_argument("model", help="SB3 zip or model folder")
+    ev.add_argument("--preset", help="preset (default: from the model's algorithm)")
+    ev.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    ev.add_argument("--episodes", type=_positive_int, default=100)
+    ev.add_argument("--seed", type=int, default=None, help="first evaluation seed (default 100000)")
+    ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
+    ev.add_argument("--workers", type=_positive_int, default=1)
+    _attack_flags(ev)
+    ev.add_argument("--no-progress", action="store_true")
+    return parser
+
+
+def _attack_flags(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("attack (black-box unless the name says otherwise)")
+    group.add_argument("--attack", help="attack config name/YAML or registry name")
+    group.add_argument("--eps", type=float)
+    group.add_argument("--norm", choices=["linf", "l2"])
+    group.add_argument("--mode", choices=["budgeted", "paper"])
+    group.add_argument("--steps", type=int, help="T, iterations per environment step")
+    group.add_argument("--n-directions", type=int, help="q, directions per iteration")
+    group.add_argument("--mu", type=float)
+    group.add_argument("--step-size", type=float)
+    group.add_argument("--l2-weight", type=float)
+    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto or none")
+    group.add_argument("--loss", choices=["margin", "paper"])
+    group.add_argument("--query-budget", type=int, help="max queries per environment step")
+    group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
+    group.add_argument("--no-early-stop", dest="early_stop", action="store_false")
+    group.add_argument("--attack-seed", type=int)
+
+
+def attack_spec_from_args(args: argparse.Namespace):
+    """The AttackSpec named by --attack with the CLI's flags on top (None without --attack)."""
+    from zodrive.attacks.spec import load_attack
+
+    if not args.attack:
+        return None
+    spec = load_attack(args.attack)
+    return spec.with_overrides(
+        eps=args.eps, norm=args.norm, mode=args.mode, steps=args.steps,
+        n_directions=args.n_directions, mu=args.mu, step_size=args.step_size,
+        l2_weight=args.l2_weight, target=args.target, loss=args.loss,
+        query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
+    )
+
+
+def cmd_env(args: argparse.Namespace) -> int:
+    from zodrive.envs import load_preset, preset_names
+
+    if args.env_command == "list":
+        print("\n".join(preset_names()))
+        return 0
+    print(yaml.safe_dump(load_preset(args.preset, args.set), sort_keys=False), end="")
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from zodrive.agents.training import load_recipe, train
+
+    overrides = list(args.set)
+    if args.steps:
+        overrides.append(f"total_timesteps={args.steps}")
+    recipe = load_recipe(args.recipe or args.algo, overrides)
+    if recipe["algo"] != args.algo:
+        raise ZodriveError(f"recipe {args.recipe!r} trains {recipe['algo']}, not {args.algo}")
+    path = train(recipe, args.out, seed=args.seed, preset_overrides=args.env_set,
+                 progress_bar=not args.no_progress, tensorboard=args.tensorboard)
+    print(f"saved {path}")
+    return 0
+
+
+def resolve_model_preset(model: str, preset: str | None, env_set: list[str]) -> dict[str, Any]:
+    """The preset to evaluate `model` in: given, or the one its algorithm trains on."""
+    from zodrive.agents.loading import model_algo
+    from zodrive.agents.training import KIND_OF_ALGO
+    from zodrive.envs import load_preset
+
+    return load_preset(preset or KIND_OF_ALGO[model_algo(model)], env_set)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from zodrive.agents.loading import model_file
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary
+
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    spec = attack_spec_from_args(args)
+    if spec is not None:  # validate the whole attack before any episode runs
+        from zodrive.agents.loading import load_model
+        from zodrive.agents.victims import sb3_victim
+        from zodrive.envs import feature_names
+
+        spec.build(sb3_victim(load_model(args.model, preset)), tuple(feature_names(preset)))
+    job = EvalJob(
+        model=str(model_file(args.model)), preset=preset,
+        attack=spec.to_dict() if spec else None,
+        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed,
+    )
+    summary = evaluate(job, args.episodes, args.out, workers=args.workers, progress=not args.no_progress)
+    print(format_summary(summary))
+    if args.out:
+        print(f"results: {args.out}/summary.json")
+    return 0
+
+
+COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        args = build_parser().parse_args(argv)
+        if args.verbose:
+            logging.getLogger("zodrive").setLevel(logging.INFO)
+        return COMMANDS[args.command](args)
+    except ZodriveError as exc:
+        print(f"zodrive: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("zodrive: interrupted; results written so far are kept (run again to resume)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

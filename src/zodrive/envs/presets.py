@@ -1,0 +1,97 @@
+"""Environment presets: resolve a preset config and build the gymnasium environment."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from zodrive.config import available, load_config
+from zodrive.errors import ZodriveError
+
+ENV_ID = "zodrive/highway-v0"
+ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+
+
+def register() -> None:
+    """Register `zodrive/highway-v0` with gymnasium (idempotent)."""
+    if ENV_ID not in gym.registry:
+        import highway_env  # noqa: F401  (registers highway-v0 and friends)
+
+        gym.register(id=ENV_ID, entry_point="zodrive.envs.highway:ZodriveHighwayEnv")
+
+
+def load_preset(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
+    """The resolved preset config (file, `base:` chain and overrides deep-merged)."""
+    config = load_config(name, "presets", overrides)
+    validate_preset(config, name)
+    config["name"] = config.get("name", name)
+    return config
+
+
+def validate_preset(config: dict[str, Any], name: str) -> None:
+    """Catch config mistakes up front, before highway-env turns them into tracebacks."""
+    hw = config.get("highway")
+    if not isinstance(hw, dict):
+        raise ZodriveError(f"preset {name!r} has no 'highway' mapping")
+    steps = config.get("max_episode_steps")
+    if not isinstance(steps, int) or steps < 1:
+        raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer")
+    obs = hw.get("observation", {})
+    if obs.get("type") not in ("Kinematics", "FastKinematics"):
+        raise ZodriveError(
+            f"preset {name!r}: observation.type must be Kinematics or FastKinematics"
+        )
+    action = hw.get("action", {}).get("type")
+    if action not in ("DiscreteMetaAction", "ContinuousAction"):
+        raise ZodriveError(
+            f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction"
+        )
+    for key in ("vehicles_count", "lanes_count", "simulation_frequency", "policy_frequency"):
+        value = hw.get(key)
+        if value is not None and (not isinstance(value, int) or value < 1):
+            raise ZodriveError(f"preset {name!r}: highway.{key} must be a positive integer")
+
+
+def action_kind(config: dict[str, Any]) -> str:
+    """`discrete` or `continuous`, from the preset's action type."""
+    return "discrete" if config["highway"]["action"]["type"] == "DiscreteMetaAction" else "continuous"
+
+
+def observation_shape(config: dict[str, Any]) -> tuple[int, int]:
+    """(vehicles, features) of the preset's observation."""
+    obs = config["highway"]["observation"]
+    return int(obs.get("vehicles_count", 5)), len(obs.get("features", ["presence", "x", "y", "vx", "vy"]))
+
+
+def feature_names(config: dict[str, Any]) -> list[str]:
+    return list(config["highway"]["observation"].get("features", ["presence", "x", "y", "vx", "vy"]))
+
+
+def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
+    """Build the environment a preset describes, capped at `max_episode_steps` decisions."""
+    register()
+    if render_mode == "rgb_array" and os.environ.get("SDL_VIDEODRIVER") == "dummy":
+        os.environ["SDL_VIDEODRIVER"] = "offscreen"  # "dummy" makes highway-env draw black frames
+    try:
+        env = gym.make(
+            config.get("env_id", ENV_ID),
+            config=config["highway"],
+            render_mode=render_mode,
+            max_episode_steps=config["max_episode_steps"],
+        )
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ZodriveError(f"preset {config.get('name', '?')!r} is not a valid highway-env config: {exc}") from exc
+    return env
+
+
+def preset_names() -> list[str]:
+    return available("presets")
+
+
+def obs_bounds(config: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """The box every (normalized, clipped) observation lies in: [-1, 1] per entry."""
+    shape = observation_shape(config)
+    return -np.ones(shape, dtype=np.float32), np.ones(shape, dtype=np.float32)

@@ -1,0 +1,238 @@
+"""Evaluate a model over fixed seeds, clean or under attack, resumably and in parallel.
+
+Episodes run with seeds S, S+1, ..., the same in every run, so two evaluations of the same
+episodes can be compared pair by pair. Per-episode records (`episodes.jsonl`) and per-step
+attack records (`steps.jsonl`) are appended as episodes finish; a run interrupted and
+started again with the same settings skips the episodes already on disk.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing as mp
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from zodrive.agents.loading import load_model
+from zodrive.agents.victims import sb3_victim
+from zodrive.attacks.spec import AttackSpec
+from zodrive.envs import feature_names, make_env
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.rollout import EpisodeRecord, run_episode
+from zodrive.evaluation.stats import mean_ci, rate_ci
+from zodrive.runinfo import command_line, versions, write_json
+from zodrive.wrappers import AttackWrapper
+
+log = logging.getLogger(__name__)
+
+DEFAULT_EVAL_SEED = 100_000  # training uses seeds < 100,000; evaluation starts here
+
+
+@dataclass
+class EvalJob:
+    """Everything a worker needs to roll out episodes (picklable)."""
+
+    model: str
+    preset: dict[str, Any]
+    attack: dict[str, Any] | None = None
+    seed: int = DEFAULT_EVAL_SEED
+    record_steps: bool = True
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def key(self) -> dict[str, Any]:
+        """What must match for a resumed run to reuse episodes on disk."""
+        return {"model": str(Path(self.model).resolve()), "preset": self.preset, "attack": self.attack, "seed": self.seed}
+
+
+_WORKER: dict[str, Any] = {}
+
+
+def _setup(job: EvalJob) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    model = load_model(job.model, job.preset)
+    victim = sb3_victim(model)
+    env = make_env(job.preset)
+    if job.attack is not None:
+        spec = AttackSpec.from_mapping(job.attack)
+        attack, objective, oracle = spec.build(victim, tuple(feature_names(job.preset)))
+        env = AttackWrapper(env, attack, objective, oracle)
+    _WORKER.update(job=job, victim=victim, env=env)
+
+
+def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    job: EvalJob = _WORKER["job"]
+    env = _WORKER["env"]
+    seed = job.seed + index
+    if isinstance(env, AttackWrapper):
+        env.attack.reseed(int(job.attack.get("seed", 0)) * 1_000_003 + seed)
+    steps: list[dict[str, Any]] = []
+    record = run_episode(
+        env, _WORKER["victim"], episode=index, seed=seed,
+        max_return=float(job.preset["max_episode_steps"]),
+        on_step=steps.append if job.record_steps else None,
+    )
+    return record.to_dict(), steps
+
+
+def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    rows = []
+    for line in path.read_text().splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            break  # a line cut by an interruption: everything after it is redone
+    return rows
+
+
+def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
+    with path.open("a") as handle:
+        for row in rows:
+            handle.write(json.dumps(row) + "\n")
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def run_episodes(job: EvalJob, indices: list[int], workers: int) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
+    """Yield (episode record, step records) as episodes finish, in any order."""
+    if workers <= 1 or len(indices) <= 1:
+        _setup(job)
+        for i in indices:
+            yield _episode(i)
+        return
+    ctx = mp.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_setup, initargs=(job,)) as pool:
+        yield from pool.map(_episode, indices, chunksize=1)
+
+
+def evaluate(
+    job: EvalJob,
+    episodes: int,
+    out: Path | None,
+    *,
+    workers: int = 1,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run `episodes` episodes (resuming from `out` if it holds part of this run); summarize."""
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
+    if workers < 1:
+        raise ZodriveError(f"workers must be >= 1, not {workers}")
+    load_model(job.model, job.preset)  # fail fast, in this process, on a bad model
+    done: dict[int, dict[str, Any]] = {}
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        key_path = out / "eval_key.json"
+        if key_path.exists():
+            if json.loads(key_path.read_text()) != json.loads(json.dumps(job.key())):
+                raise ZodriveError(f"{out} holds a different evaluation; choose another --out or delete it")
+            done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl") if r["episode"] < episodes}
+            _rewrite_consistent(out, done)
+        else:
+            for name in ("episodes.jsonl", "steps.jsonl"):
+                (out / name).unlink(missing_ok=True)
+            write_json(key_path, job.key())
+    todo = [i for i in range(episodes) if i not in done]
+    if done:
+        log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
+    bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
+    for record, steps in run_episodes(job, todo, workers):
+        done[record["episode"]] = record
+        if out is not None:
+            _append_jsonl(out / "steps.jsonl", steps)
+            _append_jsonl(out / "episodes.jsonl", [record])
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
+    if bar is not None:
+        bar.close()
+    records = [done[i] for i in range(episodes)]
+    summary = summarize(records, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    if out is not None:
+        write_json(out / "summary.json", summary)
+    return summary
+
+
+def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
+    """Drop step records of episodes that never finished (the run was cut mid-episode)."""
+    steps = [s for s in _read_jsonl(out / "steps.jsonl") if s["episode"] in done]
+    tmp = out / ".steps.jsonl.tmp"
+    tmp.write_text("".join(json.dumps(s) + "\n" for s in steps))
+    os.replace(tmp, out / "steps.jsonl")
+    tmp = out / ".episodes.jsonl.tmp"
+    tmp.write_text("".join(json.dumps(done[i]) + "\n" for i in sorted(done)))
+    os.replace(tmp, out / "episodes.jsonl")
+
+
+def _progress(total: int, enabled: bool, label: str):
+    if not enabled or total == 0:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=f"{label} episodes", unit="ep", dynamic_ncols=True)
+
+
+def summarize(
+    records: list[dict[str, Any]], job: EvalJob, steps: list[dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """The `summary.json` of an evaluation: return with CI, collision rate, attack stats."""
+    returns = np.array([r["return"] for r in records])
+    crashes = int(sum(r["crashed"] for r in records))
+    max_return = float(job.preset["max_episode_steps"])
+    low, high = mean_ci(returns, seed=job.seed)
+    summary: dict[str, Any] = {
+        "model": job.model,
+        "preset": job.preset.get("name"),
+        "episodes": len(records),
+        "seed": job.seed,
+        "mean_return": float(returns.mean()),
+        "ci95": [low, high],
+        "std_return": float(returns.std(ddof=1)) if len(returns) > 1 else 0.0,
+        "pct_of_max": float(100.0 * returns.mean() / max_return),
+        "collision_rate": crashes / len(records),
+        "collision_ci95": list(rate_ci(crashes, len(records))),
+        "mean_length": float(np.mean([r["length"] for r in records])),
+        "mean_speed": float(np.mean([r["mean_speed"] for r in records])),
+        "right_lane_share": float(np.mean([r["right_lane_share"] for r in records])),
+        "attack": None,
+    }
+    counts = [r["action_counts"] for r in records if r.get("action_counts")]
+    if counts:
+        total = np.sum(counts, axis=0)
+        summary["action_share"] = (total / total.sum()).round(4).tolist()
+    if job.attack is not None:
+        steps_total = sum(r["attacked_steps"] for r in records)
+        applicable = sum(r["applicable"] for r in records)
+        successes = sum(r["successes"] for r in records)
+        summary.update(
+            attack=job.attack["attack"],
+            eps=job.attack["eps"],
+            norm=job.attack["norm"],
+            mode=job.attack["mode"],
+            target=job.attack["target"],
+            attack_success_rate=successes / applicable if applicable else float("nan"),
+            attack_success_ci95=list(rate_ci(successes, applicable)),
+            target_base_rate=1.0 - applicable / steps_total if steps_total else float("nan"),
+            queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
+            max_linf=float(max(r["max_linf"] for r in records)),
+            attack_config=job.attack,
+        )
+        if steps:
+            summary.update(
+                mean_linf=float(np.mean([s["linf"] for s in steps])),
+                mean_l2=float(np.mean([s["l2"] for s in steps])),
+                iterations_per_step=float(np.mean([s["iterations"] for s in steps])),
+                attack_ms_per_step=float(1000 * np.mean([s["wall_time"] for s in steps])),
+            )
+    summary["command"] = command_line()
+    summary["versions"] = versions()
+    return summary

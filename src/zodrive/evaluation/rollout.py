@@ -1,0 +1,108 @@
+"""Episode rollouts: a victim drives an (optionally attacked) environment; records come out."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+
+from zodrive.agents.victims import Victim
+from zodrive.wrappers import AttackWrapper
+
+
+@dataclass
+class EpisodeRecord:
+    episode: int
+    seed: int
+    return_: float
+    pct_of_max: float
+    length: int
+    crashed: bool
+    mean_speed: float          # [m/s]
+    right_lane_share: float    # fraction of steps in the right-most lane
+    queries: int = 0           # attack queries over the episode
+    attacked_steps: int = 0
+    successes: int = 0         # steps where the attack met its goal (not already met)
+    applicable: int = 0        # steps where the clean policy did not already meet it
+    max_linf: float = 0.0
+    action_counts: list[int] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["return"] = data.pop("return_")
+        return data
+
+
+def act(victim: Victim, obs: np.ndarray) -> Any:
+    """The victim's deterministic action on one observation (not an attack query)."""
+    out = victim.query(obs[None])
+    action = victim.actions(out)[0]
+    return int(action) if victim.kind == "discrete" else np.clip(action, -1.0, 1.0)
+
+
+def run_episode(
+    env: gym.Env,
+    victim: Victim,
+    *,
+    episode: int,
+    seed: int,
+    max_return: float,
+    on_step: Callable[[dict[str, Any]], None] | None = None,
+    policy: Victim | None = None,
+) -> EpisodeRecord:
+    """Roll out one episode from `env.reset(seed=seed)`.
+
+    If `env` is wrapped in an `AttackWrapper`, the policy sees attacked observations and each
+    step's attack stats go to `on_step`. `policy` (default: `victim`) chooses the actions.
+    """
+    policy = policy or victim
+    attacked = isinstance(env, AttackWrapper) or _find_attack(env) is not None
+    obs, info = env.reset(seed=seed)
+    total, length, speeds, right = 0.0, 0, [], 0
+    crashed = False
+    queries = successes = applicable = 0
+    max_linf = 0.0
+    counts = np.zeros(5, dtype=np.int64) if policy.kind == "discrete" else None
+    pending = info.get("attack") if attacked else None
+    done = False
+    while not done:
+        action = act(policy, obs)
+        if counts is not None:
+            counts[action] += 1
+        if pending is not None:
+            queries += pending["queries"]
+            successes += pending["success"]
+            applicable += not pending["already"]
+            max_linf = max(max_linf, pending["linf"])
+            if on_step is not None:
+                on_step({"episode": episode, "step": length, "action": _plain(action), **pending})
+        obs, reward, terminated, truncated, info = env.step(action)
+        total += float(reward)
+        length += 1
+        speeds.append(float(info.get("speed", np.nan)))
+        right += float(info.get("rewards", {}).get("right_lane_reward", 0.0)) >= 1.0
+        crashed = bool(info.get("crashed", False))
+        pending = info.get("attack") if attacked else None
+        done = terminated or truncated
+    return EpisodeRecord(
+        episode=episode, seed=seed, return_=total, pct_of_max=100.0 * total / max_return,
+        length=length, crashed=crashed, mean_speed=float(np.nanmean(speeds)) if speeds else 0.0,
+        right_lane_share=right / max(length, 1), queries=queries,
+        attacked_steps=length if attacked else 0, successes=int(successes),
+        applicable=int(applicable), max_linf=max_linf,
+        action_counts=counts.tolist() if counts is not None else None,
+    )
+
+
+def _find_attack(env: gym.Env) -> AttackWrapper | None:
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, AttackWrapper):
+            return env
+        env = env.env
+    return None
+
+
+def _plain(action: Any) -> Any:
+    return action if isinstance(action, int) else [float(a) for a in np.asarray(action)]

@@ -1,0 +1,67 @@
+"""What every run folder records: resolved config, command, package versions, seed."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import sys
+import tempfile
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+PACKAGES = ("zodrive", "highway-env", "gymnasium", "stable-baselines3", "torch", "numpy")
+
+
+def versions() -> dict[str, str]:
+    """Installed versions of the packages that decide zodrive's numbers."""
+    found = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = "not installed"
+    return found
+
+
+def command_line() -> str:
+    """The command as the user typed it (the console script name, not the Python path)."""
+    argv = list(sys.argv)
+    if argv and argv[0].endswith(("zodrive", "__main__.py")):
+        argv[0] = "zodrive"
+    return shlex.join(argv)
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write a file so that a reader never sees it half-written."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w") as handle:
+        handle.write(text)
+    os.replace(tmp, path)
+
+
+def write_json(path: Path, data: Any) -> None:
+    write_atomic(path, json.dumps(data, indent=2, sort_keys=False, default=_jsonable) + "\n")
+
+
+def _jsonable(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"not JSON serializable: {type(value).__name__}")
+
+
+def write_run_info(folder: Path, config: dict[str, Any], seed: int | None) -> None:
+    """Record config, command, versions and seed in `folder` (created if needed)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_atomic(folder / "config.yaml", yaml.safe_dump(config, sort_keys=False))
+    write_json(
+        folder / "run.json",
+        {"command": command_line(), "seed": seed, "versions": versions()},
+    )

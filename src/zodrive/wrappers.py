@@ -1,0 +1,110 @@
+"""The one wrapper that applies an attack to what a policy observes.
+
+`AttackWrapper` (a gymnasium wrapper) replaces each observation the agent receives with the
+attacked one; the simulator's true state is untouched. Evaluation and adversarial training
+both use it; inside SB3's vectorized envs each copy attacks its own environment.
+`VecAttackWrapper` does the same for an SB3 VecEnv and attacks all environments of the
+process in one batch (one victim call per iteration for all of them).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from zodrive.attacks.base import Attack, AttackResult
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.errors import ZodriveError
+
+
+def attack_observations(
+    obs: np.ndarray, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False
+) -> tuple[AttackResult, float]:
+    """Attack a batch of clean observations; returns the result and wall time [s]."""
+    if not np.all(np.isfinite(obs)):
+        raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
+    start = time.perf_counter()
+    oracle.begin_step(rows=len(obs))
+    result = attack.perturb(obs, oracle, objective, trace=trace)
+    return result, time.perf_counter() - start
+
+
+def step_stats(result: AttackResult, row: int, wall: float) -> dict[str, Any]:
+    """The per-step record of one environment row (goes into `info["attack"]`)."""
+    return {
+        "queries": int(result.queries[row]),
+        "iterations": int(result.iterations[row]),
+        "success": bool(result.success[row]),
+        "already": bool(result.already[row]),
+        "linf": float(result.linf[row]),
+        "l2": float(result.l2[row]),
+        "wall_time": wall,
+    }
+
+
+class AttackWrapper(gym.ObservationWrapper):
+    """Feed the policy attacked observations; `info["attack"]` has the step's stats.
+
+    `info["clean_obs"]` keeps the true observation (for rendering what was really there).
+    """
+
+    def __init__(self, env: gym.Env, attack: Attack, objective: Objective, oracle: QueryOracle,
+                 *, trace: bool = False) -> None:
+        super().__init__(env)
+        self.attack, self.objective, self.oracle = attack, objective, oracle
+        self.trace = trace
+        self.last: AttackResult | None = None
+        self.last_stats: dict[str, Any] = {}
+        self.clean_obs: np.ndarray | None = None
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        self.clean_obs = observation
+        result, wall = attack_observations(
+            observation[None], self.attack, self.objective, self.oracle, trace=self.trace
+        )
+        self.last, self.last_stats = result, step_stats(result, 0, wall)
+        return result.x_adv[0]
+
+    def reset(self, **kwargs: Any):  # type: ignore[override]
+        self.oracle.begin_episode()
+        obs, info = super().reset(**kwargs)
+        return obs, self._info(info)
+
+    def step(self, action: Any):  # type: ignore[override]
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, reward, terminated, truncated, self._info(info)
+
+    def _info(self, info: dict[str, Any]) -> dict[str, Any]:
+        info = dict(info)
+        info["attack"] = dict(self.last_stats)
+        info["clean_obs"] = self.clean_obs
+        return info
+
+
+class VecAttackWrapper(VecEnvWrapper):
+    """Attack every environment of an SB3 VecEnv together: one victim call per iteration."""
+
+    def __init__(self, venv: VecEnv, attack: Attack, objective: Objective, oracle: QueryOracle) -> None:
+        super().__init__(venv)
+        self.attack, self.objective, self.oracle = attack, objective, oracle
+
+    def _attack(self, obs: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        result, wall = attack_observations(obs, self.attack, self.objective, self.oracle)
+        return result.x_adv, [step_stats(result, i, wall / len(obs)) for i in range(len(obs))]
+
+    def reset(self) -> np.ndarray:
+        obs, _ = self._attack(self.venv.reset())
+        return obs
+
+    def step_wait(self):  # type: ignore[no-untyped-def]
+        obs, rewards, dones, infos = self.venv.step_wait()
+        adv, stats = self._attack(obs)
+        for info, stat, clean in zip(infos, stats, obs):
+            info["attack"] = stat
+            info["clean_obs"] = clean
+        return adv, rewards, dones, infos
