@@ -164,7 +164,11 @@ COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from zodrive.runinfo import set_command
+
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    argv = list(sys.argv[1:] if argv is None else argv)
+    set_command(argv)
     try:
         args = build_parser().parse_args(argv)
         if args.verbose:

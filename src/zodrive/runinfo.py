@@ -28,12 +28,18 @@ def versions() -> dict[str, str]:
     return found
 
 
+_COMMAND: list[str] | None = None
+
+
+def set_command(argv: list[str]) -> None:
+    """Remember the CLI arguments of this process (the CLI calls this once)."""
+    global _COMMAND
+    _COMMAND = ["zodrive", *argv]
+
+
 def command_line() -> str:
-    """The command as the user typed it (the console script name, not the Python path)."""
-    argv = list(sys.argv)
-    if argv and argv[0].endswith(("zodrive", "__main__.py")):
-        argv[0] = "zodrive"
-    return shlex.join(argv)
+    """The command as the user typed it (`zodrive ...`), or the Python command line."""
+    return shlex.join(_COMMAND if _COMMAND is not None else sys.argv)
 
 
 def write_atomic(path: Path, text: str) -> None:

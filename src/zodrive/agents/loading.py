@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -72,7 +73,9 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None) -> BaseAl
     if preset is not None:
         check_fits(info, preset, file)
     try:
-        return ALGOS[info["algo"]].load(file, device="cpu")
+        with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
+            warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
+            return ALGOS[info["algo"]].load(file, device="cpu")
     except Exception as exc:
         raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
 

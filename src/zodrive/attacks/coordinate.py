@@ -26,7 +26,7 @@ class CoordinateFD(GradientEstimateAttack):
     def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
         free = np.flatnonzero(mask)
         q = min(self.n_directions, free.size)
-        u = np.zeros((n, self.n_directions, dim))
+        u = np.zeros((n, q, dim))  # q <= number of free coordinates: no wasted queries
         picks = np.argsort(self.rng.random((n, free.size)), axis=1)[:, :q]
         rows = np.repeat(np.arange(n), q)
         u[rows, np.tile(np.arange(q), n), free[picks].reshape(-1)] = 1.0

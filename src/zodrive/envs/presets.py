@@ -49,10 +49,10 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
         raise ZodriveError(
             f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction"
         )
-    for key in ("vehicles_count", "lanes_count", "simulation_frequency", "policy_frequency"):
+    for key, least in (("vehicles_count", 0), ("lanes_count", 1), ("simulation_frequency", 1), ("policy_frequency", 1)):
         value = hw.get(key)
-        if value is not None and (not isinstance(value, int) or value < 1):
-            raise ZodriveError(f"preset {name!r}: highway.{key} must be a positive integer")
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < least):
+            raise ZodriveError(f"preset {name!r}: highway.{key} must be an integer >= {least}")
 
 
 def action_kind(config: dict[str, Any]) -> str:

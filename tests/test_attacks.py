@@ -1,0 +1,154 @@
+"""Attack engine: estimators, budgets, determinism, query counting, bad parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from toys import FEATURES, linear_victim, observations
+from zodrive.agents.victims import Victim
+from zodrive.attacks import ATTACKS, AttackSpec, QueryOracle, ThreatModel, make_attack
+from zodrive.attacks.base import GradientEstimateAttack
+from zodrive.errors import ZodriveError
+
+ESTIMATORS = [name for name, cls in ATTACKS.items() if issubclass(cls, GradientEstimateAttack)]
+
+
+@pytest.mark.parametrize("name", ESTIMATORS)
+def test_estimator_points_along_the_true_gradient(name: str) -> None:
+    """On f(x) = 0.5 x^T H x + b^T x the estimate's direction matches H x + b."""
+    d = 25
+    rng = np.random.default_rng(0)
+    m = rng.standard_normal((d, d))
+    hess, b = m @ m.T / d, rng.standard_normal(d)
+    x = rng.standard_normal(d)
+    threat = ThreatModel(frozen=())
+    attack = make_attack(name, threat, n_directions=4000, mu=1e-3, seed=0)
+    mask = np.ones(d)
+    u = attack.directions(1, d, mask)
+    f = lambda z: 0.5 * np.einsum("...i,ij,...j->...", z, hess, z) + z @ b  # noqa: E731
+    points = [x[None, None]] + [x + s * attack.mu * u for s in ((1, -1) if attack.antithetic else (1,))]
+    values = f(np.concatenate(points, axis=1))
+    g = attack.estimate(values, u, d)[0]
+    true = hess @ x + b
+    cosine = g @ true / (np.linalg.norm(g) * np.linalg.norm(true))
+    assert cosine > 0.9, cosine
+    if name in ("zo-sgd", "nes", "spsa", "coordinate-fd"):  # unbiased: the scale is right too
+        assert np.linalg.norm(g) / np.linalg.norm(true) == pytest.approx(1.0, rel=0.25)
+
+
+def _run(name: str, victim: Victim, x0: np.ndarray, seed: int = 0, **kw):
+    spec = AttackSpec(attack=name, seed=seed, **kw)
+    attack, objective, oracle = spec.build(victim, FEATURES)
+    oracle.begin_step(rows=len(x0))
+    return attack.perturb(x0, oracle, objective), oracle, attack
+
+
+@pytest.mark.parametrize("name", list(ATTACKS))
+@pytest.mark.parametrize("norm", ["linf", "l2"])
+def test_every_attack_stays_in_budget_and_keeps_presence(name: str, norm: str) -> None:
+    x0 = observations(16)
+    eps = 0.2 if norm == "linf" else 0.5
+    result, _, _ = _run(name, linear_victim(), x0, eps=eps, norm=norm, steps=20)
+    delta = (result.x_adv - x0).reshape(16, -1)
+    size = np.abs(delta).max(axis=1) if norm == "linf" else np.linalg.norm(delta, axis=1)
+    assert size.max() <= eps + 1e-5
+    np.testing.assert_array_equal(result.x_adv[:, :, 0], x0[:, :, 0])
+    assert result.x_adv.min() >= -1 and result.x_adv.max() <= 1
+
+
+@pytest.mark.parametrize("name", list(ATTACKS))
+def test_every_attack_is_deterministic_given_a_seed(name: str) -> None:
+    x0 = observations(8)
+    a, _, _ = _run(name, linear_victim(), x0, seed=3, steps=15)
+    b, _, _ = _run(name, linear_victim(), x0, seed=3, steps=15)
+    np.testing.assert_array_equal(a.x_adv, b.x_adv)
+    np.testing.assert_array_equal(a.queries, b.queries)
+
+
+@pytest.mark.parametrize("name", [n for n in ATTACKS if n != "uniform-noise"])
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_every_attack_beats_the_noise_floor(name: str, kind: str) -> None:
+    victim = linear_victim(seed=2, kind=kind)
+    x0 = observations(64, seed=5)
+    noise, _, _ = _run("uniform-noise", victim, x0, eps=0.5)
+    result, _, _ = _run(name, victim, x0, steps=60, eps=0.5)
+    applicable = ~result.already
+    assert applicable.sum() > 10
+    margin = 0.0 if name == "fgsm" else 0.15  # one linearized step: only required to not lose
+    assert result.success[applicable].mean() > noise.success[applicable].mean() + margin
+
+
+@pytest.mark.parametrize("target", ["none", "FASTER"])
+def test_untargeted_and_targeted_objectives(target: str) -> None:
+    victim = linear_victim(seed=4)
+    x0 = observations(32)
+    result, _, _ = _run("zo-signsgd", victim, x0, target=target, eps=0.4)
+    clean_action = victim.query(x0).argmax(1)
+    adv_action = victim.query(result.x_adv).argmax(1)
+    hit = result.success
+    if target == "none":
+        assert np.all(adv_action[hit] != clean_action[hit])
+    else:
+        assert np.all(adv_action[hit] == 3)
+    assert hit.mean() > 0.3
+
+
+def test_oracle_counts_every_query_exactly() -> None:
+    calls: list[int] = []
+    base = linear_victim()
+
+    def counted(x: np.ndarray) -> np.ndarray:
+        calls.append(len(x))
+        return base.query(x)
+
+    victim = Victim(query=counted, kind="discrete", obs_shape=(5, 5))
+    x0 = observations(4)
+    result, oracle, attack = _run("zo-signsgd", victim, x0, steps=10, n_directions=7, early_stop=False)
+    assert oracle.step_queries == sum(calls) == result.queries.sum()
+    assert oracle.calls == len(calls) == 1 + 10  # clean batch, then one call per iteration
+    assert result.queries.max() == attack.queries_per_step() == 1 + 10 * 8
+
+
+def test_query_budget_stops_the_attack() -> None:
+    x0 = observations(3)
+    result, oracle, _ = _run("zo-signsgd", linear_victim(), x0, steps=100, n_directions=9,
+                             early_stop=False, query_budget=50)
+    assert oracle.step_queries <= 3 * 50
+    assert result.queries.max() <= 50
+
+
+def test_plain_numpy_function_is_a_victim() -> None:
+    w = np.random.default_rng(0).standard_normal((25, 5))
+    victim = Victim(query=lambda x: x.reshape(len(x), -1) @ w, kind="discrete", obs_shape=(5, 5))
+    result, _, _ = _run("nes", victim, observations(16), eps=0.3)
+    assert result.success.any()
+
+
+def test_white_box_attacks_refuse_a_black_box_victim() -> None:
+    victim = Victim(query=linear_victim().query, kind="discrete", obs_shape=(5, 5))
+    with pytest.raises(ZodriveError, match="white-box"):
+        AttackSpec(attack="pgd").build(victim, FEATURES)
+
+
+@pytest.mark.parametrize(
+    "changes,message",
+    [
+        ({"eps": 0.0}, "eps"), ({"eps": -1.0}, "eps"), ({"steps": 0}, "steps"),
+        ({"n_directions": 0}, "n_directions"), ({"attack": "nope"}, "unknown attack"),
+        ({"target": "WARP"}, "unknown target"), ({"target": 7}, "out of range"),
+        ({"mu": 0.0}, "mu"), ({"norm": "l1"}, "norm"), ({"query_budget": 0}, "query_budget"),
+        ({"loss": "hinge"}, "loss"),
+    ],
+)
+def test_bad_attack_parameters_give_one_clear_error(changes: dict, message: str) -> None:
+    with pytest.raises(ZodriveError, match=message):
+        AttackSpec(**changes).build(linear_victim(), FEATURES)
+
+
+def test_paper_mode_is_unconstrained_but_clipped() -> None:
+    x0 = observations(8)
+    result, _, _ = _run("zo-signsgd", linear_victim(), x0, mode="paper", eps=0.05,
+                        step_size=0.05, early_stop=False, l2_weight=0.0)
+    assert result.linf.max() > 0.05
+    assert result.x_adv.min() >= -1 and result.x_adv.max() <= 1

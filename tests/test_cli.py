@@ -1,0 +1,127 @@
+"""The command line: a training + evaluation smoke run and every bad-input path."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from zodrive.cli import main
+
+
+@pytest.fixture(scope="session")
+def tiny_dqn(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("dqn")
+    code = main(["train", "--algo", "dqn", "--steps", "300", "--out", str(out), "--no-progress",
+                 "--set", "hyperparameters.learning_starts=100"])
+    assert code == 0
+    return out
+
+
+def test_train_writes_a_complete_run_folder(tiny_dqn: Path) -> None:
+    for name in ("model.zip", "config.yaml", "run.json", "train.json", "progress.csv", "monitor.monitor.csv"):
+        assert (tiny_dqn / name).is_file(), name
+    run = json.loads((tiny_dqn / "run.json").read_text())
+    assert run["seed"] == 0 and "stable-baselines3" in run["versions"]
+    assert "train --algo dqn" in run["command"]
+
+
+def test_evaluate_writes_summary_and_records(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "eval"
+    assert main(["evaluate", str(tiny_dqn), "--episodes", "2", "--seed", "5", "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("mean_return", "ci95", "pct_of_max", "collision_rate", "episodes", "seed"):
+        assert key in summary
+    assert summary["episodes"] == 2 and summary["seed"] == 5
+    episodes = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert [e["seed"] for e in episodes] == [5, 6]
+    assert "mean return" in capsys.readouterr().out
+
+
+def test_evaluation_is_deterministic_and_resumes(tiny_dqn: Path, tmp_path: Path) -> None:
+    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--attack", "zo-signsgd", "--steps", "5"]
+    assert main(args + ["--out", str(tmp_path / "a")]) == 0
+    assert main(args + ["--out", str(tmp_path / "b")]) == 0
+    a = json.loads((tmp_path / "a" / "summary.json").read_text())
+    b = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert a["mean_return"] == b["mean_return"] and a["queries_per_step"] == b["queries_per_step"]
+    # cut the run after one episode, then resume: the same numbers
+    lines = (tmp_path / "a" / "episodes.jsonl").read_text().splitlines()
+    (tmp_path / "a" / "episodes.jsonl").write_text(lines[0] + "\n" + lines[1][:10])
+    (tmp_path / "a" / "summary.json").unlink()
+    assert main(args + ["--out", str(tmp_path / "a")]) == 0
+    c = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert c["mean_return"] == a["mean_return"]
+    assert len((tmp_path / "a" / "episodes.jsonl").read_text().splitlines()) == 3
+
+
+def test_attacked_summary_has_attack_fields(tiny_dqn: Path, tmp_path: Path) -> None:
+    out = tmp_path / "att"
+    assert main(["evaluate", str(tiny_dqn), "--episodes", "1", "--no-progress", "--attack", "zo-signsgd",
+                 "--steps", "3", "--n-directions", "4", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("attack", "eps", "attack_success_rate", "queries_per_step", "max_linf", "target_base_rate"):
+        assert key in summary
+    assert summary["max_linf"] <= 0.2 + 1e-6
+    assert summary["queries_per_step"] <= 1 + 3 * 5
+    steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
+    assert {"queries", "iterations", "success", "linf", "l2", "wall_time"} <= set(steps[0])
+
+
+def _error(capsys, args: list[str]) -> str:
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("zodrive: error:") and "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_bad_model_files(tmp_path: Path, capsys) -> None:
+    assert "not found" in _error(capsys, ["evaluate", str(tmp_path / "missing.zip")])
+    junk = tmp_path / "junk.zip"
+    junk.write_bytes(b"not a zip at all")
+    assert "not a stable-baselines3 model" in _error(capsys, ["evaluate", str(junk)])
+    empty = tmp_path / "empty.zip"
+    with zipfile.ZipFile(empty, "w") as z:
+        z.writestr("hello.txt", "hi")
+    assert "stable-baselines3" in _error(capsys, ["evaluate", str(empty)])
+
+
+def test_model_that_does_not_fit_the_preset(tiny_dqn: Path, capsys) -> None:
+    assert "DQN model" in _error(capsys, ["evaluate", str(tiny_dqn), "--preset", "continuous"])
+    err = _error(capsys, ["evaluate", str(tiny_dqn), "--env-set", "highway.observation.vehicles_count=7"])
+    assert "shape" in err
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["env", "show", "nope"], "unknown preset"),
+        (["env", "show", "discrete", "--set", "highway.lanes_count"], "KEY.PATH=VALUE"),
+        (["evaluate", "m.zip", "--episodes", "0"], "positive integer"),
+        (["evaluate", "m.zip", "--episodes", "abc"], "positive integer"),
+        (["train", "--algo", "ppo", "--out", "x"], "invalid choice"),
+    ],
+)
+def test_bad_arguments(args: list[str], message: str, capsys) -> None:
+    assert message in _error(capsys, args)
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [(["--eps", "0"], "eps"), (["--steps", "0"], "steps"), (["--n-directions", "0"], "n_directions"),
+     (["--attack", "nope"], "unknown attack"), (["--target", "WARP"], "unknown target")],
+)
+def test_bad_attack_flags(tiny_dqn: Path, flags: list[str], message: str, capsys) -> None:
+    args = ["evaluate", str(tiny_dqn), "--episodes", "1"] + (["--attack", "zo-signsgd"] if "--attack" not in flags else [])
+    assert message in _error(capsys, args + flags)
+
+
+def test_console_script_exits_nonzero_without_traceback(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "zodrive", "evaluate", str(tmp_path / "nope.zip")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [f"zodrive: error: model file not found: {tmp_path / 'nope.zip'}"]

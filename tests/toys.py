@@ -1,0 +1,35 @@
+"""Small victims with known structure, for fast attack tests (no highway-env)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from zodrive.agents.victims import Victim
+
+FEATURES = ("presence", "x", "y", "vx", "vy")
+
+
+def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Victim:
+    """A small tanh MLP over (5, 5) observations: 5 Q-values or a 2-d action in [-1, 1]."""
+    gen = torch.Generator().manual_seed(seed)
+    out = 5 if kind == "discrete" else 2
+    w1 = torch.randn(25, hidden, generator=gen) * 0.8
+    w2 = torch.randn(hidden, out, generator=gen) * 0.8
+
+    def forward(x: torch.Tensor) -> torch.Tensor:
+        y = torch.tanh(x.reshape(-1, 25).float() @ w1) @ w2
+        return torch.tanh(y) if kind == "continuous" else y
+
+    def query(x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return forward(torch.from_numpy(np.asarray(x, dtype=np.float32))).numpy()
+
+    return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward)
+
+
+def observations(n: int, seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-0.6, 0.6, size=(n, 5, 5)).astype(np.float32)
+    x[:, :, 0] = 1.0  # presence
+    return x
