@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
 import yaml
 
 from zodrive.errors import ZodriveError
@@ -64,6 +65,41 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--workers", type=_positive_int, default=1)
     _attack_flags(ev)
     ev.add_argument("--no-progress", action="store_true")
+
+    render = sub.add_parser("render", help="render an episode (PNG + GIF), optionally attacked")
+    render.add_argument("model")
+    render.add_argument("--preset")
+    render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    render.add_argument("--seed", type=int, default=None, help="first episode seed (default 100000)")
+    render.add_argument("--out", type=Path, required=True)
+    render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
+                        help="try up to N seeds until an episode ends in a collision")
+    _attack_flags(render)
+
+    adv = sub.add_parser("adv-train", help="adversarial training (paper Algorithm 2)")
+    adv.add_argument("model")
+    adv.add_argument("--attack", default="zo-signsgd", help="attack config name/YAML or registry name")
+    adv.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
+                     help="attack override, e.g. steps=50 (T) or eps=0.1")
+    adv.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
+    adv.add_argument("--out", type=Path, required=True)
+    adv.add_argument("--preset")
+    adv.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    adv.add_argument("--seed", type=int, default=1, help="seed of the adversarial phase")
+    adv.add_argument("--warmup", type=int, default=500, help="attacked steps collected before updates")
+    adv.add_argument("--no-progress", action="store_true")
+
+    rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
+    rep.add_argument("--out", type=Path, required=True)
+    rep.add_argument("--episodes", type=_positive_int, default=100)
+    rep.add_argument("--workers", type=_positive_int, default=2)
+    rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes)")
+    rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
+    rep.add_argument("--no-progress", action="store_true")
+
+    card = sub.add_parser("card", help="write CARD.md for a trained model folder")
+    card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
+    card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
     return parser
 
 
@@ -160,7 +196,70 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate}
+def cmd_render(args: argparse.Namespace) -> int:
+    from zodrive.agents.loading import load_model
+    from zodrive.agents.victims import sb3_victim
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
+    from zodrive.evaluation.video import record_episode, save_gif, save_png
+    from zodrive.wrappers import make_attacked_env
+
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    victim = sb3_victim(load_model(args.model, preset))
+    spec = attack_spec_from_args(args)
+    env = make_attacked_env(preset, victim, spec, render_mode="rgb_array")
+    first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
+    for seed in range(first, first + args.until_crash):
+        if spec is not None:
+            env.attack.reseed(spec.seed * 1_000_003 + seed)
+        frames, info = record_episode(env, victim, seed)
+        if info["crashed"]:
+            break
+    if float(np.asarray(frames[0].image).max()) == 0:
+        raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
+    title = f"{spec.attack} eps={spec.eps} | " if spec else "clean | "
+    save_png(frames, args.out / "episode.png", title=title)
+    save_gif(frames, args.out / "episode.gif", title=title)
+    from zodrive.runinfo import write_json
+
+    write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None})
+    print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
+          f"{'crashed' if info['crashed'] else 'no collision'} -> {args.out}/episode.png, episode.gif")
+    return 0
+
+
+def cmd_adv_train(args: argparse.Namespace) -> int:
+    from zodrive.attacks.spec import load_attack
+    from zodrive.defense.adversarial import adversarial_train
+
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    spec = load_attack(args.attack, args.attack_set)
+    path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
+                             warmup=args.warmup, progress_bar=not args.no_progress)
+    print(f"saved {path}")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from zodrive.experiments.report import table_markdown
+    from zodrive.experiments.reproduce import reproduce
+
+    table = reproduce(args.out, episodes=args.episodes, workers=args.workers, quick=args.quick,
+                      retrain=args.retrain, progress=not args.no_progress)
+    print(table_markdown(table["rows"]), end="")
+    print(f"report: {args.out}/report.html")
+    return 0
+
+
+def cmd_card(args: argparse.Namespace) -> int:
+    from zodrive.agents.card import write_card
+
+    path = write_card(args.folder, baseline=args.baseline)
+    print(f"wrote {path}")
+    return 0
+
+
+COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
+            "adv-train": cmd_adv_train, "reproduce": cmd_reproduce}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

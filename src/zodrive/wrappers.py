@@ -108,3 +108,15 @@ class VecAttackWrapper(VecEnvWrapper):
             info["attack"] = stat
             info["clean_obs"] = clean
         return adv, rewards, dones, infos
+
+
+def make_attacked_env(preset: dict[str, Any], victim, spec=None, *, render_mode: str | None = None,
+                      trace: bool = False) -> gym.Env:
+    """The preset's environment, wrapped in `AttackWrapper` when an `AttackSpec` is given."""
+    from zodrive.envs import feature_names, make_env
+
+    env = make_env(preset, render_mode=render_mode)
+    if spec is None:
+        return env
+    attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
+    return AttackWrapper(env, attack, objective, oracle, trace=trace)

@@ -22,12 +22,11 @@ import numpy as np
 from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
-from zodrive.envs import feature_names, make_env
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import EpisodeRecord, run_episode
 from zodrive.evaluation.stats import mean_ci, rate_ci
 from zodrive.runinfo import command_line, versions, write_json
-from zodrive.wrappers import AttackWrapper
+from zodrive.wrappers import AttackWrapper, make_attacked_env
 
 log = logging.getLogger(__name__)
 
@@ -57,14 +56,9 @@ def _setup(job: EvalJob) -> None:
     import torch
 
     torch.set_num_threads(1)
-    model = load_model(job.model, job.preset)
-    victim = sb3_victim(model)
-    env = make_env(job.preset)
-    if job.attack is not None:
-        spec = AttackSpec.from_mapping(job.attack)
-        attack, objective, oracle = spec.build(victim, tuple(feature_names(job.preset)))
-        env = AttackWrapper(env, attack, objective, oracle)
-    _WORKER.update(job=job, victim=victim, env=env)
+    victim = sb3_victim(load_model(job.model, job.preset))
+    spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
+    _WORKER.update(job=job, victim=victim, env=make_attacked_env(job.preset, victim, spec))
 
 
 def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:

@@ -1,0 +1,86 @@
+"""Model cards: how a shipped model was made and how it scores, from its run folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from zodrive.errors import ZodriveError
+from zodrive.runinfo import write_atomic
+
+PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
+
+
+def _load(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise ZodriveError(f"{path} is missing (train and evaluate into the folder first)")
+    return yaml.safe_load(path.read_text()) if path.suffix == ".yaml" else json.loads(path.read_text())
+
+
+def _result_line(summary: dict[str, Any]) -> str:
+    low, high = summary["ci95"]
+    return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
+            f"collision rate {summary['collision_rate']:.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
+            f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
+            f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
+
+
+def write_card(folder: Path, *, baseline: Path | None = None) -> Path:
+    """Write `folder/CARD.md` from run.json, train.json, config.yaml and eval/summary.json."""
+    run, train = _load(folder / "run.json"), _load(folder / "train.json")
+    config = _load(folder / "config.yaml")
+    summary = _load(folder / "eval" / "summary.json")
+    algo = train["algo"]
+    adversarial = train.get("kind") == "adversarial"
+    recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "steps", "warmup") if k in config}
+    kind = "adversarially trained " if adversarial else ""
+    lines = [
+        f"# {folder.name}: {kind}{algo.upper()} on the `{config['preset']['name']}` preset",
+        "",
+        "Made by this repository's own commands:",
+        "",
+        "```",
+        run["command"],
+        summary["command"],
+        f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else ""),
+        "```",
+        "",
+        f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
+        f"wall time: {train['wall_time_s'] / 60:.1f} min ({train['steps_per_s']:.0f} steps/s on a 2-core CPU)",
+        "- versions: " + ", ".join(f"{k} {v}" for k, v in run["versions"].items()),
+        "",
+        "## Evaluation",
+        "",
+        f"**Mean return {_result_line(summary)}.**",
+        "",
+    ]
+    if not adversarial:
+        lines.append(f"Paper (Table 1, Initial Training): {PAPER_TARGETS.get(algo, float('nan')):.2f}.")
+    else:
+        lines.append("Trained further on attacked observations (paper Algorithm 2); "
+                     f"{train.get('attack_queries', 0):,} attack queries during training.")
+    if summary.get("action_share"):
+        names = ["LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
+        lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(names, summary["action_share"])) + ".")
+    if baseline is not None:
+        base = _load(baseline / "summary.json")
+        lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
+                      f"{_result_line(base)}."]
+    lines += [
+        "",
+        "## Recipe" if not adversarial else "## Adversarial training",
+        "",
+        "```yaml",
+        yaml.safe_dump(recipe, sort_keys=False).rstrip(),
+        "```",
+        "",
+        "The resolved environment preset is in `config.yaml`; the training curve in `monitor.monitor.csv`"
+        " (episode returns) and `progress.csv` (SB3 logger).",
+        "",
+    ]
+    path = folder / "CARD.md"
+    write_atomic(path, "\n".join(lines))
+    return path
