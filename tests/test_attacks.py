@@ -152,3 +152,20 @@ def test_paper_mode_is_unconstrained_but_clipped() -> None:
                         step_size=0.05, early_stop=False, l2_weight=0.0)
     assert result.linf.max() > 0.05
     assert result.x_adv.min() >= -1 and result.x_adv.max() <= 1
+
+
+def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
+    """Batched across environments: the victim sees one call per iteration, whatever N is."""
+    calls: list[int] = []
+    base = linear_victim()
+
+    def counted(x: np.ndarray) -> np.ndarray:
+        calls.append(len(x))
+        return base.query(x)
+
+    victim = Victim(query=counted, kind="discrete", obs_shape=(5, 5))
+    for n in (1, 6):
+        calls.clear()
+        result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=4, early_stop=False)
+        assert len(calls) == 11
+        assert calls[1] == n * 5

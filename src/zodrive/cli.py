@@ -97,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--no-progress", action="store_true")
 
+    demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
+    demo.add_argument("--episodes", type=_positive_int, default=3)
+    demo.add_argument("--model", default=None, help="default: models/dqn")
+    demo.add_argument("--out", type=Path, default=Path("results/demo"))
+
     card = sub.add_parser("card", help="write CARD.md for a trained model folder")
     card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
     card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
@@ -209,8 +214,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     env = make_attacked_env(preset, victim, spec, render_mode="rgb_array")
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
-        if spec is not None:
-            env.attack.reseed(spec.seed * 1_000_003 + seed)
         frames, info = record_episode(env, victim, seed)
         if info["crashed"]:
             break
@@ -250,6 +253,28 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_demo(args: argparse.Namespace) -> int:
+    from zodrive.attacks.spec import load_attack
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary
+    from zodrive.experiments.reproduce import models_dir
+
+    model = args.model or str(models_dir() / "dqn" / "model.zip")
+    preset = resolve_model_preset(model, None, [])
+    spec = load_attack("zo-signsgd")
+    results = {}
+    for label, attack in (("clean", None), ("attacked", spec)):
+        job = EvalJob(model=model, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
+        print(f"== {label}: {args.episodes} episodes of the shipped DQN" + (f" under {spec.attack}" if attack else ""))
+        results[label] = evaluate(job, args.episodes, args.out / label, progress=False)
+        print(format_summary(results[label]))
+    drop = 1 - results["attacked"]["mean_return"] / results["clean"]["mean_return"]
+    print(f"== the black-box attack (L-inf eps={spec.eps}) cut the mean return by {drop:.0%} "
+          f"({results['clean']['mean_return']:.1f} -> {results['attacked']['mean_return']:.1f}); "
+          f"results in {args.out}/")
+    return 0
+
+
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
@@ -259,7 +284,8 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "reproduce": cmd_reproduce}
+            "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
+            "demo": cmd_demo}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -22,6 +22,11 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.errors import ZodriveError
 
 
+def episode_seed(attack_seed: int, env_seed: int) -> int:
+    """The attack's random seed for an episode started with `env.reset(seed=env_seed)`."""
+    return attack_seed * 1_000_003 + env_seed
+
+
 def attack_observations(
     obs: np.ndarray, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False
 ) -> tuple[AttackResult, float]:
@@ -34,8 +39,11 @@ def attack_observations(
     return result, time.perf_counter() - start
 
 
-def step_stats(result: AttackResult, row: int, wall: float) -> dict[str, Any]:
-    """The per-step record of one environment row (goes into `info["attack"]`)."""
+def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
+    """The per-step record of one environment row (goes into `info["attack"]`).
+
+    Wall time is kept out of `info` (it would make seeded steps differ); the wrappers expose
+    it as `last_wall_time`."""
     return {
         "queries": int(result.queries[row]),
         "iterations": int(result.iterations[row]),
@@ -43,11 +51,10 @@ def step_stats(result: AttackResult, row: int, wall: float) -> dict[str, Any]:
         "already": bool(result.already[row]),
         "linf": float(result.linf[row]),
         "l2": float(result.l2[row]),
-        "wall_time": wall,
     }
 
 
-class AttackWrapper(gym.ObservationWrapper):
+class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """Feed the policy attacked observations; `info["attack"]` has the step's stats.
 
     `info["clean_obs"]` keeps the true observation (for rendering what was really there).
@@ -55,11 +62,13 @@ class AttackWrapper(gym.ObservationWrapper):
 
     def __init__(self, env: gym.Env, attack: Attack, objective: Objective, oracle: QueryOracle,
                  *, trace: bool = False) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, attack=attack, objective=objective, oracle=oracle, trace=trace)
+        gym.ObservationWrapper.__init__(self, env)
         self.attack, self.objective, self.oracle = attack, objective, oracle
         self.trace = trace
         self.last: AttackResult | None = None
         self.last_stats: dict[str, Any] = {}
+        self.last_wall_time = 0.0  # [s] spent attacking the latest observation
         self.clean_obs: np.ndarray | None = None
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
@@ -67,10 +76,14 @@ class AttackWrapper(gym.ObservationWrapper):
         result, wall = attack_observations(
             observation[None], self.attack, self.objective, self.oracle, trace=self.trace
         )
-        self.last, self.last_stats = result, step_stats(result, 0, wall)
+        self.last, self.last_stats, self.last_wall_time = result, step_stats(result, 0), wall
         return result.x_adv[0]
 
     def reset(self, **kwargs: Any):  # type: ignore[override]
+        """Reset; a seeded reset also restarts the attack's random stream from that seed, so an
+        episode's perturbations depend only on (attack seed, episode seed)."""
+        if kwargs.get("seed") is not None:
+            self.attack.reseed(episode_seed(self.attack.seed, kwargs["seed"]))
         self.oracle.begin_episode()
         obs, info = super().reset(**kwargs)
         return obs, self._info(info)
@@ -92,10 +105,11 @@ class VecAttackWrapper(VecEnvWrapper):
     def __init__(self, venv: VecEnv, attack: Attack, objective: Objective, oracle: QueryOracle) -> None:
         super().__init__(venv)
         self.attack, self.objective, self.oracle = attack, objective, oracle
+        self.last_wall_time = 0.0  # [s] spent attacking the latest batch of observations
 
     def _attack(self, obs: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
-        result, wall = attack_observations(obs, self.attack, self.objective, self.oracle)
-        return result.x_adv, [step_stats(result, i, wall / len(obs)) for i in range(len(obs))]
+        result, self.last_wall_time = attack_observations(obs, self.attack, self.objective, self.oracle)
+        return result.x_adv, [step_stats(result, i) for i in range(len(obs))]
 
     def reset(self) -> np.ndarray:
         obs, _ = self._attack(self.venv.reset())

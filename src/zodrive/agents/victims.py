@@ -12,6 +12,7 @@ from typing import Callable, Literal
 import numpy as np
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.torch_layers import FlattenExtractor
 
 QueryFn = Callable[[np.ndarray], np.ndarray]
 """Observation batch (B, *obs_shape) -> outputs (B, k): Q-values or actions."""
@@ -44,15 +45,22 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
     name = type(model).__name__
     if name == "DQN":
         net, kind = policy.q_net, "discrete"
+        head = net.q_net  # the MLP after SB3's flatten feature extractor
     elif name in ("DDPG", "TD3"):
         net, kind = policy.actor, "continuous"
+        head = net.mu  # MLP ending in tanh; SB3 predicts this action (space is [-1, 1])
     else:
         raise TypeError(f"no victim adapter for {name}")
+    flat = int(np.prod(obs_shape))
+    if not isinstance(net.features_extractor, FlattenExtractor):
+        head = None  # unusual feature extractor: go through the whole network
 
     def query(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            batch = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, *obs_shape))
-            return net(batch).numpy()
+        batch = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
+        with torch.inference_mode():
+            if head is not None:  # same arithmetic as net(batch), without its Python overhead
+                return head(batch.reshape(-1, flat)).numpy()
+            return net(batch.reshape(-1, *obs_shape)).numpy()
 
     def forward(obs: torch.Tensor) -> torch.Tensor:
         return net(obs.reshape(-1, *obs_shape).float())

@@ -25,7 +25,7 @@ from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import write_json, write_run_info
-from zodrive.wrappers import make_attacked_env
+from zodrive.wrappers import episode_seed, make_attacked_env
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +56,7 @@ def adversarial_train(
 
     def build():
         env = make_attacked_env(preset, victim, spec)
-        env.attack.reseed(spec.seed * 1_000_003 + seed)
+        env.attack.reseed(episode_seed(spec.seed, seed))
         return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed",))
 
     venv = DummyVecEnv([build])

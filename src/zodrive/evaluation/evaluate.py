@@ -26,7 +26,7 @@ from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import EpisodeRecord, run_episode
 from zodrive.evaluation.stats import mean_ci, rate_ci
 from zodrive.runinfo import command_line, versions, write_json
-from zodrive.wrappers import AttackWrapper, make_attacked_env
+from zodrive.wrappers import make_attacked_env
 
 log = logging.getLogger(__name__)
 
@@ -65,8 +65,6 @@ def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     job: EvalJob = _WORKER["job"]
     env = _WORKER["env"]
     seed = job.seed + index
-    if isinstance(env, AttackWrapper):
-        env.attack.reseed(int(job.attack.get("seed", 0)) * 1_000_003 + seed)
     steps: list[dict[str, Any]] = []
     record = run_episode(
         env, _WORKER["victim"], episode=index, seed=seed,

@@ -58,7 +58,8 @@ def run_episode(
     step's attack stats go to `on_step`. `policy` (default: `victim`) chooses the actions.
     """
     policy = policy or victim
-    attacked = isinstance(env, AttackWrapper) or _find_attack(env) is not None
+    wrapper = _find_attack(env)
+    attacked = wrapper is not None
     obs, info = env.reset(seed=seed)
     total, length, speeds, right = 0.0, 0, [], 0
     crashed = False
@@ -77,7 +78,8 @@ def run_episode(
             applicable += not pending["already"]
             max_linf = max(max_linf, pending["linf"])
             if on_step is not None:
-                on_step({"episode": episode, "step": length, "action": _plain(action), **pending})
+                on_step({"episode": episode, "step": length, "action": _plain(action), **pending,
+                         "wall_time": wrapper.last_wall_time})
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         length += 1
@@ -97,9 +99,11 @@ def run_episode(
 
 
 def _find_attack(env: gym.Env) -> AttackWrapper | None:
-    while isinstance(env, gym.Wrapper):
+    while isinstance(env, gym.Env):
         if isinstance(env, AttackWrapper):
             return env
+        if not isinstance(env, gym.Wrapper):
+            return None
         env = env.env
     return None
 
