@@ -43,7 +43,8 @@ def test_evaluate_writes_summary_and_records(tiny_dqn: Path, tmp_path: Path, cap
 
 
 def test_evaluation_is_deterministic_and_resumes(tiny_dqn: Path, tmp_path: Path) -> None:
-    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--attack", "zo-signsgd", "--steps", "5"]
+    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--attack", "zo-signsgd", "--steps", "5",
+            "--env-set", "max_episode_steps=60"]
     assert main(args + ["--out", str(tmp_path / "a")]) == 0
     assert main(args + ["--out", str(tmp_path / "b")]) == 0
     a = json.loads((tmp_path / "a" / "summary.json").read_text())

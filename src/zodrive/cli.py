@@ -97,6 +97,15 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--no-progress", action="store_true")
 
+    cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
+    cmp_.add_argument("models", nargs="+")
+    cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack")
+    cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
+    cmp_.add_argument("--episodes", type=_positive_int, default=20)
+    cmp_.add_argument("--workers", type=_positive_int, default=1)
+    cmp_.add_argument("--out", type=Path, required=True)
+    cmp_.add_argument("--no-progress", action="store_true")
+
     demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
     demo.add_argument("--episodes", type=_positive_int, default=3)
     demo.add_argument("--model", default=None, help="default: models/dqn")
@@ -253,6 +262,19 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    from zodrive.attacks.registry import ATTACKS
+    from zodrive.experiments.compare import compare, markdown
+
+    for eps in args.eps:
+        if not eps > 0:
+            raise ZodriveError(f"eps must be > 0, not {eps}")
+    rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
+                   workers=args.workers, progress=not args.no_progress)
+    print(markdown(rows), end="")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
@@ -285,7 +307,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
             "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
-            "demo": cmd_demo}
+            "demo": cmd_demo, "compare": cmd_compare}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -30,7 +30,7 @@ class AttackSpec:
     steps: int = 100                      # T, iterations per environment step
     n_directions: int = 20                # q, random directions per iteration
     mu: float = 0.005                     # smoothing radius of the finite differences
-    step_size: float = 0.01               # delta, per-iteration step
+    step_size: float = 0.02               # delta, per-iteration step
     l2_weight: float = 0.0                # weight of L2 = ||x' - x||^2 in the objective
     target: Any = "auto"                  # auto (paper: FASTER / [1, 0.5]) | action | none
     loss: str = "margin"                  # DQN L1: margin (C&W) | paper (literal Eq. 5)
