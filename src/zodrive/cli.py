@@ -86,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     adv.add_argument("--preset")
     adv.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     adv.add_argument("--seed", type=int, default=1, help="seed of the adversarial phase")
-    adv.add_argument("--warmup", type=int, default=500, help="attacked steps collected before updates")
+    adv.add_argument("--warmup", type=int, default=0,
+                     help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
     adv.add_argument("--no-progress", action="store_true")
 
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
@@ -114,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     card = sub.add_parser("card", help="write CARD.md for a trained model folder")
     card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
     card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
+    card.add_argument("--eval", type=Path, help="evaluation folder to report (default FOLDER/eval)")
     return parser
 
 
@@ -300,7 +302,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
-    path = write_card(args.folder, baseline=args.baseline)
+    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval)
     print(f"wrote {path}")
     return 0
 

@@ -70,6 +70,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.last_stats: dict[str, Any] = {}
         self.last_wall_time = 0.0  # [s] spent attacking the latest observation
         self.clean_obs: np.ndarray | None = None
+        self._episode_hits = self._episode_applicable = 0
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         self.clean_obs = observation
@@ -77,6 +78,8 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             observation[None], self.attack, self.objective, self.oracle, trace=self.trace
         )
         self.last, self.last_stats, self.last_wall_time = result, step_stats(result, 0), wall
+        self._episode_hits += int(result.success[0])
+        self._episode_applicable += int(not result.already[0])
         return result.x_adv[0]
 
     def reset(self, **kwargs: Any):  # type: ignore[override]
@@ -85,6 +88,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         if kwargs.get("seed") is not None:
             self.attack.reseed(episode_seed(self.attack.seed, kwargs["seed"]))
         self.oracle.begin_episode()
+        self._episode_hits = self._episode_applicable = 0
         obs, info = super().reset(**kwargs)
         return obs, self._info(info)
 
@@ -96,6 +100,9 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         info = dict(info)
         info["attack"] = dict(self.last_stats)
         info["clean_obs"] = self.clean_obs
+        # running episode figures, flat so that SB3's Monitor can log them at episode end
+        info["attack_success_rate"] = self._episode_hits / max(self._episode_applicable, 1)
+        info["attack_queries"] = self.oracle.episode_queries
         return info
 
 

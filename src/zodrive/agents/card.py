@@ -28,11 +28,12 @@ def _result_line(summary: dict[str, Any]) -> str:
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
 
-def write_card(folder: Path, *, baseline: Path | None = None) -> Path:
-    """Write `folder/CARD.md` from run.json, train.json, config.yaml and eval/summary.json."""
+def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None) -> Path:
+    """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
+    summary.json (default `folder/eval`)."""
     run, train = _load(folder / "run.json"), _load(folder / "train.json")
     config = _load(folder / "config.yaml")
-    summary = _load(folder / "eval" / "summary.json")
+    summary = _load((evaluation or folder / "eval") / "summary.json")
     algo = train["algo"]
     adversarial = train.get("kind") == "adversarial"
     recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "steps", "warmup") if k in config}
@@ -45,7 +46,8 @@ def write_card(folder: Path, *, baseline: Path | None = None) -> Path:
         "```",
         run["command"],
         summary["command"],
-        f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else ""),
+        f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
+        + (f" --eval {evaluation}" if evaluation else ""),
         "```",
         "",
         f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "

@@ -38,7 +38,7 @@ def adversarial_train(
     out: Path,
     *,
     seed: int = 1,
-    warmup: int = 500,
+    warmup: int = 0,
     noise: dict[str, Any] | None = None,
     progress_bar: bool = True,
 ) -> Path:
@@ -57,13 +57,15 @@ def adversarial_train(
     def build():
         env = make_attacked_env(preset, victim, spec)
         env.attack.reseed(episode_seed(spec.seed, seed))
-        return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed",))
+        return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed", "attack_success_rate", "attack_queries"))
 
     venv = DummyVecEnv([build])
     venv.seed(seed)
     model.set_env(venv)
     model.set_random_seed(seed)
-    model.learning_starts = warmup  # refill the (empty) replay buffer with attacked transitions first
+    # SB3 takes *random* actions until `learning_starts`; Algorithm 2 acts with the attacked
+    # policy from the first step, so updates start at once (the buffer begins empty).
+    model.learning_starts = warmup
     if algo == "dqn":  # keep exploring at the final rate instead of restarting the schedule at 1.0
         eps = model.exploration_final_eps
         model.exploration_schedule = LinearSchedule(eps, eps, 1.0)

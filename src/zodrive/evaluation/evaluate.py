@@ -192,6 +192,7 @@ def summarize(
         "pct_of_max": float(100.0 * returns.mean() / max_return),
         "collision_rate": crashes / len(records),
         "collision_ci95": list(rate_ci(crashes, len(records))),
+        "offroad_rate": sum(bool(r.get("offroad")) for r in records) / len(records),
         "mean_length": float(np.mean([r["length"] for r in records])),
         "mean_speed": float(np.mean([r["mean_speed"] for r in records])),
         "right_lane_share": float(np.mean([r["right_lane_share"] for r in records])),

@@ -12,7 +12,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"episodes: {summary['episodes']} (seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
         f"mean return: {summary['mean_return']:.2f}  95% CI [{low:.2f}, {high:.2f}]  "
         f"({summary['pct_of_max']:.2f}% of max)",
-        f"collision rate: {summary['collision_rate']:.2%}  mean length: {summary['mean_length']:.1f}  "
+        f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
         f"mean speed: {summary['mean_speed']:.1f} m/s  right lane: {summary['right_lane_share']:.1%}",
     ]
     if summary.get("attack"):

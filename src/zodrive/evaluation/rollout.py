@@ -20,6 +20,7 @@ class EpisodeRecord:
     pct_of_max: float
     length: int
     crashed: bool
+    offroad: bool              # ended by leaving the road (continuous preset: offroad_terminal)
     mean_speed: float          # [m/s]
     right_lane_share: float    # fraction of steps in the right-most lane
     queries: int = 0           # attack queries over the episode
@@ -90,7 +91,7 @@ def run_episode(
         done = terminated or truncated
     return EpisodeRecord(
         episode=episode, seed=seed, return_=total, pct_of_max=100.0 * total / max_return,
-        length=length, crashed=crashed, mean_speed=float(np.nanmean(speeds)) if speeds else 0.0,
+        length=length, crashed=crashed, offroad=bool(terminated and not crashed), mean_speed=float(np.nanmean(speeds)) if speeds else 0.0,
         right_lane_share=right / max(length, 1), queries=queries,
         attacked_steps=length if attacked else 0, successes=int(successes),
         applicable=int(applicable), max_linf=max_linf,

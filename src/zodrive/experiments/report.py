@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.evaluation.stats import paired_difference_ci
-from zodrive.experiments.paper import ROWS, TABLE1
+from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
 from zodrive.runinfo import write_atomic, write_json
 
 MAX_RETURN = 450.0
@@ -37,7 +37,8 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
                 "attack_success_rate": s.get("attack_success_rate"),
                 "target_base_rate": s.get("target_base_rate"),
                 "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
-                "paper_return": TABLE1[algo][row], "paper_pct": 100 * TABLE1[algo][row] / MAX_RETURN,
+                "paper_return": TABLE1[algo][row], "paper_pct": TABLE1_PCT[algo][row],
+                "offroad_rate": s.get("offroad_rate"),
             }
             if row != "initial":
                 mine = _returns(out, algo, row)
@@ -60,6 +61,14 @@ def _fmt(value: Any, pattern: str) -> str:
     return "–" if value is None else pattern.format(value)
 
 
+def _success(r: dict[str, Any]) -> str:
+    rate = r.get("attack_success_rate")
+    if rate is None:
+        return "–"
+    shown = "n/a" if rate != rate else f"{rate:.1%}"  # NaN: the clean policy always chose the target
+    return f"{shown} ({r['target_base_rate']:.1%})"
+
+
 def table_markdown(records: list[dict[str, Any]]) -> str:
     lines = [
         "| Policy | Scenario | zodrive return (95% CI) | % of 450 | Paper | Paper % | Collisions | "
@@ -67,8 +76,7 @@ def table_markdown(records: list[dict[str, Any]]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in records:
-        success = "–" if r["attack_success_rate"] is None else \
-            f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
+        success = _success(r)
         lines.append(
             f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
             f"{r['pct_of_max']:.2f}% | {r['paper_return']:.2f} | {r['paper_pct']:.2f}% | "
@@ -79,7 +87,7 @@ def table_markdown(records: list[dict[str, Any]]) -> str:
 
 
 FIGURES = [
-    ("fig2_loss.png", "Fig. 2 — Loss1 (attack) and Loss2 (distortion) over ZO-SignSGD iterations on a step the attack won (early stopping off, L2 weight 1)."),
+    ("fig2_loss.png", "Fig. 2 — Loss1 (attack) and Loss2 (distortion) over ZO-SignSGD iterations on a step the attack won (early stopping off, L2 weight 0.1)."),
     ("fig3_attacked_episode.png", "Fig. 3 — The attacked DQN at its collision: simulator (left), what it perceived (red outlines) over what was there (green), right."),
     ("fig3_attacked_episode.gif", "Fig. 3 (animated) — the last decisions before the collision."),
     ("fig4_ddpg_adversarial_training.png", "Fig. 4 — DDPG reward per episode during adversarial training."),
@@ -130,7 +138,7 @@ def _html_table(records: list[dict[str, Any]]) -> str:
     for r in records:
         cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",
                  f"{r['pct_of_max']:.2f}%", f"{r['paper_return']:.2f}", f"{r['collision_rate']:.0%}",
-                 "–" if r["attack_success_rate"] is None else f"{r['attack_success_rate']:.1%}",
+                 _success(r),
                  _fmt(r["queries_per_step"], "{:.0f}"), _fmt(r["max_linf"], "{:.3f}")]
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")
