@@ -7,7 +7,7 @@ import pytest
 
 from toys import FEATURES, linear_victim, observations
 from zodrive.agents.victims import Victim
-from zodrive.attacks import ATTACKS, AttackSpec, QueryOracle, ThreatModel, make_attack
+from zodrive.attacks import ATTACKS, AttackSpec, ThreatModel, make_attack
 from zodrive.attacks.base import GradientEstimateAttack
 from zodrive.errors import ZodriveError
 

@@ -126,3 +126,12 @@ def test_console_script_exits_nonzero_without_traceback(tmp_path: Path) -> None:
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [f"zodrive: error: model file not found: {tmp_path / 'nope.zip'}"]
+
+
+def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path) -> None:
+    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--env-set", "max_episode_steps=40"]
+    assert main(args + ["--out", str(tmp_path / "one")]) == 0
+    assert main(args + ["--out", str(tmp_path / "two"), "--workers", "2"]) == 0
+    one = json.loads((tmp_path / "one" / "summary.json").read_text())
+    two = json.loads((tmp_path / "two" / "summary.json").read_text())
+    assert one["mean_return"] == two["mean_return"] and one["ci95"] == two["ci95"]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from zodrive.agents.victims import Victim
@@ -40,11 +40,10 @@ class AttackSpec:
     early_stop: bool = True               # stop a step's iterations once the goal is met
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
-    extra: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any]) -> "AttackSpec":
-        names = {f.name for f in dataclasses.fields(cls)} - {"extra"}
+        names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - names - {"name", "description"}
         if unknown:
             raise ZodriveError(f"unknown attack option(s): {', '.join(sorted(unknown))}")
@@ -58,7 +57,6 @@ class AttackSpec:
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
-        data.pop("extra")
         data["frozen"] = list(self.frozen)
         if isinstance(data["target"], tuple):
             data["target"] = list(data["target"])

@@ -6,7 +6,6 @@ import os
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from zodrive.config import available, load_config
 from zodrive.errors import ZodriveError
@@ -89,9 +88,3 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
 
 def preset_names() -> list[str]:
     return available("presets")
-
-
-def obs_bounds(config: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """The box every (normalized, clipped) observation lies in: [-1, 1] per entry."""
-    shape = observation_shape(config)
-    return -np.ones(shape, dtype=np.float32), np.ones(shape, dtype=np.float32)

@@ -13,7 +13,7 @@ import logging
 import multiprocessing as mp
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -23,7 +23,7 @@ from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.rollout import EpisodeRecord, run_episode
+from zodrive.evaluation.rollout import run_episode
 from zodrive.evaluation.stats import mean_ci, rate_ci
 from zodrive.runinfo import command_line, versions, write_json
 from zodrive.wrappers import make_attacked_env
@@ -42,7 +42,6 @@ class EvalJob:
     attack: dict[str, Any] | None = None
     seed: int = DEFAULT_EVAL_SEED
     record_steps: bool = True
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk."""
