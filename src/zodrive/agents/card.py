@@ -67,6 +67,9 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     if summary.get("action_share"):
         names = ["LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
         lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(names, summary["action_share"])) + ".")
+    if not adversarial and recipe.get("hyperparameters"):
+        changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
+        lines += ["", f"Changed from stable-baselines3's defaults (the step budget is the paper's): {changed}."]
     if baseline is not None:
         base = _load(baseline / "summary.json")
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
