@@ -20,10 +20,9 @@ DQN_LOSSES = ("margin", "paper")
 
 
 def _others_max(q: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
-    """max_{j != index} q[..., j], with `index` broadcast over the candidate axis."""
-    masked = q.clone()
-    masked.scatter_(-1, index.expand(*q.shape[:-1], 1), float("-inf"))
-    return masked.max(dim=-1).values
+    """max_{j != index} q[..., j]; `index` (..., 1) broadcasts over the leading axes."""
+    excluded = torch.arange(q.shape[-1]) == index
+    return torch.where(excluded, float("-inf"), q).amax(dim=-1)
 
 
 @dataclass(frozen=True)
@@ -58,12 +57,12 @@ class DiscreteTargeted(Objective):
     kappa: float = 0.01
 
     def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
-        t = torch.full((*out.shape[:-1], 1), self.target, dtype=torch.long)
         q_t = out[..., self.target]
         if self.kind == "paper":
             y = clean.argmax(dim=-1)[:, None, None].expand(*out.shape[:-1], 1)
             return self.weight * (q_t - out.gather(-1, y).squeeze(-1)).abs()
-        return self.weight * torch.clamp(_others_max(out, t) - q_t + self.kappa, min=0.0)
+        others = _others_max(out, torch.tensor(self.target))
+        return self.weight * torch.clamp(others - q_t + self.kappa, min=0.0)
 
     def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
         return out.argmax(dim=-1) == self.target
