@@ -115,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
     card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
     card.add_argument("--eval", type=Path, help="evaluation folder to report (default FOLDER/eval)")
+    card.add_argument("--note", action="append", default=[], help="a line for the card's Notes section")
     return parser
 
 
@@ -236,7 +237,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None})
     print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
-          f"{'crashed' if info['crashed'] else 'no collision'} -> {args.out}/episode.png, episode.gif")
+          f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
+          f" -> {args.out}/episode.png, episode.gif")
     return 0
 
 
@@ -301,7 +303,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
-    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval)
+    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note)
     print(f"wrote {path}")
     return 0
 

@@ -23,12 +23,13 @@ def _load(path: Path) -> dict[str, Any]:
 def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
-            f"collision rate {summary['collision_rate']:.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
+            f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
             f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
 
-def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None) -> Path:
+def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
+               notes: list[str] | None = None) -> Path:
     """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
     summary.json (default `folder/eval`)."""
     run, train = _load(folder / "run.json"), _load(folder / "train.json")
@@ -47,7 +48,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         run["command"],
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
-        + (f" --eval {evaluation}" if evaluation else ""),
+        + (f" --eval {evaluation}" if evaluation else "") + "".join(f" --note {n!r}" for n in notes or []),
         "```",
         "",
         f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
@@ -74,6 +75,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         base = _load(baseline / "summary.json")
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
                       f"{_result_line(base)}."]
+    if notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     lines += [
         "",
         "## Recipe" if not adversarial else "## Adversarial training",

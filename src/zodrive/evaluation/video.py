@@ -33,7 +33,7 @@ def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[st
     """Roll out one episode from `seed`, keeping a frame per decision (env renders rgb_array)."""
     obs, info = env.reset(seed=seed)
     frames: list[Frame] = []
-    done, total, crashed = False, 0.0, False
+    done, total, crashed, terminated = False, 0.0, False, False
     while not done:
         clean = info.get("clean_obs")
         action = act(victim, obs)
@@ -45,7 +45,8 @@ def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[st
         done = terminated or truncated
     last = frames[-1]
     frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}))
-    return frames, {"seed": seed, "return": total, "length": len(frames) - 1, "crashed": crashed}
+    return frames, {"seed": seed, "return": total, "length": len(frames) - 1, "crashed": crashed,
+                    "offroad": bool(terminated and not crashed)}
 
 
 def _action_label(action: Any) -> str:
