@@ -71,16 +71,16 @@ def _success(r: dict[str, Any]) -> str:
 
 def table_markdown(records: list[dict[str, Any]]) -> str:
     lines = [
-        "| Policy | Scenario | zodrive return (95% CI) | % of 450 | Paper | Paper % | Collisions | "
+        "| Policy | Scenario | zodrive return (95% CI) | % of 450 | Paper | Paper % | Collisions | Off-road | "
         "Attack success (base rate) | Queries/step | max L∞ |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in records:
         success = _success(r)
         lines.append(
             f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
             f"{r['pct_of_max']:.2f}% | {r['paper_return']:.2f} | {r['paper_pct']:.2f}% | "
-            f"{r['collision_rate']:.0%} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
+            f"{r['collision_rate']:.0%} | {_fmt(r.get('offroad_rate'), '{:.0%}')} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
             f"{_fmt(r['max_linf'], '{:.3f}')} |"
         )
     return "\n".join(lines) + "\n"
@@ -132,12 +132,13 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
 
 
 def _html_table(records: list[dict[str, Any]]) -> str:
-    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Attack success",
+    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road", "Attack success",
             "Queries/step", "max L∞"]
     rows = []
     for r in records:
         cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",
                  f"{r['pct_of_max']:.2f}%", f"{r['paper_return']:.2f}", f"{r['collision_rate']:.0%}",
+                 _fmt(r.get("offroad_rate"), "{:.0%}"),
                  _success(r),
                  _fmt(r["queries_per_step"], "{:.0f}"), _fmt(r["max_linf"], "{:.3f}")]
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
