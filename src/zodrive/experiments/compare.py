@@ -37,7 +37,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                 rows.append({
                     "model": name, "attack": _label(attack), "eps": eps, "mean_return": s["mean_return"], "ci95_low": low,
                     "ci95_high": high, "collision_rate": s["collision_rate"],
-                    "attack_success_rate": s.get("attack_success_rate"), "target_base_rate": s.get("target_base_rate"),
+                    "offroad_rate": s.get("offroad_rate"), "attack_success_rate": s.get("attack_success_rate"), "target_base_rate": s.get("target_base_rate"),
                     "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
                     "episodes": s["episodes"],
                 })
@@ -58,13 +58,14 @@ def _cell(value: Any, pattern: str) -> str:
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    lines = ["| Model | Attack | ε (L∞) | Return (95% CI) | Collisions | Success (base rate) | Queries/step | max L∞ |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| Model | Attack | ε (L∞) | Return (95% CI) | Collisions | Off-road | Success (base rate) | Queries/step | max L∞ |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
         lines.append(f"| {r['model']} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {r['mean_return']:.1f} "
-                     f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | {success} | "
+                     f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
+                     f"{_cell(r.get('offroad_rate'), '{:.0%}')} | {success} | "
                      f"{_cell(r['queries_per_step'], '{:.0f}')} | {_cell(r['max_linf'], '{:.3f}')} |")
     return "\n".join(lines) + "\n"
 
