@@ -21,7 +21,7 @@ from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import feature_names, load_preset, make_env
-from zodrive.evaluation.rollout import act, run_episode
+from zodrive.evaluation.rollout import clean_states, run_episode
 from zodrive.wrappers import make_attacked_env
 
 SEED = 50_000  # tuning range, disjoint from evaluation seeds
@@ -52,12 +52,7 @@ def literal_algorithm1(x0: np.ndarray, victim, objective, mask: np.ndarray, *, s
 def per_step(model: str, states: int, steps: int, q: int) -> tuple[float, float]:
     preset = load_preset("discrete")
     victim = sb3_victim(load_model(model, preset))
-    env = make_env(preset)
-    obs, _ = env.reset(seed=SEED)
-    xs = []
-    for _ in range(states):
-        xs.append(obs)
-        obs, *_ = env.step(act(victim, obs))
+    xs = clean_states(make_env(preset), victim, SEED, states)
     spec = AttackSpec(steps=steps, n_directions=q, early_stop=False)
     attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
     mask = attack.threat.mask((5, 5))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from toys import FEATURES, linear_victim, observations
+from toys import FEATURES, counting_victim, linear_victim, observations
 from zodrive.agents.victims import Victim
 from zodrive.attacks import ATTACKS, AttackSpec, ThreatModel, make_attack
 from zodrive.attacks.base import GradientEstimateAttack
@@ -96,13 +96,7 @@ def test_untargeted_and_targeted_objectives(target: str) -> None:
 
 def test_oracle_counts_every_query_exactly() -> None:
     calls: list[int] = []
-    base = linear_victim()
-
-    def counted(x: np.ndarray) -> np.ndarray:
-        calls.append(len(x))
-        return base.query(x)
-
-    victim = Victim(query=counted, kind="discrete", obs_shape=(5, 5))
+    victim = counting_victim(calls)
     x0 = observations(4)
     result, oracle, attack = _run("zo-signsgd", victim, x0, steps=10, n_directions=7, early_stop=False)
     assert oracle.step_queries == sum(calls) == result.queries.sum()
@@ -157,13 +151,7 @@ def test_paper_mode_is_unconstrained_but_clipped() -> None:
 def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
     """Batched across environments: the victim sees one call per iteration, whatever N is."""
     calls: list[int] = []
-    base = linear_victim()
-
-    def counted(x: np.ndarray) -> np.ndarray:
-        calls.append(len(x))
-        return base.query(x)
-
-    victim = Victim(query=counted, kind="discrete", obs_shape=(5, 5))
+    victim = counting_victim(calls)
     for n in (1, 6):
         calls.clear()
         result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=4, early_stop=False)

@@ -33,3 +33,14 @@ def observations(n: int, seed: int = 1) -> np.ndarray:
     x = rng.uniform(-0.6, 0.6, size=(n, 5, 5)).astype(np.float32)
     x[:, :, 0] = 1.0  # presence
     return x
+
+
+def counting_victim(calls: list[int]) -> Victim:
+    """`linear_victim()` that appends the batch size of every call to `calls`."""
+    base = linear_victim()
+
+    def counted(x: np.ndarray) -> np.ndarray:
+        calls.append(len(x))
+        return base.query(x)
+
+    return Victim(query=counted, kind="discrete", obs_shape=(5, 5))

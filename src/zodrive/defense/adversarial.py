@@ -25,7 +25,7 @@ from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import write_json, write_run_info
-from zodrive.wrappers import episode_seed, make_attacked_env
+from zodrive.wrappers import make_attacked_env
 
 log = logging.getLogger(__name__)
 
@@ -55,8 +55,7 @@ def adversarial_train(
                          "steps": steps, "warmup": warmup, "action_noise": noise}, seed)
 
     def build():
-        env = make_attacked_env(preset, victim, spec)
-        env.attack.reseed(episode_seed(spec.seed, seed))
+        env = make_attacked_env(preset, victim, spec)  # reseeded by the seeded reset below
         return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed", "attack_success_rate", "attack_queries"))
 
     venv = DummyVecEnv([build])

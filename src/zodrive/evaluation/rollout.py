@@ -43,6 +43,19 @@ def act(victim: Victim, obs: np.ndarray) -> Any:
     return int(action) if victim.kind == "discrete" else np.clip(action, -1.0, 1.0)
 
 
+def clean_states(env: gym.Env, victim: Victim, seed: int, count: int) -> np.ndarray:
+    """`count` observations the victim meets driving clean from `env.reset(seed=seed)`; an
+    episode that ends is followed by one reset with seed `seed + states so far`."""
+    obs, _ = env.reset(seed=seed)
+    states = []
+    for _ in range(count):
+        states.append(obs)
+        obs, _, terminated, truncated, _ = env.step(act(victim, obs))
+        if terminated or truncated:
+            obs, _ = env.reset(seed=seed + len(states))
+    return np.stack(states)
+
+
 def run_episode(
     env: gym.Env,
     victim: Victim,

@@ -11,7 +11,7 @@ from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import feature_names, make_env
-from zodrive.evaluation.rollout import act
+from zodrive.evaluation.rollout import clean_states
 
 TUNING_SEED = 50_000  # states for figures come from seeds outside the evaluation range
 
@@ -29,15 +29,7 @@ def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: in
                max_states: int = 200) -> dict[str, Any]:
     """Attack clean-rollout states with early stopping off; return the trace of the first success."""
     victim = sb3_victim(load_model(model, preset))
-    env = make_env(preset)
-    obs, _ = env.reset(seed=seed)
-    states = []
-    for _ in range(max_states):
-        states.append(obs)
-        obs, _, term, trunc, _ = env.step(act(victim, obs))
-        if term or trunc:
-            obs, _ = env.reset(seed=seed + len(states))
-    x0 = np.stack(states)
+    x0 = clean_states(make_env(preset), victim, seed, max_states)
     attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
     oracle.begin_step(rows=len(x0))
     result = attack.perturb(x0, oracle, objective, trace=True)
