@@ -43,6 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (deep merge)")
     env_sub.add_parser("list", help="list presets")
 
+    sub.add_parser("baselines", help="list the built-in baseline policies (baseline:NAME)")
+
     train = sub.add_parser("train", help="train a DQN or DDPG agent")
     train.add_argument("--algo", choices=["dqn", "ddpg"], required=True)
     train.add_argument("--recipe", help="recipe name or YAML (default: the tuned recipe of --algo)")
@@ -55,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--no-progress", action="store_true")
 
     ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
-    ev.add_argument("model", help="SB3 zip or model folder")
+    ev.add_argument("model", help="SB3 zip, model folder or baseline:NAME (see `zodrive baselines`)")
     ev.add_argument("--preset", help="preset (default: from the model's algorithm)")
     ev.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
     ev.add_argument("--episodes", type=_positive_int, default=100)
@@ -66,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--no-progress", action="store_true")
 
     render = sub.add_parser("render", help="render an episode (PNG + GIF), optionally attacked")
-    render.add_argument("model")
+    render.add_argument("model", help="SB3 zip, model folder or baseline:NAME")
     render.add_argument("--preset")
     render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     render.add_argument("--seed", type=int, default=None, help="first episode seed (default 100000)")
@@ -98,7 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-progress", action="store_true")
 
     cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
-    cmp_.add_argument("models", nargs="+")
+    cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
     cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack")
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--episodes", type=_positive_int, default=20)
@@ -163,6 +165,14 @@ def cmd_env(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_baselines(args: argparse.Namespace) -> int:
+    from zodrive.agents.baselines import BASELINES, PREFIX
+
+    for b in BASELINES.values():
+        print(f"{PREFIX + b.name:22} {'/'.join(b.kinds):20} reads {b.reads:10} {b.description}")
+    return 0
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from zodrive.agents.training import load_recipe, train
 
@@ -180,28 +190,26 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def resolve_model_preset(model: str, preset: str | None, env_set: list[str]) -> dict[str, Any]:
     """The preset to evaluate `model` in: given, or the one its algorithm trains on."""
-    from zodrive.agents.loading import model_algo
-    from zodrive.agents.training import KIND_OF_ALGO
+    from zodrive.agents.policies import policy_kind
     from zodrive.envs import load_preset
 
-    return load_preset(preset or KIND_OF_ALGO[model_algo(model)], env_set)
+    return load_preset(preset or policy_kind(model), env_set)
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from zodrive.agents.loading import model_file
+    from zodrive.agents.policies import check_policy, load_victim, policy_ref
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
 
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     spec = attack_spec_from_args(args)
+    check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
-        from zodrive.agents.loading import load_model
-        from zodrive.agents.victims import sb3_victim
         from zodrive.envs import feature_names
 
-        spec.build(sb3_victim(load_model(args.model, preset)), tuple(feature_names(preset)))
+        spec.build(load_victim(args.model, preset), tuple(feature_names(preset)))
     job = EvalJob(
-        model=str(model_file(args.model)), preset=preset,
+        model=policy_ref(args.model), preset=preset,
         attack=spec.to_dict() if spec else None,
         seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed,
     )
@@ -213,16 +221,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from zodrive.agents.loading import load_model
-    from zodrive.agents.victims import sb3_victim
+    from zodrive.agents.policies import make_policy_env
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.evaluation.video import record_episode, save_gif, save_png
-    from zodrive.wrappers import make_attacked_env
 
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    victim = sb3_victim(load_model(args.model, preset))
     spec = attack_spec_from_args(args)
-    env = make_attacked_env(preset, victim, spec, render_mode="rgb_array")
+    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array")
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
         frames, info = record_episode(env, victim, seed)
@@ -308,7 +313,7 @@ def cmd_card(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"env": cmd_env, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
+COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
             "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare}
 

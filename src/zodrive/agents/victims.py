@@ -31,6 +31,8 @@ class Victim:
     obs_shape: tuple[int, ...]
     differentiable: Callable[[torch.Tensor], torch.Tensor] | None = None
     """White-box access (torch forward with gradients); only FGSM/PGD baselines use it."""
+    reads: Literal["observation", "nothing", "simulator"] = "observation"
+    """What the decisions depend on: built-in baselines read nothing or the simulator."""
 
     def actions(self, outputs: np.ndarray) -> np.ndarray:
         """The action(s) the victim takes given its outputs."""

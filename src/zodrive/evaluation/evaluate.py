@@ -19,14 +19,12 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from zodrive.agents.loading import load_model
-from zodrive.agents.victims import sb3_victim
+from zodrive.agents.policies import check_policy, make_policy_env
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import run_episode
 from zodrive.evaluation.stats import mean_ci, rate_ci
 from zodrive.runinfo import command_line, versions, write_json
-from zodrive.wrappers import make_attacked_env
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +35,7 @@ DEFAULT_EVAL_SEED = 100_000  # training uses seeds < 100,000; evaluation starts 
 class EvalJob:
     """Everything a worker needs to roll out episodes (picklable)."""
 
-    model: str
+    model: str                 # model file or `baseline:NAME`
     preset: dict[str, Any]
     attack: dict[str, Any] | None = None
     seed: int = DEFAULT_EVAL_SEED
@@ -45,7 +43,8 @@ class EvalJob:
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk."""
-        return {"model": str(Path(self.model).resolve()), "preset": self.preset, "attack": self.attack, "seed": self.seed}
+        model = self.model if self.model.startswith("baseline:") else str(Path(self.model).resolve())
+        return {"model": model, "preset": self.preset, "attack": self.attack, "seed": self.seed}
 
 
 _WORKER: dict[str, Any] = {}
@@ -55,9 +54,9 @@ def _setup(job: EvalJob) -> None:
     import torch
 
     torch.set_num_threads(1)
-    victim = sb3_victim(load_model(job.model, job.preset))
     spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
-    _WORKER.update(job=job, victim=victim, env=make_attacked_env(job.preset, victim, spec))
+    victim, env = make_policy_env(job.model, job.preset, spec)
+    _WORKER.update(job=job, victim=victim, env=env)
 
 
 def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -118,7 +117,7 @@ def evaluate(
         raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
     if workers < 1:
         raise ZodriveError(f"workers must be >= 1, not {workers}")
-    load_model(job.model, job.preset)  # fail fast, in this process, on a bad model
+    check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
     done: dict[int, dict[str, Any]] = {}
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -195,6 +194,8 @@ def summarize(
         "mean_length": float(np.mean([r["length"] for r in records])),
         "mean_speed": float(np.mean([r["mean_speed"] for r in records])),
         "right_lane_share": float(np.mean([r["right_lane_share"] for r in records])),
+        "lane_changes_per_episode": float(np.mean([r.get("lane_changes", 0) for r in records])),
+        "mean_distance": float(np.mean([r.get("distance", 0.0) for r in records])),
         "attack": None,
     }
     counts = [r["action_counts"] for r in records if r.get("action_counts")]

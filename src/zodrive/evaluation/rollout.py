@@ -23,6 +23,8 @@ class EpisodeRecord:
     offroad: bool              # ended by leaving the road (continuous preset: offroad_terminal)
     mean_speed: float          # [m/s]
     right_lane_share: float    # fraction of steps in the right-most lane
+    lane_changes: int = 0      # lane boundaries the ego crossed
+    distance: float = 0.0      # [m] travelled along the road
     queries: int = 0           # attack queries over the episode
     attacked_steps: int = 0
     successes: int = 0         # steps where the attack met its goal (not already met)
@@ -75,6 +77,9 @@ def run_episode(
     wrapper = _find_attack(env)
     attacked = wrapper is not None
     obs, info = env.reset(seed=seed)
+    ego = env.unwrapped.vehicle  # read for the driving metrics only; the policy sees `obs`
+    start_x, lane = float(ego.position[0]), ego.lane_index[2]
+    lane_changes = 0
     total, length, speeds, right = 0.0, 0, [], 0
     crashed = False
     queries = successes = applicable = 0
@@ -100,12 +105,16 @@ def run_episode(
         speeds.append(float(info.get("speed", np.nan)))
         right += float(info.get("rewards", {}).get("right_lane_reward", 0.0)) >= 1.0
         crashed = bool(info.get("crashed", False))
+        ego = env.unwrapped.vehicle
+        lane_changes += ego.lane_index[2] != lane
+        lane = ego.lane_index[2]
         pending = info.get("attack") if attacked else None
         done = terminated or truncated
     return EpisodeRecord(
         episode=episode, seed=seed, return_=total, pct_of_max=100.0 * total / max_return,
         length=length, crashed=crashed, offroad=bool(terminated and not crashed), mean_speed=float(np.nanmean(speeds)) if speeds else 0.0,
-        right_lane_share=right / max(length, 1), queries=queries,
+        right_lane_share=right / max(length, 1), lane_changes=int(lane_changes),
+        distance=float(env.unwrapped.vehicle.position[0]) - start_x, queries=queries,
         attacked_steps=length if attacked else 0, successes=int(successes),
         applicable=int(applicable), max_linf=max_linf,
         action_counts=counts.tolist() if counts is not None else None,

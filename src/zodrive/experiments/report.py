@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from zodrive.agents.baselines import get_baseline
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
 from zodrive.runinfo import write_atomic, write_json
@@ -28,8 +29,10 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
     records = []
     for algo in ("dqn", "ddpg"):
         clean = _returns(out, algo, "initial")
-        for row, label in ROWS.items():
+        baselines = [row for row in summaries[algo] if row.startswith("baseline-")]
+        for row in [*ROWS, *baselines]:
             s = summaries[algo][row]
+            label = ROWS.get(row) or _baseline_label(row)
             rec = {
                 "algo": algo.upper(), "row": label, "mean_return": s["mean_return"],
                 "ci95_low": s["ci95"][0], "ci95_high": s["ci95"][1], "pct_of_max": s["pct_of_max"],
@@ -37,8 +40,9 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
                 "attack_success_rate": s.get("attack_success_rate"),
                 "target_base_rate": s.get("target_base_rate"),
                 "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
-                "paper_return": TABLE1[algo][row], "paper_pct": TABLE1_PCT[algo][row],
-                "offroad_rate": s.get("offroad_rate"),
+                "paper_return": TABLE1[algo].get(row), "paper_pct": TABLE1_PCT[algo].get(row),
+                "offroad_rate": s.get("offroad_rate"), "mean_speed": s.get("mean_speed"),
+                "lane_changes_per_episode": s.get("lane_changes_per_episode"),
             }
             if row != "initial":
                 mine = _returns(out, algo, row)
@@ -57,6 +61,12 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
     return {"rows": records}
 
 
+def _baseline_label(row: str) -> str:
+    """`baseline-slower` -> `Baseline: always SLOWER (action 4): ...` for the table."""
+    baseline = get_baseline("baseline:" + row[len("baseline-"):])
+    return f"Baseline `{baseline.name}`: {baseline.description}"
+
+
 def _fmt(value: Any, pattern: str) -> str:
     return "–" if value is None else pattern.format(value)
 
@@ -72,15 +82,16 @@ def _success(r: dict[str, Any]) -> str:
 def table_markdown(records: list[dict[str, Any]]) -> str:
     lines = [
         "| Policy | Scenario | zodrive return (95% CI) | % of 450 | Paper | Paper % | Collisions | Off-road | "
-        "Attack success (base rate) | Queries/step | max L∞ |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "Speed (m/s) | Lane changes/ep | Attack success (base rate) | Queries/step | max L∞ |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in records:
         success = _success(r)
         lines.append(
             f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
-            f"{r['pct_of_max']:.2f}% | {r['paper_return']:.2f} | {r['paper_pct']:.2f}% | "
-            f"{r['collision_rate']:.0%} | {_fmt(r.get('offroad_rate'), '{:.0%}')} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
+            f"{r['pct_of_max']:.2f}% | {_fmt(r['paper_return'], '{:.2f}')} | {_fmt(r['paper_pct'], '{:.2f}%')} | "
+            f"{r['collision_rate']:.0%} | {_fmt(r.get('offroad_rate'), '{:.0%}')} | {_fmt(r.get('mean_speed'), '{:.1f}')} | "
+            f"{_fmt(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
             f"{_fmt(r['max_linf'], '{:.3f}')} |"
         )
     return "\n".join(lines) + "\n"
@@ -132,13 +143,15 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
 
 
 def _html_table(records: list[dict[str, Any]]) -> str:
-    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road", "Attack success",
+    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road", "Speed (m/s)",
+            "Lane changes/ep", "Attack success",
             "Queries/step", "max L∞"]
     rows = []
     for r in records:
         cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",
-                 f"{r['pct_of_max']:.2f}%", f"{r['paper_return']:.2f}", f"{r['collision_rate']:.0%}",
-                 _fmt(r.get("offroad_rate"), "{:.0%}"),
+                 f"{r['pct_of_max']:.2f}%", _fmt(r["paper_return"], "{:.2f}"), f"{r['collision_rate']:.0%}",
+                 _fmt(r.get("offroad_rate"), "{:.0%}"), _fmt(r.get("mean_speed"), "{:.1f}"),
+                 _fmt(r.get("lane_changes_per_episode"), "{:.1f}"),
                  _success(r),
                  _fmt(r["queries_per_step"], "{:.0f}"), _fmt(r["max_linf"], "{:.3f}")]
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.agents.loading import model_file
+from zodrive.agents.policies import policy_ref
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.config import config_root
 from zodrive.envs import load_preset
@@ -27,6 +28,12 @@ from zodrive.runinfo import write_json
 log = logging.getLogger(__name__)
 
 PRESET_OF = {"dqn": "discrete", "ddpg": "continuous"}
+# Policies that ignore their observation (or read the simulator), evaluated beside each agent:
+# a number one of these also reaches is not a result.
+BASELINE_ROWS = {
+    "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil"),
+    "ddpg": ("baseline:brake", "baseline:accelerate", "baseline:idm-mobil"),
+}
 
 
 def models_dir() -> Path:
@@ -60,16 +67,17 @@ def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> 
     return paths
 
 
-def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, Path, AttackSpec | None]]:
-    """(algo, row, model, attack) for the eight cells of Table 1."""
+def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str, AttackSpec | None]]:
+    """(algo, row, model, attack) for the eight cells of Table 1 and the baseline rows."""
     table = []
     for algo in ("dqn", "ddpg"):
         table += [
-            (algo, "initial", models[algo], None),
-            (algo, "under_attack", models[algo], spec),
-            (algo, "adversarial", models[f"{algo}-adv"], spec),
-            (algo, "after", models[f"{algo}-adv"], None),
+            (algo, "initial", policy_ref(models[algo]), None),
+            (algo, "under_attack", policy_ref(models[algo]), spec),
+            (algo, "adversarial", policy_ref(models[f"{algo}-adv"]), spec),
+            (algo, "after", policy_ref(models[f"{algo}-adv"]), None),
         ]
+        table += [(algo, baseline.replace(":", "-"), baseline, None) for baseline in BASELINE_ROWS[algo]]
     return table
 
 
@@ -90,7 +98,7 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
     summaries: dict[str, dict[str, dict[str, Any]]] = {"dqn": {}, "ddpg": {}}
     for algo, row, model, attack in cells(models, spec):
         folder = out / "cells" / f"{algo}-{row}"
-        job = EvalJob(model=str(model_file(model)), preset=load_preset(PRESET_OF[algo]),
+        job = EvalJob(model=model, preset=load_preset(PRESET_OF[algo]),
                       attack=attack.to_dict() if attack else None, seed=seed)
         t0 = time.perf_counter()
         summary_path = folder / "summary.json"

@@ -1,0 +1,96 @@
+"""Built-in baselines stand wherever a model can, and driving metrics say how a policy drives."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zodrive.agents.baselines import BASELINES
+from zodrive.agents.policies import load_victim, make_policy_env, policy_kind, policy_label
+from zodrive.cli import main
+from zodrive.envs import load_preset
+from zodrive.evaluation.rollout import run_episode
+
+SHORT = ["max_episode_steps=60"]
+
+
+def test_constant_baselines_ignore_their_input() -> None:
+    preset = load_preset("discrete")
+    victim = load_victim("baseline:slower", preset)
+    obs = np.random.default_rng(0).uniform(-1, 1, (7, 5, 5)).astype(np.float32)
+    assert victim.actions(victim.query(obs)).tolist() == [4] * 7
+    assert victim.reads == "nothing"
+    brake = load_victim("baseline:brake", load_preset("continuous"))
+    np.testing.assert_array_equal(brake.query(obs[:2]), [[-1, 0], [-1, 0]])
+
+
+def test_idm_mobil_drives_and_changes_lanes() -> None:
+    """The rule-based driver keeps going without a crash on these seeds, overtakes and speeds up."""
+    preset = load_preset("discrete", ["max_episode_steps=150"])
+    victim, env = make_policy_env("baseline:idm-mobil", preset)
+    records = [run_episode(env, victim, episode=i, seed=50_000 + i, max_return=150.0) for i in range(2)]
+    assert not any(r.crashed for r in records)
+    assert sum(r.lane_changes for r in records) >= 1
+    assert all(r.mean_speed > 20.5 for r in records)  # faster than always-SLOWER
+    counts = np.sum([r.action_counts for r in records], axis=0)
+    assert counts[3] > 0 and counts[1] > counts[4]  # it accelerates and mostly holds
+
+
+def test_idm_mobil_continuous_stays_on_the_road() -> None:
+    preset = load_preset("continuous", ["max_episode_steps=150"])
+    victim, env = make_policy_env("baseline:idm-mobil", preset)
+    record = run_episode(env, victim, episode=0, seed=50_000, max_return=150.0)
+    assert not record.offroad and not record.crashed and record.length == 150
+    assert record.distance > 150 * 20.0 / 15  # [m] at more than 20 m/s on average
+
+
+def test_driving_metrics_of_a_constant_policy() -> None:
+    preset = load_preset("discrete", SHORT)
+    victim, env = make_policy_env("baseline:slower", preset)
+    record = run_episode(env, victim, episode=0, seed=3, max_return=60.0)
+    assert record.lane_changes == 0  # SLOWER never steers
+    assert record.distance == pytest.approx(record.mean_speed * record.length / 15, rel=0.05)
+
+
+def test_policy_names() -> None:
+    assert policy_kind("baseline:brake") == "continuous"
+    assert policy_kind("baseline:idm-mobil") == "discrete"
+    assert policy_label("baseline:idle") == "baseline:idle"
+    assert {"slower", "idle", "brake", "idm-mobil"} <= set(BASELINES)
+
+
+def test_evaluate_a_baseline(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "brake"
+    assert main(["evaluate", "baseline:brake", "--episodes", "2", "--out", str(out), "--no-progress",
+                 "--env-set", SHORT[0]]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["model"] == "baseline:brake" and summary["preset"] == "continuous"
+    for key in ("mean_speed", "lane_changes_per_episode", "mean_distance", "right_lane_share", "offroad_rate"):
+        assert key in summary
+    assert summary["mean_speed"] < 18.0  # full brake: from 25 m/s down to the preset's 15 m/s floor
+    assert "lane changes/episode" in capsys.readouterr().out
+
+
+def test_attacking_a_constant_baseline_changes_nothing(tmp_path: Path) -> None:
+    args = ["evaluate", "baseline:slower", "--episodes", "1", "--no-progress", "--env-set", "max_episode_steps=20"]
+    assert main(args + ["--out", str(tmp_path / "clean")]) == 0
+    assert main(args + ["--out", str(tmp_path / "att"), "--attack", "random-search", "--steps", "3"]) == 0
+    clean = json.loads((tmp_path / "clean" / "summary.json").read_text())
+    attacked = json.loads((tmp_path / "att" / "summary.json").read_text())
+    assert attacked["mean_return"] == clean["mean_return"]
+    assert attacked["attack_success_rate"] == 0.0
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["evaluate", "baseline:nosuch"], "known: baseline:slower"),
+    (["evaluate", "baseline:brake", "--preset", "discrete"], "drives continuous presets"),
+    (["evaluate", "baseline:idm-mobil", "--attack", "zo-signsgd"], "reads the simulator"),
+    (["render", "baseline:idm-mobil", "--attack", "nes", "--out", "x"], "reads the simulator"),
+])
+def test_bad_baselines(args: list[str], message: str, capsys) -> None:
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
