@@ -94,3 +94,20 @@ def test_bad_baselines(args: list[str], message: str, capsys) -> None:
     assert main(args) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_card_reports_median_and_range_over_training_seeds(tmp_path: Path) -> None:
+    from zodrive.agents.card import seed_table
+
+    runs = []
+    for seed, ret, speed in ((0, 300.0, 24.0), (1, 360.0, 26.0), (2, 340.0, 25.0)):
+        run = tmp_path / f"seed{seed}"
+        (run / "eval").mkdir(parents=True)
+        (run / "train.json").write_text(json.dumps({"seed": seed}))
+        (run / "eval" / "summary.json").write_text(json.dumps({
+            "mean_return": ret, "ci95": [ret - 5, ret + 5], "collision_rate": 0.01, "offroad_rate": 0.0,
+            "mean_speed": speed, "lane_changes_per_episode": 1.5}))
+        runs.append(run)
+    text = "\n".join(seed_table(runs))
+    assert "Mean return across 3 seeds: median 340.00, range 300.00–360.00" in text
+    assert "Speed (m/s) across 3 seeds: median 25.0, range 24.0–26.0" in text

@@ -135,3 +135,25 @@ def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path) -> No
     one = json.loads((tmp_path / "one" / "summary.json").read_text())
     two = json.loads((tmp_path / "two" / "summary.json").read_text())
     assert one["mean_return"] == two["mean_return"] and one["ci95"] == two["ci95"]
+
+
+def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    base = ["train", "--algo", "dqn", "--out", str(out), "--no-progress",
+            "--set", "hyperparameters.learning_starts=50", "--set", "checkpoint_every=100"]
+    assert main(base + ["--steps", "200"]) == 0
+    assert (out / "checkpoints" / "dqn_200_steps.zip").is_file()
+    assert (out / "checkpoints" / "dqn_replay_buffer_200_steps.pkl").is_file()
+    assert main(base + ["--steps", "200"]) == 2
+    assert "--resume" in capsys.readouterr().err
+    # the same recipe with a bigger budget is another recipe: refused, the run stays as it was
+    assert main(base + ["--steps", "300", "--resume"]) == 2
+    assert "another recipe" in capsys.readouterr().err
+    for name in ("model.zip", "checkpoints/dqn_200_steps.zip", "checkpoints/dqn_replay_buffer_200_steps.pkl"):
+        (out / name).unlink()  # as if the run was cut between steps 100 and 200
+    assert main(base + ["--steps", "200", "--resume"]) == 0
+    train = json.loads((out / "train.json").read_text())
+    assert train["resumed_from"] == 100 and (out / "model.zip").is_file()
+    assert (out / "checkpoints" / "dqn_200_steps.zip").is_file()  # the resumed run went on to 200
+    assert main(base + ["--steps", "200", "--force"]) == 0
+    assert json.loads((out / "train.json").read_text())["resumed_from"] is None

@@ -54,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="recipe override")
     train.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
     train.add_argument("--tensorboard", action="store_true")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
+    train.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     train.add_argument("--no-progress", action="store_true")
 
     ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
@@ -118,6 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
     card.add_argument("--eval", type=Path, help="evaluation folder to report (default FOLDER/eval)")
     card.add_argument("--note", action="append", default=[], help="a line for the card's Notes section")
+    card.add_argument("--seeds", nargs="+", type=Path, default=None, metavar="RUN",
+                      help="run folders of every training seed (each with eval/): median and range in the card")
     return parser
 
 
@@ -183,7 +187,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if recipe["algo"] != args.algo:
         raise ZodriveError(f"recipe {args.recipe!r} trains {recipe['algo']}, not {args.algo}")
     path = train(recipe, args.out, seed=args.seed, preset_overrides=args.env_set,
-                 progress_bar=not args.no_progress, tensorboard=args.tensorboard)
+                 progress_bar=not args.no_progress, tensorboard=args.tensorboard,
+                 resume=args.resume, force=args.force)
     print(f"saved {path}")
     return 0
 
@@ -308,7 +313,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
-    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note)
+    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note, seeds=args.seeds)
     print(f"wrote {path}")
     return 0
 

@@ -24,12 +24,38 @@ def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
             f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
+            f"{summary.get('lane_changes_per_episode', float('nan')):.1f} lane changes per episode, "
+            f"{summary.get('mean_distance', float('nan')):.0f} m travelled, "
             f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
 
+def seed_table(folders: list[Path]) -> list[str]:
+    """Markdown lines: each training seed's evaluation, then the median and range across seeds."""
+    import numpy as np
+
+    rows = []
+    for folder in folders:
+        train, summary = _load(folder / "train.json"), _load(folder / "eval" / "summary.json")
+        rows.append((train["seed"], folder, summary))
+    lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
+             "|---|---|---|---|---|---|---|"]
+    for seed, folder, s in sorted(rows, key=lambda r: r[0]):
+        lines.append(f"| {seed} | `{folder.name}` | {s['mean_return']:.2f} ({s['ci95'][0]:.2f}–{s['ci95'][1]:.2f}) | "
+                     f"{s['collision_rate']:.0%} | {s.get('offroad_rate', 0):.0%} | {s['mean_speed']:.1f} | "
+                     f"{s.get('lane_changes_per_episode', float('nan')):.1f} |")
+    lines.append("")
+    for key, label, fmt in (("mean_return", "Mean return", "{:.2f}"), ("collision_rate", "Collisions", "{:.0%}"),
+                            ("mean_speed", "Speed (m/s)", "{:.1f}"),
+                            ("lane_changes_per_episode", "Lane changes/ep", "{:.1f}")):
+        values = np.array([s.get(key, np.nan) for _, _, s in rows], dtype=float)
+        lines.append(f"- {label} across {len(values)} seeds: median " + fmt.format(np.median(values))
+                     + ", range " + fmt.format(values.min()) + "–" + fmt.format(values.max()))
+    return lines
+
+
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
-               notes: list[str] | None = None) -> Path:
+               notes: list[str] | None = None, seeds: list[Path] | None = None) -> Path:
     """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
     summary.json (default `folder/eval`)."""
     run, train = _load(folder / "run.json"), _load(folder / "train.json")
@@ -48,7 +74,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         run["command"],
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
-        + (f" --eval {evaluation}" if evaluation else "") + "".join(f" --note {n!r}" for n in notes or []),
+        + (f" --eval {evaluation}" if evaluation else "")
+        + (" --seeds " + " ".join(str(p) for p in seeds) if seeds else "") + "".join(f" --note {n!r}" for n in notes or []),
         "```",
         "",
         f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
@@ -75,6 +102,9 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         base = _load(baseline / "summary.json")
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
                       f"{_result_line(base)}."]
+    if seeds:
+        lines += ["", "## Training seeds", "", "Every seed trained with the same recipe and evaluated on the same "
+                  "episodes; the shipped model is the median seed.", ""] + seed_table(seeds)
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     lines += [

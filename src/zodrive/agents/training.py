@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from pathlib import Path
@@ -25,6 +26,12 @@ log = logging.getLogger(__name__)
 
 ALGOS = {"dqn": DQN, "ddpg": DDPG}
 KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
+
+
+def _load_yaml(path: Path) -> Any:
+    import yaml
+
+    return yaml.safe_load(path.read_text())
 
 
 def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
@@ -52,15 +59,37 @@ def action_noise(spec: dict[str, Any] | None, n_actions: int):
     raise ZodriveError(f"unknown action noise type {kind!r} (normal, ornstein-uhlenbeck)")
 
 
-def make_training_env(preset: dict[str, Any], seed: int, log_dir: Path) -> DummyVecEnv:
+def make_training_env(preset: dict[str, Any], seed: int, log_dir: Path, *, append: bool = False) -> DummyVecEnv:
     """One monitored environment; its episode returns become the training curve."""
 
     def build():
-        return Monitor(make_env(preset), filename=str(log_dir / "monitor"))
+        return Monitor(make_env(preset), filename=str(log_dir / "monitor"), override_existing=not append)
 
     venv = DummyVecEnv([build])
     venv.seed(seed)
     return venv
+
+
+def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
+    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
+    found = []
+    for path in (out / "checkpoints").glob(f"{algo}_*_steps.zip"):
+        try:
+            found.append((int(path.stem.split("_")[1]), path))
+        except (IndexError, ValueError):
+            continue
+    if not found:
+        return None
+    steps, path = max(found)
+    return path, steps
+
+
+def check_run_folder(out: Path, *, resume: bool, force: bool) -> None:
+    """Refuse to write a run into a folder that already holds one, unless told what to do."""
+    if resume or force or not out.exists() or not any(out.iterdir()):
+        return
+    raise ZodriveError(f"{out} already holds a run; use --resume to continue it, --force to overwrite it, "
+                       "or choose another --out")
 
 
 def train(
@@ -71,47 +100,76 @@ def train(
     preset_overrides: list[str] | None = None,
     progress_bar: bool = True,
     tensorboard: bool = False,
+    resume: bool = False,
+    force: bool = False,
 ) -> Path:
-    """Train per `recipe` into run folder `out`; returns the saved model path."""
+    """Train per `recipe` into run folder `out`; returns the saved model path.
+
+    Checkpoints (model and replay buffer) are written every `checkpoint_every` steps; with
+    `resume`, training continues from the newest one with the run's own recipe and seed (the
+    environment restarts from a fresh episode, so a resumed run is not bit-identical to an
+    uninterrupted one)."""
+    check_run_folder(out, resume=resume, force=force)
+    previous = _load_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
+    if previous is not None and previous.get("recipe") != recipe:
+        raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started")
     seed = int(recipe.get("seed", 0) if seed is None else seed)
+    if previous is not None:
+        seed = int(json.loads((out / "run.json").read_text())["seed"])
     algo = recipe["algo"]
     preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
     if action_kind(preset) != KIND_OF_ALGO[algo]:
         raise ZodriveError(f"{algo} needs a {KIND_OF_ALGO[algo]} preset, not {preset['name']!r}")
     out.mkdir(parents=True, exist_ok=True)
-    write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
+    checkpoint = latest_checkpoint(out, algo) if resume else None
+    if previous is None:
+        write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
     torch.set_num_threads(1)  # small MLPs: one thread is fastest and lets runs share cores
 
-    env = make_training_env(preset, seed, out)
-    kwargs = dict(recipe.get("hyperparameters") or {})
-    if algo == "ddpg":
-        kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
-    model = ALGOS[algo](
-        "MlpPolicy",
-        env,
-        seed=seed,
-        device="cpu",
-        verbose=0,
-        tensorboard_log=str(out / "tb") if tensorboard else None,
-        **kwargs,
-    )
+    env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,
+                            append=checkpoint is not None)
+    if checkpoint is None:
+        kwargs = dict(recipe.get("hyperparameters") or {})
+        if algo == "ddpg":
+            kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
+        model = ALGOS[algo](
+            "MlpPolicy",
+            env,
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=str(out / "tb") if tensorboard else None,
+            **kwargs,
+        )
+        done = 0
+    else:
+        path, done = checkpoint
+        model = ALGOS[algo].load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
+        if buffer.is_file():
+            model.load_replay_buffer(buffer)
+        log.warning("resuming %s from step %d (%s)", out, done, path.name)
     model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
     every = int(recipe.get("checkpoint_every", 0) or 0)
-    callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo) if every else None
+    callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
+                                  save_replay_buffer=True) if every else None
     start = time.perf_counter()
-    model.learn(
-        total_timesteps=int(recipe["total_timesteps"]),
-        callback=callback,
-        progress_bar=progress_bar,
-        log_interval=1 if algo == "ddpg" else 4,
-    )
-    wall = time.perf_counter() - start
+    total = int(recipe["total_timesteps"])
+    if done < total:
+        model.learn(
+            total_timesteps=total - done,
+            callback=callback,
+            progress_bar=progress_bar,
+            log_interval=1 if algo == "ddpg" else 4,
+            reset_num_timesteps=checkpoint is None,
+        )
+    wall = time.perf_counter() - start  # of this invocation: steps done-total
     path = out / "model.zip"
     model.save(path)
     write_json(
         out / "train.json",
-        {"algo": algo, "total_timesteps": int(recipe["total_timesteps"]), "seed": seed,
-         "wall_time_s": round(wall, 1), "steps_per_s": round(recipe["total_timesteps"] / wall, 1)},
+        {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
+         "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1)},
     )
     env.close()
     log.info("trained %s for %d steps in %.0f s", algo, recipe["total_timesteps"], wall)
