@@ -91,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     adv.add_argument("--seed", type=int, default=1, help="seed of the adversarial phase")
     adv.add_argument("--warmup", type=int, default=0,
                      help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
+    adv.add_argument("--trust-model", action="store_true",
+                     help="load MODEL with stable-baselines3's full loader, which unpickles it (can run code "
+                          "from the file); needed for any model but the shipped ones")
     adv.add_argument("--no-progress", action="store_true")
 
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
@@ -144,11 +147,21 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--attack-seed", type=int)
 
 
+ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "steps",
+                "--n-directions": "n_directions", "--mu": "mu", "--step-size": "step_size",
+                "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
+                "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
+                "--attack-seed": "attack_seed"}
+
+
 def attack_spec_from_args(args: argparse.Namespace):
     """The AttackSpec named by --attack with the CLI's flags on top (None without --attack)."""
     from zodrive.attacks.spec import load_attack
 
     if not args.attack:
+        given = [flag for flag, dest in ATTACK_FLAGS.items() if getattr(args, dest, None) is not None]
+        if given:
+            raise ZodriveError(f"{', '.join(given)} set an attack's options, but no --attack was given")
         return None
     spec = load_attack(args.attack)
     return spec.with_overrides(
@@ -259,7 +272,7 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     spec = load_attack(args.attack, args.attack_set)
     path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
-                             warmup=args.warmup, progress_bar=not args.no_progress)
+                             warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model)
     print(f"saved {path}")
     return 0
 

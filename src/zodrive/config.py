@@ -57,6 +57,17 @@ def parse_override(text: str) -> dict[str, Any]:
     return nested
 
 
+def check_keys(data: Mapping[str, Any], valid: set[str], context: str, prefix: str = "") -> None:
+    """Raise on a key not in `valid`, naming the closest valid one (a typo is never a no-op)."""
+    import difflib
+
+    for key in data:
+        if key not in valid:
+            close = difflib.get_close_matches(str(key), sorted(valid), n=1)
+            hint = f"; did you mean '{prefix}{close[0]}'?" if close else f" (valid: {', '.join(sorted(valid))})"
+            raise ZodriveError(f"unknown key '{prefix}{key}' in {context}{hint}")
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
     """Load one YAML mapping, with a one-line error for missing or malformed files."""
     try:

@@ -31,17 +31,24 @@ class Baseline:
     kinds: tuple[str, ...]                    # presets it can drive: discrete and/or continuous
     reads: Literal["nothing", "simulator"]    # what its decisions depend on
     description: str
+    label: str                                # short name for tables
     action: Any = None                        # constant action (None: a driver)
 
 
 BASELINES: dict[str, Baseline] = {b.name: b for b in (
-    Baseline("slower", ("discrete",), "nothing", "always SLOWER (action 4): drives at 20 m/s", 4),
-    Baseline("idle", ("discrete",), "nothing", "always IDLE (action 1): keeps its start speed and lane", 1),
-    Baseline("faster", ("discrete",), "nothing", "always FASTER (action 3): the DQN attack's target", 3),
-    Baseline("brake", ("continuous",), "nothing", "always [-1, 0]: full brake, straight", (-1.0, 0.0)),
-    Baseline("accelerate", ("continuous",), "nothing", "always [1, 0.5]: the DDPG attack's target", (1.0, 0.5)),
+    Baseline("slower", ("discrete",), "nothing", "always SLOWER (action 4): drives at 20 m/s",
+             "always SLOWER", 4),
+    Baseline("idle", ("discrete",), "nothing", "always IDLE (action 1): keeps its start speed and lane",
+             "always IDLE", 1),
+    Baseline("faster", ("discrete",), "nothing", "always FASTER (action 3): the DQN attack's target",
+             "always FASTER (the attack's target)", 3),
+    Baseline("brake", ("continuous",), "nothing", "always [-1, 0]: full brake, straight",
+             "always [-1, 0] (full brake)", (-1.0, 0.0)),
+    Baseline("accelerate", ("continuous",), "nothing", "always [1, 0.5]: the DDPG attack's target",
+             "always [1, 0.5] (the attack's target)", (1.0, 0.5)),
     Baseline("idm-mobil", ("discrete", "continuous"), "simulator",
-             "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator"),
+             "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
+             "IDM + MOBIL driver (reads the simulator)"),
 )}
 
 

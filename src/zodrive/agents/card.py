@@ -8,6 +8,7 @@ from typing import Any
 
 import yaml
 
+from zodrive.agents.safe_load import sha256
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import write_atomic
 
@@ -24,9 +25,9 @@ def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
             f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
-            f"{summary.get('lane_changes_per_episode', float('nan')):.1f} lane changes per episode, "
-            f"{summary.get('mean_distance', float('nan')):.0f} m travelled, "
-            f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
+            + (f"{summary['lane_changes_per_episode']:.1f} lane changes per episode, "
+               f"{summary['mean_distance']:.0f} m travelled, " if "lane_changes_per_episode" in summary else "")
+            + f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
 
@@ -81,6 +82,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
         f"wall time: {train['wall_time_s'] / 60:.1f} min ({train['steps_per_s']:.0f} steps/s on a 2-core CPU)",
         "- versions: " + ", ".join(f"{k} {v}" for k, v in run["versions"].items()),
+        f"- `model.zip` SHA-256: `{sha256(folder / 'model.zip')}` (shipped models are listed in "
+        "`models/SHA256SUMS`; zodrive checks the sum before it lets stable-baselines3 unpickle the file)",
         "",
         "## Evaluation",
         "",

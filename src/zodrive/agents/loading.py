@@ -1,21 +1,24 @@
-"""Load SB3 DQN/DDPG zips and check that they fit a preset, with one-line errors."""
+"""Open DQN/DDPG zips and check that they fit a preset, with one-line errors.
+
+By default nothing in a model file is unpickled (see `safe_load`): the acting network is
+rebuilt from the zip's plain JSON and its weights. `load_model(..., trust=True)` uses SB3's
+full loader, which unpickles and can run code from the file: only for models you trust
+(the shipped ones are checked against `models/SHA256SUMS`), and only where an SB3 object is
+needed (adversarial training continues training one).
+"""
 
 from __future__ import annotations
 
 import warnings
-import zipfile
 from pathlib import Path
 from typing import Any
 
-from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.save_util import load_from_zip_file
 
+from zodrive.agents.safe_load import PolicyNetwork, _algo, _space_shape, load_policy_network, read_plain, sha256, shipped_sums
 from zodrive.agents.training import ALGOS, KIND_OF_ALGO
 from zodrive.envs import action_kind, observation_shape
 from zodrive.errors import ZodriveError
-
-POLICY_TO_ALGO = {"DQNPolicy": "dqn", "TD3Policy": "ddpg"}  # SB3's DDPG uses TD3Policy
 
 
 def model_file(path: str | Path) -> Path:
@@ -29,21 +32,12 @@ def model_file(path: str | Path) -> Path:
 
 
 def inspect_model(path: Path) -> dict[str, Any]:
-    """Algorithm and spaces stored in an SB3 zip, without building the model."""
-    if not zipfile.is_zipfile(path):
-        raise ZodriveError(f"{path} is not a stable-baselines3 model (not a zip file)")
-    try:
-        data, _, _ = load_from_zip_file(path, device="cpu", load_data=True)
-    except Exception as exc:  # SB3 raises many types for damaged archives
-        raise ZodriveError(f"{path} is corrupt or not a stable-baselines3 model ({type(exc).__name__})") from exc
-    if not data or "policy_class" not in data:
-        raise ZodriveError(f"{path} is not a stable-baselines3 model (no policy data)")
-    policy = getattr(data["policy_class"], "__name__", str(data["policy_class"]))
-    algo = POLICY_TO_ALGO.get(policy)
-    if algo is None:
-        raise ZodriveError(f"{path}: unsupported policy {policy} (zodrive loads DQN and DDPG)")
-    return {"algo": algo, "observation_space": data.get("observation_space"),
-            "action_space": data.get("action_space")}
+    """Algorithm and space shapes stored in an SB3 zip, read without unpickling anything."""
+    data, weights = read_plain(path)
+    algo = _algo(weights, path)
+    action = data.get("action_space") if isinstance(data.get("action_space"), dict) else {}
+    n_actions = int(action["n"]) if "n" in action else (_space_shape(action) or (None,))[0]
+    return {"algo": algo, "obs_shape": _space_shape(data.get("observation_space")), "n_actions": n_actions}
 
 
 def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None:
@@ -54,24 +48,48 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
             f"{path} is a {info['algo'].upper()} model; preset {preset['name']!r} has "
             f"{kind} actions (use a {'DQN' if kind == 'discrete' else 'DDPG'} model)"
         )
-    obs_space = info["observation_space"]
     want = observation_shape(preset)
-    if not isinstance(obs_space, spaces.Box) or tuple(obs_space.shape) != want:
-        got = getattr(obs_space, "shape", obs_space)
-        raise ZodriveError(f"{path} expects observations of shape {got}; preset gives {want}")
-    act_space = info["action_space"]
+    if info["obs_shape"] != want:
+        raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset gives {want}")
     n_actions = 5 if kind == "discrete" else 2
-    size = act_space.n if isinstance(act_space, spaces.Discrete) else act_space.shape[0]
-    if size != n_actions:
-        raise ZodriveError(f"{path} has {size} actions; preset {preset['name']!r} has {n_actions}")
+    if info["n_actions"] != n_actions:
+        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {n_actions}")
 
 
-def load_model(path: str | Path, preset: dict[str, Any] | None = None) -> BaseAlgorithm:
-    """Load a DQN/DDPG zip on the CPU; with `preset`, check that it fits first."""
+def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
+    """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it."""
+    file = model_file(path)
+    if preset is not None:
+        check_fits(inspect_model(file), preset, file)
+    return load_policy_network(file)
+
+
+def is_shipped(file: Path) -> bool:
+    """True if `file` is one of the repository's shipped models and its SHA-256 matches."""
+    from zodrive.config import config_root
+
+    models = config_root().parent / "models"
+    try:
+        relative = file.resolve().relative_to(models.resolve())
+    except ValueError:
+        return False
+    expected = shipped_sums(models).get(str(relative))
+    if expected is None:
+        return False
+    if sha256(file) != expected:
+        raise ZodriveError(f"{file} does not match its SHA-256 in {models / 'SHA256SUMS'}: it was changed")
+    return True
+
+
+def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False) -> BaseAlgorithm:
+    """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model)."""
     file = model_file(path)
     info = inspect_model(file)
     if preset is not None:
         check_fits(info, preset, file)
+    if not (trust or is_shipped(file)):
+        raise ZodriveError(f"loading {file} with stable-baselines3 would unpickle it, which can run code from "
+                           "the file; pass --trust-model if you trust where it came from")
     try:
         with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
             warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
@@ -81,5 +99,5 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None) -> BaseAl
 
 
 def model_algo(path: str | Path) -> str:
-    """`dqn` or `ddpg` for a model file, read from its stored policy class."""
+    """`dqn` or `ddpg` for a model file, read from its weights."""
     return inspect_model(model_file(path))["algo"]

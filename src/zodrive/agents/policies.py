@@ -55,9 +55,10 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator, not the observation: "
                                "an observation attack cannot reach it")
         return
-    from zodrive.agents.loading import load_model
+    from zodrive.agents.loading import check_fits, inspect_model, model_file
 
-    load_model(model, preset)
+    file = model_file(model)
+    check_fits(inspect_model(file), preset, file)
 
 
 def load_victim(model: str, preset: dict[str, Any]) -> Victim:
@@ -70,10 +71,11 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator; it needs its environment "
                                "(use make_policy_env)")
         return bl.constant_victim(baseline, observation_shape(preset), 5 if kind == "discrete" else 2)
-    from zodrive.agents.loading import load_model
-    from zodrive.agents.victims import sb3_victim
+    from zodrive.agents.loading import load_network
+    from zodrive.agents.victims import network_victim
 
-    return sb3_victim(load_model(model, preset))
+    network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
+    return network_victim(network.net, kind, network.obs_shape)
 
 
 def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mode: str | None = None,

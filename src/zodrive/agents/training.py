@@ -17,7 +17,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from zodrive.config import load_config
+from zodrive.config import check_keys, load_config
 from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import write_json, write_run_info
@@ -25,6 +25,19 @@ from zodrive.runinfo import write_json, write_run_info
 log = logging.getLogger(__name__)
 
 ALGOS = {"dqn": DQN, "ddpg": DDPG}
+RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
+               "double_q"}
+
+
+def algorithm_class(recipe: dict[str, Any]):
+    """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target) or DDPG."""
+    if recipe.get("double_q"):
+        if recipe["algo"] != "dqn":
+            raise ZodriveError("double_q applies to dqn recipes only")
+        from zodrive.agents.double_dqn import DoubleDQN
+
+        return DoubleDQN
+    return ALGOS[recipe["algo"]]
 KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
 
 
@@ -40,6 +53,12 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     algo = recipe.get("algo")
     if algo not in ALGOS:
         raise ZodriveError(f"recipe {name!r}: algo must be one of {sorted(ALGOS)}, not {algo!r}")
+    check_keys(recipe, RECIPE_KEYS, f"recipe {name!r}")
+    import inspect
+
+    params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
+                                                                        "verbose", "tensorboard_log", "action_noise"}
+    check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
     steps = recipe.get("total_timesteps")
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
@@ -132,7 +151,7 @@ def train(
         kwargs = dict(recipe.get("hyperparameters") or {})
         if algo == "ddpg":
             kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
-        model = ALGOS[algo](
+        model = algorithm_class(recipe)(
             "MlpPolicy",
             env,
             seed=seed,
@@ -144,7 +163,7 @@ def train(
         done = 0
     else:
         path, done = checkpoint
-        model = ALGOS[algo].load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
         buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
         if buffer.is_file():
             model.load_replay_buffer(buffer)

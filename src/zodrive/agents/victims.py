@@ -39,6 +39,22 @@ class Victim:
         return outputs.argmax(axis=-1) if self.kind == "discrete" else outputs
 
 
+def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
+    """A torch network over flattened observations (Q-values or action) as a victim."""
+    flat = int(np.prod(obs_shape))
+    net.eval()
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        batch = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)).reshape(-1, flat)
+        with torch.inference_mode():
+            return net(batch).numpy()
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return net(obs.reshape(-1, flat).float())
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
+
+
 def sb3_victim(model: BaseAlgorithm) -> Victim:
     """Wrap an SB3 DQN (Q-values) or DDPG (deterministic action) as a black-box victim."""
     obs_shape = tuple(model.observation_space.shape)

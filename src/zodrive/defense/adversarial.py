@@ -41,6 +41,7 @@ def adversarial_train(
     warmup: int = 0,
     noise: dict[str, Any] | None = None,
     progress_bar: bool = True,
+    trust: bool = False,
 ) -> Path:
     """Train `model_path` for `steps` more steps on attacked observations; save to `out`."""
     if steps < 1:
@@ -48,7 +49,7 @@ def adversarial_train(
     torch.set_num_threads(1)
     source = model_file(model_path)
     algo = model_algo(source)
-    model = load_model(source, preset)
+    model = load_model(source, preset, trust=trust)  # an SB3 object to train further
     victim = sb3_victim(model)  # live view of the networks being trained
     out.mkdir(parents=True, exist_ok=True)
     write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec.to_dict(),

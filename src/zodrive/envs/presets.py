@@ -7,11 +7,21 @@ from typing import Any
 
 import gymnasium as gym
 
-from zodrive.config import available, load_config
+from zodrive.config import available, check_keys, load_config
 from zodrive.errors import ZodriveError
 
 ENV_ID = "zodrive/highway-v0"
 ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+
+
+PRESET_KEYS = {"env_id", "max_episode_steps", "highway", "name"}
+
+
+def highway_keys() -> set[str]:
+    """The configuration keys highway-env's `highway-v0` knows."""
+    from highway_env.envs.highway_env import HighwayEnv
+
+    return set(HighwayEnv.default_config())
 
 
 def register() -> None:
@@ -35,6 +45,8 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
     hw = config.get("highway")
     if not isinstance(hw, dict):
         raise ZodriveError(f"preset {name!r} has no 'highway' mapping")
+    check_keys(config, PRESET_KEYS, f"preset {name!r}")
+    check_keys(hw, highway_keys(), f"preset {name!r}", "highway.")
     steps = config.get("max_episode_steps")
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer")

@@ -7,8 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.agents.loading import load_model
-from zodrive.agents.victims import sb3_victim
+from zodrive.agents.policies import load_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import feature_names, make_env
 from zodrive.evaluation.rollout import clean_states
@@ -28,7 +27,7 @@ def _plt():
 def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: int = TUNING_SEED,
                max_states: int = 200) -> dict[str, Any]:
     """Attack clean-rollout states with early stopping off; return the trace of the first success."""
-    victim = sb3_victim(load_model(model, preset))
+    victim = load_victim(str(model), preset)
     x0 = clean_states(make_env(preset), victim, seed, max_states)
     attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
     oracle.begin_step(rows=len(x0))

@@ -62,9 +62,9 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
 
 
 def _baseline_label(row: str) -> str:
-    """`baseline-slower` -> `Baseline: always SLOWER (action 4): ...` for the table."""
+    """`baseline-slower` -> `Baseline: always SLOWER` for the table."""
     baseline = get_baseline("baseline:" + row[len("baseline-"):])
-    return f"Baseline `{baseline.name}`: {baseline.description}"
+    return f"Baseline: {baseline.label}"
 
 
 def _fmt(value: Any, pattern: str) -> str:
@@ -114,7 +114,9 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
         f"Reproduction of Table 1 with {episodes} episodes per cell (seeds 100000–{100000 + episodes - 1}, the same "
         f"in every cell), {'models retrained by this run' if retrain else 'the shipped models in models/'}"
         f"{' (quick mode: not the full study)' if quick else ''}. Attack: ZO-SignSGD, L∞ ε = 0.2, budgeted, "
-        "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in table1.json."
+        "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in table1.json. "
+        "The baseline rows are policies that ignore their observation (one constant action; no observation attack can "
+        "change them) or read the simulator (IDM + MOBIL): a number that one of them also reaches is not a result."
     )
     timing_lines = "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
     md = ["# zodrive reproduction of Table 1", "", intro, "", md_table, "## Figures", ""]

@@ -62,7 +62,8 @@ def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> 
             train(load_recipe(algo, overrides), base, progress_bar=progress)
         if not _done(adv / "model.zip"):
             adversarial_train(base, load_preset(PRESET_OF[algo]), load_attack("zo-signsgd"),
-                              500 if quick else ADV_STEPS[algo], adv, progress_bar=progress)
+                              500 if quick else ADV_STEPS[algo], adv, progress_bar=progress,
+                              trust=True)  # trained by this very run
         paths[algo], paths[f"{algo}-adv"] = base, adv
     return paths
 
@@ -155,13 +156,12 @@ def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick:
 
 def render_crash(model: Path, spec: AttackSpec, fig: Path, *, tries: int) -> dict[str, Any]:
     """Fig. 3: the first attacked DQN episode (from seed 100000) that ends in a collision."""
-    from zodrive.agents.loading import load_model
-    from zodrive.agents.victims import sb3_victim
+    from zodrive.agents.policies import load_victim
     from zodrive.evaluation.video import record_episode, save_gif, save_png
     from zodrive.wrappers import make_attacked_env
 
     preset = load_preset("discrete")
-    victim = sb3_victim(load_model(model, preset))
+    victim = load_victim(str(model), preset)
     env = make_attacked_env(preset, victim, spec, render_mode="rgb_array")
     for seed in range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + tries):
         frames, info = record_episode(env, victim, seed)
