@@ -146,8 +146,8 @@ def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: P
     assert (out / "checkpoints" / "dqn_replay_buffer_200_steps.pkl").is_file()
     assert main(base + ["--steps", "200"]) == 2
     assert "--resume" in capsys.readouterr().err
-    # the same recipe with a bigger budget is another recipe: refused, the run stays as it was
-    assert main(base + ["--steps", "300", "--resume"]) == 2
+    # another recipe is refused (only the step budget may grow), and the run stays as it was
+    assert main(base + ["--steps", "200", "--resume", "--set", "hyperparameters.gamma=0.5"]) == 2
     assert "another recipe" in capsys.readouterr().err
     for name in ("model.zip", "checkpoints/dqn_200_steps.zip", "checkpoints/dqn_replay_buffer_200_steps.pkl"):
         (out / name).unlink()  # as if the run was cut between steps 100 and 200
@@ -155,5 +155,29 @@ def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: P
     train = json.loads((out / "train.json").read_text())
     assert train["resumed_from"] == 100 and (out / "model.zip").is_file()
     assert (out / "checkpoints" / "dqn_200_steps.zip").is_file()  # the resumed run went on to 200
+    assert main(base + ["--steps", "300", "--resume"]) == 0  # train it longer
+    train = json.loads((out / "train.json").read_text())
+    assert train["resumed_from"] == 200 and train["total_timesteps"] == 300
     assert main(base + ["--steps", "200", "--force"]) == 0
     assert json.loads((out / "train.json").read_text())["resumed_from"] is None
+
+
+def test_evaluation_is_keyed_on_the_model_content(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
+    """A moved model still resumes; a swapped file at the same path is refused, and fewer
+    episodes than are on disk never drop any."""
+    moved = tmp_path / "moved.zip"
+    moved.write_bytes((tiny_dqn / "model.zip").read_bytes())
+    out = tmp_path / "eval"
+    args = ["--episodes", "2", "--out", str(out), "--no-progress", "--env-set", "max_episode_steps=20"]
+    assert main(["evaluate", str(tiny_dqn)] + args) == 0
+    assert main(["evaluate", str(moved)] + args) == 0  # same bytes elsewhere: the same evaluation
+    other = tmp_path / "other"
+    assert main(["train", "--algo", "dqn", "--steps", "150", "--seed", "3", "--out", str(other), "--no-progress",
+                 "--set", "hyperparameters.learning_starts=50"]) == 0
+    moved.write_bytes((other / "model.zip").read_bytes())
+    capsys.readouterr()
+    assert main(["evaluate", str(moved)] + args) == 2
+    assert "the model" in capsys.readouterr().err
+    assert main(["evaluate", str(tiny_dqn), "--episodes", "1"] + args[2:]) == 2
+    assert "never drops" in capsys.readouterr().err
+    assert len((out / "episodes.jsonl").read_text().splitlines()) == 2

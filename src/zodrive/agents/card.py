@@ -73,6 +73,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         "",
         "```",
         run["command"],
+        *run.get("continued_by", []),
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
         + (f" --eval {evaluation}" if evaluation else "")

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import yaml
 from stable_baselines3 import DDPG, DQN
 from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.logger import configure
@@ -20,7 +21,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from zodrive.config import check_keys, load_config
 from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
-from zodrive.runinfo import write_json, write_run_info
+from zodrive.runinfo import command_line, write_atomic, write_json, write_run_info
 
 log = logging.getLogger(__name__)
 
@@ -42,8 +43,6 @@ KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
 
 
 def _load_yaml(path: Path) -> Any:
-    import yaml
-
     return yaml.safe_load(path.read_text())
 
 
@@ -103,6 +102,10 @@ def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
     return path, steps
 
 
+def _without_budget(recipe: Any) -> Any:
+    return {k: v for k, v in recipe.items() if k != "total_timesteps"} if isinstance(recipe, dict) else recipe
+
+
 def check_run_folder(out: Path, *, resume: bool, force: bool) -> None:
     """Refuse to write a run into a folder that already holds one, unless told what to do."""
     if resume or force or not out.exists() or not any(out.iterdir()):
@@ -130,8 +133,9 @@ def train(
     uninterrupted one)."""
     check_run_folder(out, resume=resume, force=force)
     previous = _load_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
-    if previous is not None and previous.get("recipe") != recipe:
-        raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started")
+    if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
+        raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "
+                           "(only --steps may change, to train it longer)")
     seed = int(recipe.get("seed", 0) if seed is None else seed)
     if previous is not None:
         seed = int(json.loads((out / "run.json").read_text())["seed"])
@@ -143,6 +147,11 @@ def train(
     checkpoint = latest_checkpoint(out, algo) if resume else None
     if previous is None:
         write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
+    else:  # the run folder keeps the command that started it and lists those that continued it
+        run = json.loads((out / "run.json").read_text())
+        run["continued_by"] = [*run.get("continued_by", []), command_line()]
+        write_json(out / "run.json", run)
+        write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
     torch.set_num_threads(1)  # small MLPs: one thread is fastest and lets runs share cores
 
     env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,

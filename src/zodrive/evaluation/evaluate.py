@@ -42,8 +42,15 @@ class EvalJob:
     record_steps: bool = True
 
     def key(self) -> dict[str, Any]:
-        """What must match for a resumed run to reuse episodes on disk."""
-        model = self.model if self.model.startswith("baseline:") else str(Path(self.model).resolve())
+        """What must match for a resumed run to reuse episodes on disk: the policy (a model by
+        the SHA-256 of its file, so a moved checkout still matches and a swapped file does
+        not), the preset, the attack and the first seed."""
+        if self.model.startswith("baseline:"):
+            model = self.model
+        else:
+            from zodrive.agents.safe_load import sha256
+
+            model = "sha256:" + sha256(Path(self.model))
         return {"model": model, "preset": self.preset, "attack": self.attack, "seed": self.seed}
 
 
@@ -123,9 +130,11 @@ def evaluate(
         out.mkdir(parents=True, exist_ok=True)
         key_path = out / "eval_key.json"
         if key_path.exists():
-            if json.loads(key_path.read_text()) != json.loads(json.dumps(job.key())):
-                raise ZodriveError(f"{out} holds a different evaluation; choose another --out or delete it")
-            done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl") if r["episode"] < episodes}
+            check_same_evaluation(json.loads(key_path.read_text()), json.loads(json.dumps(job.key())), out)
+            done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl")}
+            if len(done) > episodes:
+                raise ZodriveError(f"{out} already holds {len(done)} episodes; ask for at least {len(done)} "
+                                   "(or use another --out): zodrive never drops recorded episodes")
             _rewrite_consistent(out, done)
         else:
             for name in ("episodes.jsonl", "steps.jsonl"):
@@ -150,6 +159,17 @@ def evaluate(
     if out is not None:
         write_json(out / "summary.json", summary)
     return summary
+
+
+def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
+    """Refuse to mix episodes of two different evaluations, saying what differs."""
+    if on_disk == wanted:
+        return
+    differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
+    what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
+            "attack": "the attack settings", "seed": "the first seed"}
+    raise ZodriveError(f"{out} holds a different evaluation ({', '.join(what.get(k, k) for k in differs)} "
+                       "differ); choose another --out")
 
 
 def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
