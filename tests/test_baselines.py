@@ -111,3 +111,15 @@ def test_card_reports_median_and_range_over_training_seeds(tmp_path: Path) -> No
     text = "\n".join(seed_table(runs))
     assert "Mean return across 3 seeds: median 340.00, range 300.00–360.00" in text
     assert "Speed (m/s) across 3 seeds: median 25.0, range 24.0–26.0" in text
+
+
+def test_learning_curves_bin_episodes_by_training_step(tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    rows = "\n".join(f"{r},{n},0.0" for r, n in ((10, 50), (20, 50), (300, 100), (100, 40)))
+    (run / "monitor.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n' + rows + "\n")
+    assert main(["curves", str(run), "--bin", "100", "--plot", str(tmp_path / "c.png")]) == 0
+    out = capsys.readouterr().out
+    assert "| run | 15 / 50 | 300 / 100 | 100 / 40 |" in out  # steps 0-100, 100-200, 200-300
+    assert (tmp_path / "c.png").stat().st_size > 0
+    assert main(["curves", str(tmp_path / "nothing")]) == 2

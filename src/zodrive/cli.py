@@ -118,6 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--model", default=None, help="default: models/dqn")
     demo.add_argument("--out", type=Path, default=Path("results/demo"))
 
+    curves = sub.add_parser("curves", help="learning curves of training runs side by side (table, --plot PNG)")
+    curves.add_argument("runs", nargs="+", type=Path, help="run folders (with monitor.monitor.csv)")
+    curves.add_argument("--bin", type=_positive_int, default=20000, help="steps per window")
+    curves.add_argument("--plot", type=Path, help="also draw the curves to this PNG")
+
     card = sub.add_parser("card", help="write CARD.md for a trained model folder")
     card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
     card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
@@ -323,6 +328,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_curves(args: argparse.Namespace) -> int:
+    from zodrive.experiments.curves import curves_markdown, plot_curves
+
+    print("mean training return / episode length, per window of training steps (ε-greedy or noisy actions)")
+    print(curves_markdown(args.runs, args.bin), end="")
+    if args.plot:
+        plot_curves(args.runs, args.bin, args.plot)
+        print(f"plot: {args.plot}")
+    return 0
+
+
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
@@ -333,7 +349,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
             "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
-            "demo": cmd_demo, "compare": cmd_compare}
+            "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
