@@ -132,7 +132,8 @@ def test_white_box_attacks_refuse_a_black_box_victim() -> None:
         ({"n_directions": 0}, "n_directions"), ({"attack": "nope"}, "unknown attack"),
         ({"target": "WARP"}, "unknown target"), ({"target": 7}, "out of range"),
         ({"mu": 0.0}, "mu"), ({"norm": "l1"}, "norm"), ({"query_budget": 0}, "query_budget"),
-        ({"loss": "hinge"}, "loss"),
+        ({"loss": "hinge"}, "loss"), ({"query_budget": 5}, "below one iteration of zo-signsgd \\(22 queries"),
+        ({"attack": "random-search", "query_budget": 21}, "below one iteration"),
     ],
 )
 def test_bad_attack_parameters_give_one_clear_error(changes: dict, message: str) -> None:

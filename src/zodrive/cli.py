@@ -91,6 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
     adv.add_argument("--seed", type=int, default=1, help="seed of the adversarial phase")
     adv.add_argument("--warmup", type=int, default=0,
                      help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
+    adv.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     adv.add_argument("--trust-model", action="store_true",
                      help="load MODEL with stable-baselines3's full loader, which unpickles it (can run code "
                           "from the file); needed for any model but the shipped ones")
@@ -277,7 +278,8 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     spec = load_attack(args.attack, args.attack_set)
     path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
-                             warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model)
+                             warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model,
+                             force=args.force)
     print(f"saved {path}")
     return 0
 

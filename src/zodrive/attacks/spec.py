@@ -75,6 +75,13 @@ class AttackSpec:
             self.attack, threat, steps=self.steps, n_directions=self.n_directions, mu=self.mu,
             step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop, seed=self.seed,
         )
+        if self.query_budget is not None and self.query_budget >= 1:  # < 1: the oracle says so
+            one = make_attack(self.attack, threat, steps=1, n_directions=self.n_directions, mu=self.mu,
+                              step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
+                              seed=self.seed).queries_per_step()
+            if self.query_budget < one:
+                raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
+                                   f"({one} queries with these settings): the attack could do nothing")
         n_actions = 5 if victim.kind == "discrete" else 2
         objective = make_objective(
             victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,

@@ -20,7 +20,7 @@ from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from zodrive.agents.loading import load_model, model_algo, model_file
-from zodrive.agents.training import action_noise
+from zodrive.agents.training import action_noise, check_run_folder
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
@@ -42,10 +42,12 @@ def adversarial_train(
     noise: dict[str, Any] | None = None,
     progress_bar: bool = True,
     trust: bool = False,
+    force: bool = False,
 ) -> Path:
     """Train `model_path` for `steps` more steps on attacked observations; save to `out`."""
     if steps < 1:
         raise ZodriveError(f"steps must be >= 1, not {steps}")
+    check_run_folder(out, resume=False, force=force)
     torch.set_num_threads(1)
     source = model_file(model_path)
     algo = model_algo(source)
