@@ -105,10 +105,23 @@ def test_model_that_does_not_fit_the_preset(tiny_dqn: Path, capsys) -> None:
         (["evaluate", "m.zip", "--episodes", "0"], "positive integer"),
         (["evaluate", "m.zip", "--episodes", "abc"], "positive integer"),
         (["train", "--algo", "ppo", "--out", "x"], "invalid choice"),
+        (["evaluate", "m.zip", "--seed", "-1"], "integer >= 0"),
+        (["train", "--algo", "dqn", "--seed", "-3", "--out", "x"], "integer >= 0"),
+        (["render", "m.zip", "--seed", "-1", "--out", "x"], "integer >= 0"),
+        (["evaluate", "m.zip", "--attack", "nes", "--attack-seed", "-1"], "integer >= 0"),
+        (["adv-train", "m.zip", "--steps", "5", "--warmup", "-1", "--out", "x"], "integer >= 0"),
+        (["render", "m.zip", "--out", "README.md"], "is a file, not a folder"),
+        (["compare", "baseline:slower", "--attacks", "nosuch", "--out", "x"], "unknown attack"),
+        (["evaluate", "m.zip", "--eps", "0.1"], "no --attack was given"),
+        (["env", "show", "discrete", "--set", "highway.lane_count=3"], "did you mean 'highway.lanes_count'"),
+        (["train", "--algo", "dqn", "--out", "x", "--set", "hyperparameters.gama=1"], "did you mean 'hyperparameters.gamma'"),
+        (["train", "--algo", "dqn", "--out", "x", "--set", "nosuch=1"], "unknown key 'nosuch'"),
     ],
 )
-def test_bad_arguments(args: list[str], message: str, capsys) -> None:
+def test_bad_arguments(args: list[str], message: str, capsys, monkeypatch) -> None:
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])  # README.md exists there
     assert message in _error(capsys, args)
+    assert not Path("x").exists()  # no half-made output folder
 
 
 @pytest.mark.parametrize(
@@ -187,3 +200,12 @@ def test_adv_train_refuses_to_overwrite_a_run(tiny_dqn: Path, capsys) -> None:
     assert main(["adv-train", str(tiny_dqn), "--steps", "10", "--out", str(tiny_dqn)]) == 2
     assert "--force" in capsys.readouterr().err
     assert (tiny_dqn / "model.zip").is_file()
+
+
+def test_bad_yaml_values_and_hyperparameters(tmp_path: Path, capsys) -> None:
+    config = tmp_path / "a.yaml"
+    config.write_text("attack: zo-signsgd\neps: banana\n")
+    assert "must be a number" in _error(capsys, ["evaluate", "baseline:slower", "--attack", str(config)])
+    out = tmp_path / "run"
+    err = _error(capsys, ["train", "--algo", "dqn", "--out", str(out), "--set", "hyperparameters.learning_rate=banana"])
+    assert "invalid setting" in err and not out.exists()

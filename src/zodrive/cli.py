@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -24,6 +25,37 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
     return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a seed (an integer >= 0), got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a seed (an integer >= 0), got {value}")
+    return value
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def _check_out(path: Path | None) -> None:
+    """An --out must be a folder (or not exist yet) that we can write to."""
+    if path is None:
+        return
+    if path.exists() and not path.is_dir():
+        raise ZodriveError(f"--out {path} is a file, not a folder")
+    parent = path if path.exists() else next((p for p in path.parents if p.exists()), Path("."))
+    if not os.access(parent, os.W_OK):
+        raise ZodriveError(f"--out {path}: {parent} is not writable")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -48,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     train = sub.add_parser("train", help="train a DQN or DDPG agent")
     train.add_argument("--algo", choices=["dqn", "ddpg"], required=True)
     train.add_argument("--recipe", help="recipe name or YAML (default: the tuned recipe of --algo)")
-    train.add_argument("--seed", type=int, help="training seed (default: the recipe's)")
+    train.add_argument("--seed", type=_seed, help="training seed (default: the recipe's)")
     train.add_argument("--steps", type=_positive_int, help="total timesteps (default: the recipe's budget)")
     train.add_argument("--out", type=Path, required=True, help="run folder")
     train.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="recipe override")
@@ -63,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--preset", help="preset (default: from the model's algorithm)")
     ev.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
     ev.add_argument("--episodes", type=_positive_int, default=100)
-    ev.add_argument("--seed", type=int, default=None, help="first evaluation seed (default 100000)")
+    ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
     ev.add_argument("--workers", type=_positive_int, default=1)
     _attack_flags(ev)
@@ -73,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("model", help="SB3 zip, model folder or baseline:NAME")
     render.add_argument("--preset")
     render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
-    render.add_argument("--seed", type=int, default=None, help="first episode seed (default 100000)")
+    render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     render.add_argument("--out", type=Path, required=True)
     render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
                         help="try up to N seeds until an episode ends in a collision")
@@ -88,8 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     adv.add_argument("--out", type=Path, required=True)
     adv.add_argument("--preset")
     adv.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
-    adv.add_argument("--seed", type=int, default=1, help="seed of the adversarial phase")
-    adv.add_argument("--warmup", type=int, default=0,
+    adv.add_argument("--seed", type=_seed, default=1, help="seed of the adversarial phase")
+    adv.add_argument("--warmup", type=_nonnegative_int, default=0,
                      help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
     adv.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     adv.add_argument("--trust-model", action="store_true",
@@ -150,7 +182,7 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--query-budget", type=int, help="max queries per environment step")
     group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
     group.add_argument("--no-early-stop", dest="early_stop", action="store_false")
-    group.add_argument("--attack-seed", type=int)
+    group.add_argument("--attack-seed", type=_seed)
 
 
 ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "steps",
@@ -225,8 +257,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
 
+    spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    spec = attack_spec_from_args(args)
     check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
         from zodrive.envs import feature_names
@@ -249,8 +281,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.evaluation.video import record_episode, save_gif, save_png
 
-    preset = resolve_model_preset(args.model, args.preset, args.env_set)
     spec = attack_spec_from_args(args)
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
     victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array")
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
@@ -302,6 +334,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
     for eps in args.eps:
         if not eps > 0:
             raise ZodriveError(f"eps must be > 0, not {eps}")
+    from zodrive.attacks.spec import load_attack
+
+    for attack in args.attacks or []:
+        load_attack(attack)  # an unknown attack fails now, not after the clean cells ran
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress)
     print(markdown(rows), end="")
@@ -364,6 +400,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.verbose:
             logging.getLogger("zodrive").setLevel(logging.INFO)
+        _check_out(getattr(args, "out", None))
         return COMMANDS[args.command](args)
     except ZodriveError as exc:
         print(f"zodrive: error: {exc}", file=sys.stderr)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -143,7 +144,20 @@ def train(
     preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
     if action_kind(preset) != KIND_OF_ALGO[algo]:
         raise ZodriveError(f"{algo} needs a {KIND_OF_ALGO[algo]} preset, not {preset['name']!r}")
+    fresh = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
+                      tensorboard=tensorboard)
+    except (TypeError, ValueError, AssertionError) as exc:  # SB3 rejects a hyperparameter
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
+        raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
+
+
+def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
+           previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool) -> Path:
+    algo = recipe["algo"]
     checkpoint = latest_checkpoint(out, algo) if resume else None
     if previous is None:
         write_run_info(out, {"recipe": recipe, "preset": preset}, seed)

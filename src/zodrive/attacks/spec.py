@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +15,8 @@ from zodrive.attacks.registry import make_attack
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
+
+log = logging.getLogger(__name__)
 
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 
@@ -48,6 +51,12 @@ class AttackSpec:
         if unknown:
             raise ZodriveError(f"unknown attack option(s): {', '.join(sorted(unknown))}")
         values = {k: v for k, v in data.items() if k in names}
+        for field in dataclasses.fields(cls):
+            value = values.get(field.name)
+            if value is None or field.name not in values:
+                continue
+            if field.type in ("float", "int", "int | None") and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ZodriveError(f"attack option {field.name} must be a number, not {value!r}")
         if "frozen" in values:
             values["frozen"] = tuple(values["frozen"] or ())
         return cls(**values)
@@ -71,6 +80,9 @@ class AttackSpec:
     def build(self, victim: Victim, features: tuple[str, ...]) -> tuple[Attack, Objective, QueryOracle]:
         """The attack, its objective for this victim, and the oracle that counts queries."""
         threat = self.threat(features)
+        if self.mode == "budgeted" and self.norm == "linf" and self.eps >= 2.0:
+            log.warning("eps=%g covers the whole observation box [-1, 1] (width 2): the budget constrains nothing, "
+                        "only the box clips the perturbation", self.eps)
         attack = make_attack(
             self.attack, threat, steps=self.steps, n_directions=self.n_directions, mu=self.mu,
             step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop, seed=self.seed,
