@@ -40,15 +40,21 @@ def binned(run: Path, bin_steps: int) -> list[dict[str, Any]]:
     return rows
 
 
+def labels(runs: list[Path]) -> list[str]:
+    """Run folder names, with their parent where two runs share a name."""
+    names = [run.name for run in runs]
+    return [f"{run.parent.name}/{run.name}" if names.count(run.name) > 1 else run.name for run in runs]
+
+
 def curves_markdown(runs: list[Path], bin_steps: int) -> str:
     """One row per run: mean training return (and length) per step window."""
     data = {run: {r["step"]: r for r in binned(run, bin_steps)} for run in runs}
     steps = sorted({s for rows in data.values() for s in rows})
     lines = ["| Run | " + " | ".join(f"≤{s // 1000}k" for s in steps) + " |",
              "|---|" + "---|" * len(steps)]
-    for run, rows in data.items():
+    for label, rows in zip(labels(runs), data.values()):
         cells = [f"{rows[s]['mean_return']:.0f} / {rows[s]['mean_length']:.0f}" if s in rows else "" for s in steps]
-        lines.append(f"| {run.name} | " + " | ".join(cells) + " |")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -57,9 +63,9 @@ def plot_curves(runs: list[Path], bin_steps: int, path: Path) -> None:
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 3.8))
-    for run in runs:
+    for run, label in zip(runs, labels(runs)):
         rows = binned(run, bin_steps)
-        ax.plot([r["step"] for r in rows], [r["mean_return"] for r in rows], ".-", label=run.name)
+        ax.plot([r["step"] for r in rows], [r["mean_return"] for r in rows], ".-", label=label)
     ax.set_xlabel("training step")
     ax.set_ylabel(f"mean training return per {bin_steps // 1000}k steps")
     ax.legend(fontsize=7)
