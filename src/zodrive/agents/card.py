@@ -13,6 +13,7 @@ from zodrive.errors import ZodriveError
 from zodrive.runinfo import write_atomic
 
 PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
+PAPER_BUDGETS = {"dqn": 20_000, "ddpg": 120_000}
 
 
 def _load(path: Path) -> dict[str, Any]:
@@ -101,7 +102,9 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(names, summary["action_share"])) + ".")
     if not adversarial and recipe.get("hyperparameters"):
         changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
-        lines += ["", f"Changed from stable-baselines3's defaults (the step budget is the paper's): {changed}."]
+        budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)
+                  else f"{train['total_timesteps']:,} steps; the paper's budget is {PAPER_BUDGETS.get(algo, 0):,}")
+        lines += ["", f"Changed from stable-baselines3's defaults ({budget}): {changed}."]
     if baseline is not None:
         base = _load(baseline / "summary.json")
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "

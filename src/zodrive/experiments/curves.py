@@ -41,9 +41,12 @@ def binned(run: Path, bin_steps: int) -> list[dict[str, Any]]:
 
 
 def labels(runs: list[Path]) -> list[str]:
-    """Run folder names, with their parent where two runs share a name."""
-    names = [run.name for run in runs]
-    return [f"{run.parent.name}/{run.name}" if names.count(run.name) > 1 else run.name for run in runs]
+    """The shortest path tails that tell the runs apart."""
+    for depth in range(1, 1 + max(len(run.parts) for run in runs)):
+        names = ["/".join(run.parts[-depth:]) for run in runs]
+        if len(set(names)) == len(names):
+            return names
+    return [str(run) for run in runs]
 
 
 def curves_markdown(runs: list[Path], bin_steps: int) -> str:
