@@ -111,7 +111,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
                       f"{_result_line(base)}."]
     if seeds:
         lines += ["", "## Training seeds", "", "Every seed trained with the same recipe and evaluated on the same "
-                  "episodes; the shipped model is the median seed.", ""] + seed_table(seeds)
+                  "episodes; report the median and range, not the best seed.", ""] + seed_table(seeds)
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     lines += [
