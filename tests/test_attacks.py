@@ -158,3 +158,9 @@ def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
         result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=4, early_stop=False)
         assert len(calls) == 11
         assert calls[1] == n * 5
+
+
+def test_an_eps_that_covers_the_whole_box_is_reported(caplog) -> None:
+    with caplog.at_level("WARNING"):
+        AttackSpec(eps=1e9).build(linear_victim(), FEATURES)
+    assert "covers the whole observation box" in caplog.text
