@@ -123,3 +123,18 @@ def test_learning_curves_bin_episodes_by_training_step(tmp_path: Path, capsys) -
     assert "| run | 15 / 50 | 300 / 100 | 100 / 40 |" in out  # steps 0-100, 100-200, 200-300
     assert (tmp_path / "c.png").stat().st_size > 0
     assert main(["curves", str(tmp_path / "nothing")]) == 2
+
+
+def test_perception_panel_shows_every_perceived_vehicle() -> None:
+    from zodrive.evaluation.video import X_RANGE, Y_RANGE, Frame, panel_extent
+
+    clean = np.zeros((5, 5), dtype=np.float32)
+    clean[:, 0] = 1.0
+    clean[1:, 1] = [0.2, 0.4, 0.6, 0.8]
+    perceived = clean.copy()
+    perceived[2, 2] = 0.2   # moved 20 m sideways by an attack
+    perceived[3, 1] = -0.5  # moved 50 m behind the ego
+    (x_low, x_high), y_half = panel_extent(Frame(np.zeros((2, 2, 3)), clean, perceived, 1))
+    for row in perceived[1:]:
+        assert x_low < row[1] * X_RANGE < x_high and abs(row[2] * Y_RANGE) < y_half
+    assert panel_extent(Frame(np.zeros((2, 2, 3)), clean, clean, 1))[1] == 14.0  # the lanes, as before

@@ -70,15 +70,25 @@ def draw(frame: Frame, fig, step: int, title: str = "") -> None:
             x, y = row[1] * X_RANGE, row[2] * Y_RANGE
             right.add_patch(_car(x, y, **style, label=label if i == 1 else None))
     right.add_patch(_car(0.0, 0.0, facecolor="tab:blue", label="ego"))
-    right.set_xlim(-30, 90)
-    right.set_ylim(14, -14)  # right lanes down, as in the simulator's image
+    (x_low, x_high), y_half = panel_extent(frame)
+    right.set_xlim(x_low, x_high)
+    right.set_ylim(y_half, -y_half)  # right lanes down, as in the simulator's image
     right.set_xlabel("longitudinal x [m] (ego frame)")
     right.set_ylabel("lateral y [m]")
     right.set_title("observation", fontsize=9)
-    right.legend(loc="lower right", fontsize=7)
+    right.legend(loc="best", fontsize=7)
     if frame.stats:
         right.text(0.02, 0.98, f"Linf {frame.stats.get('linf', 0):.3f}\nqueries {frame.stats.get('queries', 0)}",
                    transform=right.transAxes, va="top", fontsize=7)
+
+
+def panel_extent(frame: Frame) -> tuple[tuple[float, float], float]:
+    """Axis limits of the perception panel: the four lanes at least, and every vehicle drawn,
+    real or perceived (an attack may move a vehicle 20 m sideways)."""
+    rows = [row for obs in (frame.clean, frame.perceived) for i, row in enumerate(obs) if i > 0 and row[0] > 0]
+    xs = [row[1] * X_RANGE for row in rows] or [0.0]
+    ys = [abs(row[2] * Y_RANGE) for row in rows] or [0.0]
+    return (min(-30.0, min(xs) - 5.0), max(90.0, max(xs) + 5.0)), max(14.0, max(ys) + 3.0)
 
 
 def _car(x: float, y: float, **style):
