@@ -49,6 +49,10 @@ def _check_out(path: Path | None) -> None:
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)  # --help shows defaults
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str) -> None:  # one line, exit 2, like every other error
         raise ZodriveError(f"{self.prog}: {message}")
 
@@ -137,9 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--no-progress", action="store_true")
 
     demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
-    demo.add_argument("--episodes", type=_positive_int, default=3)
-    demo.add_argument("--model", default=None, help="default: models/dqn")
-    demo.add_argument("--out", type=Path, default=Path("results/demo"))
+    demo.add_argument("--episodes", type=_positive_int, default=3, help="episodes, clean and attacked")
+    demo.add_argument("--model", default=None, help="model folder or zip; None = the shipped DQN (models/dqn)")
+    demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
 
     curves = sub.add_parser("curves", help="learning curves of training runs side by side (table, --plot PNG)")
     curves.add_argument("runs", nargs="+", type=Path, help="run folders (with monitor.monitor.csv)")
@@ -335,24 +339,29 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from zodrive.agents.policies import policy_label, policy_ref
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
     from zodrive.experiments.reproduce import models_dir
 
-    model = args.model or str(models_dir() / "dqn" / "model.zip")
+    model = args.model or str(models_dir() / "dqn")
     preset = resolve_model_preset(model, None, [])
+    ref, name = policy_ref(model), ("the shipped DQN" if args.model is None else policy_label(model))
     spec = load_attack("zo-signsgd")
     results = {}
     for label, attack in (("clean", None), ("attacked", spec)):
-        job = EvalJob(model=model, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
-        print(f"== {label}: {args.episodes} episodes of the shipped DQN" + (f" under {spec.attack}" if attack else ""))
-        results[label] = evaluate(job, args.episodes, args.out / label, progress=False)
+        job = EvalJob(model=ref, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
+        print(f"== {label}: {args.episodes} episodes of {name}" + (f" under {spec.attack}" if attack else ""))
+        results[label] = evaluate(job, args.episodes, args.out / label, progress=True)
         print(format_summary(results[label]))
     drop = 1 - results["attacked"]["mean_return"] / results["clean"]["mean_return"]
     print(f"== the black-box attack (L-inf eps={spec.eps}) cut the mean return by {drop:.0%} "
           f"({results['clean']['mean_return']:.1f} -> {results['attacked']['mean_return']:.1f}); "
           f"results in {args.out}/")
+    print("   target=auto: the paper's target action (FASTER for a DQN, [1, 0.5] for a DDPG).")
+    print("   base rate: how often the clean policy already takes the target; success counts only the other steps.")
+    print("   queries/step: observations the attacker sent to the policy per decision (black-box cost).")
     return 0
 
 

@@ -10,8 +10,9 @@ def format_summary(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     lines = [
         f"episodes: {summary['episodes']} (seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
-        f"mean return: {summary['mean_return']:.2f}  95% CI [{low:.2f}, {high:.2f}]  "
-        f"({summary['pct_of_max']:.2f}% of max)",
+        f"mean return: {summary['mean_return']:.2f}  "
+        + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
+        + f"({summary['pct_of_max']:.2f}% of max)",
         f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
         f"mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
         f"{summary.get('lane_changes_per_episode', float('nan')):.2f}  distance: {summary.get('mean_distance', float('nan')):.0f} m  "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -109,6 +110,9 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
             summaries[algo][row] = json.loads(summary_path.read_text())
             continue
         log.info("cell %s / %s", algo, row)
+        if progress:
+            print(f"cell {algo}-{row}: {episodes} episodes of {model}" + (" under attack" if attack else ""),
+                  file=sys.stderr)
         summaries[algo][row] = evaluate(job, episodes, folder, workers=workers, progress=progress)
         timings[f"cell {algo}-{row}"] = round(time.perf_counter() - t0, 1)
         write_json(out / "timings.json", timings)
