@@ -15,7 +15,7 @@ from typing import Any
 
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from zodrive.agents.safe_load import PolicyNetwork, _algo, _space_shape, load_policy_network, read_plain, sha256, shipped_sums
+from zodrive.agents.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
 from zodrive.agents.training import ALGOS, KIND_OF_ALGO
 from zodrive.envs import action_kind, observation_shape
 from zodrive.errors import ZodriveError
@@ -33,11 +33,7 @@ def model_file(path: str | Path) -> Path:
 
 def inspect_model(path: Path) -> dict[str, Any]:
     """Algorithm and space shapes stored in an SB3 zip, read without unpickling anything."""
-    data, weights = read_plain(path)
-    algo = _algo(weights, path)
-    action = data.get("action_space") if isinstance(data.get("action_space"), dict) else {}
-    n_actions = int(action["n"]) if "n" in action else (_space_shape(action) or (None,))[0]
-    return {"algo": algo, "obs_shape": _space_shape(data.get("observation_space")), "n_actions": n_actions}
+    return describe(*read_plain(path), path)
 
 
 def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None:
@@ -59,9 +55,10 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
     """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it."""
     file = model_file(path)
+    data, weights = read_plain(file)  # the zip is read once
     if preset is not None:
-        check_fits(inspect_model(file), preset, file)
-    return load_policy_network(file)
+        check_fits(describe(data, weights, file), preset, file)
+    return network_from(data, weights, file)
 
 
 def is_shipped(file: Path) -> bool:

@@ -84,12 +84,12 @@ def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mod
     from zodrive.envs import make_env
     from zodrive.wrappers import make_attacked_env
 
-    check_policy(model, preset, attacked=spec is not None)
     if bl.is_baseline(model) and bl.get_baseline(model).reads == "simulator":
+        check_policy(model, preset, attacked=spec is not None)
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
         driver = bl.IdmMobilDriver(env, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), 5 if kind == "discrete" else 2)
         return victim, env
-    victim = load_victim(model, preset)
+    victim = load_victim(model, preset)  # checks that the policy fits the preset
     return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)

@@ -86,9 +86,21 @@ def _space_shape(space: Any) -> tuple[int, ...] | None:
     return tuple(int(v) for v in shape) if isinstance(shape, list) else None
 
 
+def describe(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path) -> dict[str, Any]:
+    """Algorithm and space shapes of a zip's plain contents (see `read_plain`)."""
+    action = data.get("action_space") if isinstance(data.get("action_space"), dict) else {}
+    n_actions = int(action["n"]) if "n" in action else (_space_shape(action) or (None,))[0]
+    return {"algo": _algo(weights, path), "obs_shape": _space_shape(data.get("observation_space")),
+            "n_actions": n_actions}
+
+
 def load_policy_network(path: Path) -> PolicyNetwork:
     """Rebuild the acting network of an SB3 DQN/DDPG zip from plain data only."""
-    data, weights = read_plain(path)
+    return network_from(*read_plain(path), path)
+
+
+def network_from(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path) -> PolicyNetwork:
+    """The acting network (SB3's default MLP) rebuilt from a zip's plain contents."""
     algo = _algo(weights, path)
     kwargs = data.get("policy_kwargs", {})
     if not isinstance(kwargs, dict) or ":serialized:" in kwargs or set(kwargs) & CHANGES_THE_NETWORK:
@@ -97,16 +109,16 @@ def load_policy_network(path: Path) -> PolicyNetwork:
     prefix = HEADS[algo]
     layers = sorted({int(m.group(1)) for key in weights if (m := re.fullmatch(re.escape(prefix) + r"\.(\d+)\.weight", key))})
     extra = [k for k in weights if k.startswith(prefix.split(".")[0] + ".features_extractor")]
-    if not layers or extra:
+    layout_ok = bool(layers) and not extra and layers == list(range(0, 2 * len(layers), 2)) and all(
+        weights[f"{prefix}.{i}.weight"].ndim == 2
+        and getattr(weights.get(f"{prefix}.{i}.bias"), "shape", None) == weights[f"{prefix}.{i}.weight"].shape[:1]
+        for i in layers)  # SB3's MLP: Linear layers at even indices, an activation between them
+    if not layout_ok:
         raise ZodriveError(f"{path}: unexpected policy network layout; pass --trust-model to load it with SB3")
     modules: list[nn.Module] = []
     state: dict[str, torch.Tensor] = {}
     for i, index in enumerate(layers):
-        weight, bias = weights[f"{prefix}.{index}.weight"], weights.get(f"{prefix}.{index}.bias")
-        if weight.ndim != 2 or bias is None or bias.shape != weight.shape[:1]:
-            raise ZodriveError(f"{path}: unexpected policy network layout; pass --trust-model to load it with SB3")
-        if index != 2 * i:  # SB3's MLP: Linear at even indices, activation between
-            raise ZodriveError(f"{path}: unexpected policy network layout; pass --trust-model to load it with SB3")
+        weight, bias = weights[f"{prefix}.{index}.weight"], weights[f"{prefix}.{index}.bias"]
         modules.append(nn.Linear(weight.shape[1], weight.shape[0]))
         state[f"{len(modules) - 1}.weight"], state[f"{len(modules) - 1}.bias"] = weight, bias
         if i < len(layers) - 1:
@@ -120,7 +132,8 @@ def load_policy_network(path: Path) -> PolicyNetwork:
     n_in = int(torch.tensor(obs_shape).prod())
     if n_in != modules[0].in_features:
         raise ZodriveError(f"{path}: observation space {obs_shape} does not match the network's input")
-    return PolicyNetwork(algo=algo, net=net, obs_shape=obs_shape, n_outputs=int(modules[-2 if algo == "ddpg" else -1].out_features))
+    n_outputs = int(weights[f"{prefix}.{layers[-1]}.weight"].shape[0])
+    return PolicyNetwork(algo=algo, net=net, obs_shape=obs_shape, n_outputs=n_outputs)
 
 
 def shipped_sums(folder: Path) -> dict[str, str]:

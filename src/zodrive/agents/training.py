@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import logging
 import shutil
@@ -19,7 +20,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from zodrive.config import check_keys, load_config
+from zodrive.config import check_keys, load_config, read_yaml
 from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import command_line, write_atomic, write_json, write_run_info
@@ -27,6 +28,7 @@ from zodrive.runinfo import command_line, write_atomic, write_json, write_run_in
 log = logging.getLogger(__name__)
 
 ALGOS = {"dqn": DQN, "ddpg": DDPG}
+KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
                "double_q"}
 
@@ -40,11 +42,6 @@ def algorithm_class(recipe: dict[str, Any]):
 
         return DoubleDQN
     return ALGOS[recipe["algo"]]
-KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
-
-
-def _load_yaml(path: Path) -> Any:
-    return yaml.safe_load(path.read_text())
 
 
 def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
@@ -54,8 +51,6 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     if algo not in ALGOS:
         raise ZodriveError(f"recipe {name!r}: algo must be one of {sorted(ALGOS)}, not {algo!r}")
     check_keys(recipe, RECIPE_KEYS, f"recipe {name!r}")
-    import inspect
-
     params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
                                                                         "verbose", "tensorboard_log", "action_noise"}
     check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
@@ -133,7 +128,7 @@ def train(
     environment restarts from a fresh episode, so a resumed run is not bit-identical to an
     uninterrupted one)."""
     check_run_folder(out, resume=resume, force=force)
-    previous = _load_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
+    previous = read_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
     if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
         raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "
                            "(only --steps may change, to train it longer)")

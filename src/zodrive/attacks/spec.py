@@ -53,9 +53,8 @@ class AttackSpec:
         values = {k: v for k, v in data.items() if k in names}
         for field in dataclasses.fields(cls):
             value = values.get(field.name)
-            if value is None or field.name not in values:
-                continue
-            if field.type in ("float", "int", "int | None") and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            numeric = field.type in ("float", "int", "int | None")
+            if numeric and value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
                 raise ZodriveError(f"attack option {field.name} must be a number, not {value!r}")
         if "frozen" in values:
             values["frozen"] = tuple(values["frozen"] or ())
@@ -77,20 +76,20 @@ class AttackSpec:
     def threat(self, features: tuple[str, ...]) -> ThreatModel:
         return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=self.frozen, features=features)  # type: ignore[arg-type]
 
+    def _make(self, threat: ThreatModel, steps: int) -> Attack:
+        return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
+                           step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
+                           seed=self.seed)
+
     def build(self, victim: Victim, features: tuple[str, ...]) -> tuple[Attack, Objective, QueryOracle]:
         """The attack, its objective for this victim, and the oracle that counts queries."""
         threat = self.threat(features)
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= 2.0:
             log.warning("eps=%g covers the whole observation box [-1, 1] (width 2): the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps)
-        attack = make_attack(
-            self.attack, threat, steps=self.steps, n_directions=self.n_directions, mu=self.mu,
-            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop, seed=self.seed,
-        )
+        attack = self._make(threat, self.steps)
         if self.query_budget is not None and self.query_budget >= 1:  # < 1: the oracle says so
-            one = make_attack(self.attack, threat, steps=1, n_directions=self.n_directions, mu=self.mu,
-                              step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
-                              seed=self.seed).queries_per_step()
+            one = self._make(threat, 1).queries_per_step()  # the cost of a single iteration
             if self.query_budget < one:
                 raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
                                    f"({one} queries with these settings): the attack could do nothing")

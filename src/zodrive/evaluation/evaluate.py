@@ -19,6 +19,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from zodrive.agents.baselines import is_baseline
 from zodrive.agents.policies import check_policy, make_policy_env
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
@@ -45,7 +46,7 @@ class EvalJob:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
         not), the preset, the attack and the first seed."""
-        if self.model.startswith("baseline:"):
+        if is_baseline(self.model):
             model = self.model
         else:
             from zodrive.agents.safe_load import sha256

@@ -160,13 +160,10 @@ def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick:
 
 def render_crash(model: Path, spec: AttackSpec, fig: Path, *, tries: int) -> dict[str, Any]:
     """Fig. 3: the first attacked DQN episode (from seed 100000) that ends in a collision."""
-    from zodrive.agents.policies import load_victim
+    from zodrive.agents.policies import make_policy_env
     from zodrive.evaluation.video import record_episode, save_gif, save_png
-    from zodrive.wrappers import make_attacked_env
 
-    preset = load_preset("discrete")
-    victim = load_victim(str(model), preset)
-    env = make_attacked_env(preset, victim, spec, render_mode="rgb_array")
+    victim, env = make_policy_env(str(model), load_preset("discrete"), spec, render_mode="rgb_array")
     for seed in range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + tries):
         frames, info = record_episode(env, victim, seed)
         if info["crashed"]:
