@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from toys import FEATURES, counting_victim, linear_victim, observations
-from zodrive.agents.victims import Victim
+from toys import CONTEXT, context, counting_victim, linear_victim, observations
+from zodrive.attacks.victim import Victim
 from zodrive.attacks import ATTACKS, AttackSpec, ThreatModel, make_attack
 from zodrive.attacks.base import GradientEstimateAttack
 from zodrive.errors import ZodriveError
@@ -39,8 +39,7 @@ def test_estimator_points_along_the_true_gradient(name: str) -> None:
 
 def _run(name: str, victim: Victim, x0: np.ndarray, seed: int = 0, **kw):
     spec = AttackSpec(attack=name, seed=seed, **kw)
-    attack, objective, oracle = spec.build(victim, FEATURES)
-    oracle.begin_step(rows=len(x0))
+    attack, objective, oracle = spec.build(victim, **context(victim.kind))
     return attack.perturb(x0, oracle, objective), oracle, attack
 
 
@@ -101,7 +100,8 @@ def test_oracle_counts_every_query_exactly() -> None:
     result, oracle, attack = _run("zo-signsgd", victim, x0, steps=10, n_directions=7, early_stop=False)
     assert oracle.step_queries == sum(calls) == result.queries.sum()
     assert oracle.calls == len(calls) == 1 + 10  # clean batch, then one call per iteration
-    assert result.queries.max() == attack.queries_per_step() == 1 + 10 * 8
+    # iteration 0's base point is the clean observation: queried once, not twice
+    assert result.queries.max() == attack.queries_per_step() == 10 * 8
 
 
 def test_query_budget_stops_the_attack() -> None:
@@ -122,7 +122,7 @@ def test_plain_numpy_function_is_a_victim() -> None:
 def test_white_box_attacks_refuse_a_black_box_victim() -> None:
     victim = Victim(query=linear_victim().query, kind="discrete", obs_shape=(5, 5))
     with pytest.raises(ZodriveError, match="white-box"):
-        AttackSpec(attack="pgd").build(victim, FEATURES)
+        AttackSpec(attack="pgd").build(victim, **CONTEXT)
 
 
 @pytest.mark.parametrize(
@@ -132,13 +132,13 @@ def test_white_box_attacks_refuse_a_black_box_victim() -> None:
         ({"n_directions": 0}, "n_directions"), ({"attack": "nope"}, "unknown attack"),
         ({"target": "WARP"}, "unknown target"), ({"target": 7}, "out of range"),
         ({"mu": 0.0}, "mu"), ({"norm": "l1"}, "norm"), ({"query_budget": 0}, "query_budget"),
-        ({"loss": "hinge"}, "loss"), ({"query_budget": 5}, "below one iteration of zo-signsgd \\(22 queries"),
+        ({"loss": "hinge"}, "loss"), ({"query_budget": 5}, "below one iteration of zo-signsgd \\(21 queries"),
         ({"attack": "random-search", "query_budget": 21}, "below one iteration"),
     ],
 )
 def test_bad_attack_parameters_give_one_clear_error(changes: dict, message: str) -> None:
     with pytest.raises(ZodriveError, match=message):
-        AttackSpec(**changes).build(linear_victim(), FEATURES)
+        AttackSpec(**changes).build(linear_victim(), **CONTEXT)
 
 
 def test_paper_mode_is_unconstrained_but_clipped() -> None:
@@ -157,10 +157,10 @@ def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
         calls.clear()
         result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=4, early_stop=False)
         assert len(calls) == 11
-        assert calls[1] == n * 5
+        assert calls[1] == n * 4 and calls[2] == n * 5  # iteration 0: probes only
 
 
 def test_an_eps_that_covers_the_whole_box_is_reported(caplog) -> None:
     with caplog.at_level("WARNING"):
-        AttackSpec(eps=1e9).build(linear_victim(), FEATURES)
+        AttackSpec(eps=1e9).build(linear_victim(), **CONTEXT)
     assert "covers the whole observation box" in caplog.text

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium.utils.env_checker import check_env
-from stable_baselines3.common.vec_env import DummyVecEnv
 
 from toys import linear_victim
 from zodrive.attacks import AttackSpec
 from zodrive.envs import load_preset, make_env
-from zodrive.wrappers import AttackWrapper, VecAttackWrapper, make_attacked_env
+from zodrive.wrappers import AttackWrapper, make_attacked_env
 
 PRESET = load_preset("discrete")
 
@@ -35,16 +34,3 @@ def test_wrapper_changes_the_observation_not_the_simulator() -> None:
         np.testing.assert_array_equal(info["clean_obs"], obs_c)
         assert {"queries", "iterations", "success", "linf", "l2"} <= set(info["attack"])
         assert attacked.last_wall_time > 0
-
-
-def test_vec_wrapper_attacks_all_envs_in_one_batch() -> None:
-    victim = linear_victim()
-    spec = AttackSpec(steps=3, n_directions=4, early_stop=False)
-    attack, objective, oracle = spec.build(victim, ("presence", "x", "y", "vx", "vy"))
-    venv = VecAttackWrapper(DummyVecEnv([lambda: make_env(PRESET)] * 3), attack, objective, oracle)
-    venv.seed(0)
-    venv.reset()
-    calls = oracle.calls
-    obs, rewards, dones, infos = venv.step(np.array([1, 1, 1]))
-    assert oracle.calls - calls == 1 + 3  # clean batch + one call per iteration, for all 3 envs
-    assert obs.shape == (3, 5, 5) and all("attack" in i for i in infos)

@@ -5,9 +5,15 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from zodrive.agents.victims import Victim
+from zodrive.attacks.victim import Victim
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
+CONTEXT = {"features": FEATURES, "bounds": (-1.0, 1.0), "n_actions": 5}  # the discrete preset
+
+
+def context(kind: str = "discrete") -> dict:
+    """`AttackSpec.build` arguments for a toy victim of this kind."""
+    return {**CONTEXT, "n_actions": 5 if kind == "discrete" else 2}
 
 
 def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Victim:

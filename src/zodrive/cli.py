@@ -255,9 +255,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
-        from zodrive.envs import feature_names
+        from zodrive.envs import attack_context
 
-        spec.build(load_victim(args.model, preset), tuple(feature_names(preset)))
+        spec.build(load_victim(args.model, preset), **attack_context(preset))
     job = EvalJob(
         model=policy_ref(args.model), preset=preset,
         attack=spec.to_dict() if spec else None,

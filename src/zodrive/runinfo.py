@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import shlex
@@ -52,8 +53,26 @@ def write_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def to_json(data: Any, indent: int | None = None) -> str:
+    """Strict JSON: numpy values as plain numbers, NaN and infinities as null (not the
+    non-standard NaN token other JSON readers reject)."""
+    return json.dumps(_finite(data), indent=indent, sort_keys=False, default=_jsonable, allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return _finite(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def write_json(path: Path, data: Any) -> None:
-    write_atomic(path, json.dumps(data, indent=2, sort_keys=False, default=_jsonable) + "\n")
+    write_atomic(path, to_json(data, indent=2) + "\n")
 
 
 def _jsonable(value: Any) -> Any:

@@ -3,8 +3,6 @@
 `AttackWrapper` (a gymnasium wrapper) replaces each observation the agent receives with the
 attacked one; the simulator's true state is untouched. Evaluation and adversarial training
 both use it; inside SB3's vectorized envs each copy attacks its own environment.
-`VecAttackWrapper` does the same for an SB3 VecEnv and attacks all environments of the
-process in one batch (one victim call per iteration for all of them).
 """
 
 from __future__ import annotations
@@ -14,7 +12,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
@@ -34,7 +31,6 @@ def attack_observations(
     if not np.all(np.isfinite(obs)):
         raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
     start = time.perf_counter()
-    oracle.begin_step(rows=len(obs))
     result = attack.perturb(obs, oracle, objective, trace=trace)
     return result, time.perf_counter() - start
 
@@ -106,38 +102,13 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return info
 
 
-class VecAttackWrapper(VecEnvWrapper):
-    """Attack every environment of an SB3 VecEnv together: one victim call per iteration."""
-
-    def __init__(self, venv: VecEnv, attack: Attack, objective: Objective, oracle: QueryOracle) -> None:
-        super().__init__(venv)
-        self.attack, self.objective, self.oracle = attack, objective, oracle
-        self.last_wall_time = 0.0  # [s] spent attacking the latest batch of observations
-
-    def _attack(self, obs: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
-        result, self.last_wall_time = attack_observations(obs, self.attack, self.objective, self.oracle)
-        return result.x_adv, [step_stats(result, i) for i in range(len(obs))]
-
-    def reset(self) -> np.ndarray:
-        obs, _ = self._attack(self.venv.reset())
-        return obs
-
-    def step_wait(self):  # type: ignore[no-untyped-def]
-        obs, rewards, dones, infos = self.venv.step_wait()
-        adv, stats = self._attack(obs)
-        for info, stat, clean in zip(infos, stats, obs):
-            info["attack"] = stat
-            info["clean_obs"] = clean
-        return adv, rewards, dones, infos
-
-
 def make_attacked_env(preset: dict[str, Any], victim, spec=None, *, render_mode: str | None = None,
                       trace: bool = False) -> gym.Env:
     """The preset's environment, wrapped in `AttackWrapper` when an `AttackSpec` is given."""
-    from zodrive.envs import feature_names, make_env
+    from zodrive.envs import attack_context, make_env
 
     env = make_env(preset, render_mode=render_mode)
     if spec is None:
         return env
-    attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
+    attack, objective, oracle = spec.build(victim, **attack_context(preset))
     return AttackWrapper(env, attack, objective, oracle, trace=trace)

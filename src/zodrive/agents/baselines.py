@@ -16,7 +16,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 import torch
 
-from zodrive.agents.victims import Victim
+from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
 PREFIX = "baseline:"

@@ -17,7 +17,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.agents.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
 from zodrive.agents.training import ALGOS, KIND_OF_ALGO
-from zodrive.envs import action_kind, observation_shape
+from zodrive.envs import action_kind, n_actions, observation_shape
 from zodrive.errors import ZodriveError
 
 
@@ -47,9 +47,8 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
     want = observation_shape(preset)
     if info["obs_shape"] != want:
         raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset gives {want}")
-    n_actions = 5 if kind == "discrete" else 2
-    if info["n_actions"] != n_actions:
-        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {n_actions}")
+    if info["n_actions"] != n_actions(preset):
+        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {n_actions(preset)}")
 
 
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:

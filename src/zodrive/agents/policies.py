@@ -14,8 +14,8 @@ from typing import Any
 import gymnasium as gym
 
 from zodrive.agents import baselines as bl
-from zodrive.agents.victims import Victim
-from zodrive.envs import action_kind, observation_shape
+from zodrive.attacks.victim import Victim
+from zodrive.envs import action_kind, n_actions, observation_shape
 from zodrive.errors import ZodriveError
 
 
@@ -70,7 +70,7 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
         if baseline.reads == "simulator":
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator; it needs its environment "
                                "(use make_policy_env)")
-        return bl.constant_victim(baseline, observation_shape(preset), 5 if kind == "discrete" else 2)
+        return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset))
     from zodrive.agents.loading import load_network
     from zodrive.agents.victims import network_victim
 
@@ -89,7 +89,7 @@ def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mod
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
         driver = bl.IdmMobilDriver(env, kind)
-        victim = bl.driver_victim(driver, kind, observation_shape(preset), 5 if kind == "discrete" else 2)
+        victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
     victim = load_victim(model, preset)  # checks that the policy fits the preset
     return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 import yaml
 from stable_baselines3 import DDPG, DQN
 from stable_baselines3.common.callbacks import CheckpointCallback
@@ -20,6 +19,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from zodrive.compute import one_torch_thread
 from zodrive.config import check_keys, load_config, read_yaml
 from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
@@ -110,6 +110,7 @@ def check_run_folder(out: Path, *, resume: bool, force: bool) -> None:
                        "or choose another --out")
 
 
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
 def train(
     recipe: dict[str, Any],
     out: Path,
@@ -161,7 +162,6 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         run["continued_by"] = [*run.get("continued_by", []), command_line()]
         write_json(out / "run.json", run)
         write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
-    torch.set_num_threads(1)  # small MLPs: one thread is fastest and lets runs share cores
 
     env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,
                             append=checkpoint is not None)

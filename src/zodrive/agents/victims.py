@@ -1,42 +1,19 @@
-"""Black-box victims: a model becomes a query function (observation batch -> outputs).
+"""Adapters that turn models into `Victim`s (query functions) for the attack library.
 
-Attacks only ever see a `Victim`: a callable over numpy arrays plus how outputs map to the
-action taken. SB3 models are wrapped here; any plain callable works the same way.
+Attacks only ever see a `zodrive.attacks.victim.Victim`; SB3 models and torch networks are
+wrapped here, any plain callable works the same way.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Literal
 
 import numpy as np
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.torch_layers import FlattenExtractor
 
-QueryFn = Callable[[np.ndarray], np.ndarray]
-"""Observation batch (B, *obs_shape) -> outputs (B, k): Q-values or actions."""
-
-
-@dataclass(frozen=True)
-class Victim:
-    """A query function and what its outputs are.
-
-    `kind="discrete"`: outputs are per-action scores (e.g. Q-values); the action taken is
-    their argmax. `kind="continuous"`: outputs are the action itself.
-    """
-
-    query: QueryFn
-    kind: Literal["discrete", "continuous"]
-    obs_shape: tuple[int, ...]
-    differentiable: Callable[[torch.Tensor], torch.Tensor] | None = None
-    """White-box access (torch forward with gradients); only FGSM/PGD baselines use it."""
-    reads: Literal["observation", "nothing", "simulator"] = "observation"
-    """What the decisions depend on: built-in baselines read nothing or the simulator."""
-
-    def actions(self, outputs: np.ndarray) -> np.ndarray:
-        """The action(s) the victim takes given its outputs."""
-        return outputs.argmax(axis=-1) if self.kind == "discrete" else outputs
+from zodrive.attacks.victim import Victim
 
 
 def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:

@@ -1,17 +1,23 @@
-"""The attack interface and the shared zeroth-order loop.
+"""The attack interface and the one driver loop every attack runs in.
 
 An attack turns clean observations `x0` (N environments at once) into perturbed ones
-inside a `ThreatModel`, talking to the victim only through a `QueryOracle`. Gradient-
-estimating attacks (ZO-SignSGD, ZO-SGD, NES, SPSA, coordinate differences) share one loop
-and differ only in how they draw directions and take a step, as in foolbox/ART:
+inside a `ThreatModel`, talking to the victim only through a `QueryOracle`. The driver
+(`Attack.perturb`) owns everything attacks share, so that no attack can get it wrong:
 
-    for k in 0..T-1:
-        query [x_k, x_k + mu*u_1, ..., x_k + mu*u_q]   (one victim call for all N envs)
-        keep the best iterate so far (successful first, then lowest objective)
+    query x0 (the clean outputs; iteration 0's base point, never queried twice)
+    x = init(x0)
+    for k in 0..T-1, over the rows still active:
+        candidates = [x, *propose(x)]      projected into the box and the eps-ball
+        skip rows whose own per-step budget cannot pay for them; query the rest in one
+        batch (a base point whose outputs are known is not queried again)
+        keep the best queried point so far (successful first, then lowest objective)
         stop rows that succeeded (early_stop)
-        g = estimate(f, u);  x_{k+1} = project(update(x_k, g))
+        x = project(step(candidates, objective values))
 
-The objective is the paper's Eq. 8: L1 (from `objectives`) + l2_weight * ||x - x0||^2.
+An attack only says how to start (`init`), what to query around the base point
+(`propose`) and where to go next (`step`). The objective is the paper's Eq. 8:
+L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
+False`) get the exact gradient of L1 at the base point instead of probes.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import numpy as np
 import torch
 
 from zodrive.attacks.objectives import Objective
-from zodrive.attacks.oracle import QueryBudgetExhausted, QueryOracle
+from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
@@ -37,16 +43,29 @@ class AttackResult:
     success: np.ndarray          # (N,) goal met on x_adv
     already: np.ndarray          # (N,) goal already met on the clean observation
     iterations: np.ndarray       # (N,) iterations run
-    queries: np.ndarray          # (N,) victim queries spent on this row
+    queries: np.ndarray          # (N,) victim queries spent on this row (the oracle's count)
     linf: np.ndarray             # (N,) ||x_adv - x0||_inf
     l2: np.ndarray               # (N,) ||x_adv - x0||_2
     adv_outputs: np.ndarray      # (N, k) victim outputs on x_adv (seen by the attacker)
     clean_outputs: np.ndarray    # (N, k) victim outputs on x0
-    trace: list[dict[str, np.ndarray]] = field(default_factory=list)  # per iteration: l1, l2
+    trace: list[dict[str, np.ndarray]] = field(default_factory=list)  # per iteration: l1, l2 of the base point
+
+
+class Best:
+    """Tracks, per row, the best queried point: successful beats unsuccessful, then lower f."""
+
+    def __init__(self, x: np.ndarray, out: np.ndarray, f: np.ndarray, ok: np.ndarray) -> None:
+        self.x, self.out, self.f, self.ok = x.copy(), out.copy(), f.copy(), ok.copy()
+
+    def offer(self, rows: np.ndarray, x: np.ndarray, out: np.ndarray, f: np.ndarray, ok: np.ndarray) -> None:
+        better = (ok & ~self.ok[rows]) | ((ok == self.ok[rows]) & (f < self.f[rows]))
+        take = rows[better]
+        self.x[take], self.out[take] = x[better], out[better]
+        self.f[take], self.ok[take] = f[better], ok[better]
 
 
 class Attack(abc.ABC):
-    """Base class: validated hyperparameters, a seeded generator, `perturb`."""
+    """Base class: validated hyperparameters, a seeded generator, the driver `perturb`."""
 
     name: ClassVar[str]
     black_box: ClassVar[bool] = True
@@ -88,61 +107,141 @@ class Attack(abc.ABC):
         """Restart the attack's random stream (e.g. per episode, for reproducible episodes)."""
         self.rng = np.random.default_rng(seed)
 
+    # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
     def queries_per_step(self) -> int:
         """Upper bound on victim queries per environment step (the docstring's formula)."""
 
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
+        return x0.copy()
+
+    def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """Points (A, P, dim) to query around the base points x (A, dim) of `rows`."""
+        return np.empty((len(x), 0, x.shape[1]), dtype=np.float32)
+
     @abc.abstractmethod
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        """The next base points (A, dim) from the queried candidates (A, 1 + P, dim) (base
+        point first), their objective values f (A, 1 + P) and, for white-box attacks, the
+        gradient of L1 at the base point (A, dim)."""
+
+    # -- the driver ---------------------------------------------------------------------
     def perturb(
         self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
     ) -> AttackResult:
-        """Attack clean observations `x0` (N, *obs); see `AttackResult`."""
+        """Attack clean observations `x0` (N, *obs); see the module docstring and `AttackResult`."""
+        n, shape = len(x0), x0.shape[1:]
+        dim = int(np.prod(shape))
+        mask = self.threat.mask(shape).reshape(-1)
+        flat0 = np.asarray(x0, dtype=np.float32).reshape(n, dim)
+        oracle.begin_step(rows=n)
 
-    # -- shared pieces -------------------------------------------------------------
-    def objective_values(
-        self, x: np.ndarray, x0: np.ndarray, out: np.ndarray, clean: np.ndarray, objective: Objective
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """L1 (A, M), L2 (A, M) and success (A, M) of candidates x (A, M, *obs)."""
-        out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean)
-        l1 = objective.loss(out_t, clean_t).numpy().astype(np.float64)
-        diff = (x - x0[:, None]).reshape(x.shape[0], x.shape[1], -1).astype(np.float64)
-        l2 = (diff**2).sum(axis=-1)
-        ok = objective.success(out_t, clean_t).numpy()
-        return l1, l2, ok
+        def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
+            m = cand.shape[1]
+            inside = self.threat.project(cand.reshape(-1, *shape).astype(np.float32),
+                                         np.repeat(flat0[rows], m, axis=0).reshape(-1, *shape))
+            return inside.reshape(len(rows), m, dim)
 
-    def clean_query(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective) -> tuple[np.ndarray, np.ndarray]:
-        """Outputs on the clean observations (one query each) and where the goal is met."""
-        clean = oracle(x0).astype(np.float32)
+        def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+            out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean[rows])
+            l1 = objective.loss(out_t, clean_t).numpy().astype(np.float64)
+            l2 = ((cand - flat0[rows, None]).astype(np.float64) ** 2).sum(axis=-1)
+            return l1, l2, l1 + self.l2_weight * l2, objective.success(out_t, clean_t).numpy()
+
+        def white_box_loss(rows: np.ndarray):  # L1 at the base points of `rows`, for autograd
+            clean_t = None if rows is None else torch.from_numpy(clean[rows])
+            return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
+
+        everyone = np.arange(n)
+        if self.black_box:
+            clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
+        else:
+            clean, grad0 = oracle.gradient(flat0.reshape(n, *shape), white_box_loss(None), everyone)
+        clean = clean.astype(np.float32)
         already = objective.already(torch.from_numpy(clean)).numpy()
-        return clean, already
+        _, _, f0, _ = values(flat0[:, None], clean[:, None], everyone)
+        best = Best(flat0, clean, f0[:, 0], already)
+        # the last evaluated base point of each row, so that it is never queried twice
+        known_x, known_out = flat0.copy(), clean.copy()
+        known_grad = None if grad0 is None else grad0.reshape(n, dim).astype(np.float32)
 
-
-class Best:
-    """Tracks, per row, the best iterate: successful beats unsuccessful, then lower f."""
-
-    def __init__(self, x0: np.ndarray, clean: np.ndarray, already: np.ndarray) -> None:
-        n = len(x0)
-        self.x = x0.copy()
-        self.out = clean.copy()
-        self.ok = already.copy()
-        self.f = np.full(n, np.inf)
-
-    def offer(self, rows: np.ndarray, x: np.ndarray, out: np.ndarray, f: np.ndarray, ok: np.ndarray) -> None:
-        better = (ok & ~self.ok[rows]) | ((ok == self.ok[rows]) & (f < self.f[rows]))
-        take = rows[better]
-        self.x[take], self.out[take] = x[better], out[better]
-        self.f[take], self.ok[take] = f[better], ok[better]
+        x = project(self.init(flat0.copy(), mask)[:, None].astype(np.float32), everyone)[:, 0]
+        active = ~already if self.early_stop else np.ones(n, dtype=bool)
+        iterations = np.zeros(n, dtype=np.int64)
+        records: list[dict[str, np.ndarray]] = []
+        for k in range(self.steps):
+            rows = np.flatnonzero(active)
+            if rows.size == 0:
+                break
+            probes = self.propose(k, x[rows], rows, mask)
+            cand = project(np.concatenate([x[rows, None], probes.astype(np.float32)], axis=1), rows)
+            need = np.ones(cand.shape[:2], dtype=bool)
+            need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
+            afford = oracle.remaining(rows) >= need.sum(axis=1)
+            if not afford.all():  # a row's own budget is spent: that row stops, the others go on
+                active[rows[~afford]] = False
+                rows, cand, need = rows[afford], cand[afford], need[afford]
+                if rows.size == 0:
+                    break
+            a, m = cand.shape[:2]
+            out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+            out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
+            owners = np.repeat(rows, need.sum(axis=1))
+            grad = None
+            if self.black_box:
+                if owners.size:
+                    out[need] = oracle(cand[need].reshape(-1, *shape), owners)
+            else:
+                grad = known_grad[rows].copy()
+                ask = need[:, 0]
+                if ask.any():
+                    o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]), rows[ask])
+                    out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
+                known_grad[rows] = grad
+            known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
+            iterations[rows] += 1
+            l1, l2, f, ok = values(cand, out, rows)
+            has_ok = ok.any(axis=1)
+            pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+            ar = np.arange(a)
+            best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+            if trace:
+                rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
+                rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
+                records.append(rec)
+            if self.early_stop:
+                active[rows[has_ok]] = False
+            if k == self.steps - 1:
+                break
+            x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
+            if self.black_box:  # a step onto a queried point (random search) costs no new query
+                same = np.all(cand == x[rows, None], axis=2)
+                hit = same.any(axis=1)
+                col = same.argmax(axis=1)[hit]
+                known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
+        x_adv = best.x.reshape(n, *shape).astype(x0.dtype)
+        linf, l2n = distortion(x_adv, x0)
+        return AttackResult(
+            x_adv=x_adv, success=best.ok & ~already, already=already, iterations=iterations,
+            queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
+            adv_outputs=best.out, clean_outputs=clean, trace=records,
+        )
 
 
 class GradientEstimateAttack(Attack):
-    """The shared loop for attacks that estimate a gradient from finite differences."""
+    """Attacks that estimate a gradient from finite differences around the base point.
+
+    They differ only in the directions they draw and the step they take (as in foolbox/ART).
+    Queries per environment step: at most T * (1 + q) with forward differences, T * (1 + 2q)
+    with central ones (the clean query is iteration 0's base point).
+    """
 
     antithetic: ClassVar[bool] = False  # central differences f(x+mu u) - f(x-mu u)
     unit_directions: ClassVar[bool] = False  # E[u u^T] = I/d: scale the estimate by d
 
     def queries_per_step(self) -> int:
-        per_iteration = 1 + self.n_directions * (2 if self.antithetic else 1)
-        return 1 + self.steps * per_iteration
+        return self.steps * (1 + self.n_directions * (2 if self.antithetic else 1))
 
     @abc.abstractmethod
     def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
@@ -161,70 +260,25 @@ class GradientEstimateAttack(Attack):
         scale = (d if self.unit_directions else 1.0) / q
         return np.einsum("aq,aqd->ad", diff, u) * scale
 
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._d_free = int(mask.sum())
+        self.start(x0)
+        return x0.copy()
+
     def start(self, x0: np.ndarray) -> None:
         """Per-call state (e.g. an optimizer) before the first update."""
+
+    def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._u = self.directions(len(rows), x.shape[1], mask).astype(np.float32)
+        signs = (1.0, -1.0) if self.antithetic else (1.0,)
+        return np.concatenate([x[:, None] + (s * self.mu) * self._u for s in signs], axis=1)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        return self.update(cand[:, 0], self.estimate(f, self._u, self._d_free), rows)
 
     @abc.abstractmethod
     def update(self, x: np.ndarray, g: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """One step from flattened iterates x (A, dim) with estimate g (A, dim)."""
-
-    def perturb(
-        self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
-    ) -> AttackResult:
-        n, shape = len(x0), x0.shape[1:]
-        dim = int(np.prod(shape))
-        mask = self.threat.mask(shape).reshape(-1)
-        d_free = int(mask.sum())
-        per_row = np.zeros(n, dtype=np.int64)
-        iterations = np.zeros(n, dtype=np.int64)
-        clean, already = self.clean_query(x0, oracle, objective)
-        per_row += 1
-        best = Best(x0, clean, already)
-        active = ~already if self.early_stop else np.ones(n, dtype=bool)
-        x = x0.reshape(n, dim).astype(np.float32).copy()
-        flat0 = x0.reshape(n, dim)
-        self.start(x)
-        records: list[dict[str, np.ndarray]] = []
-        sign = np.array([1.0, -1.0], dtype=np.float32)
-        for k in range(self.steps):
-            rows = np.flatnonzero(active)
-            if rows.size == 0:
-                break
-            u = self.directions(rows.size, dim, mask).astype(np.float32)
-            probes = [x[rows, None] + (s * self.mu) * u for s in (sign if self.antithetic else sign[:1])]
-            cand = np.concatenate([x[rows, None]] + probes, axis=1)  # (A, M, dim)
-            m = cand.shape[1]
-            try:
-                out = oracle(cand.reshape(rows.size * m, *shape)).reshape(rows.size, m, -1)
-            except QueryBudgetExhausted:
-                break
-            per_row[rows] += m
-            iterations[rows] += 1
-            l1, l2, ok = self.objective_values(
-                cand.reshape(rows.size, m, *shape), x0[rows], out, clean[rows], objective
-            )
-            f = l1 + self.l2_weight * l2
-            best.offer(rows, cand[:, 0].reshape(rows.size, *shape), out[:, 0], f[:, 0], ok[:, 0])
-            if trace:
-                rec_l1 = np.full(n, np.nan)
-                rec_l2 = np.full(n, np.nan)
-                rec_l1[rows], rec_l2[rows] = l1[:, 0], l2[:, 0]
-                records.append({"l1": rec_l1, "l2": rec_l2})
-            if self.early_stop:
-                active[rows[ok[:, 0]]] = False
-            if k == self.steps - 1:
-                break
-            g = self.estimate(f, u, d_free)
-            stepped = self.update(x[rows], g, rows)
-            x[rows] = self.threat.project(
-                stepped.reshape(rows.size, *shape), flat0[rows].reshape(rows.size, *shape)
-            ).reshape(rows.size, dim)
-        linf, l2n = distortion(best.x, x0)
-        return AttackResult(
-            x_adv=best.x.astype(x0.dtype), success=best.ok & ~already, already=already,
-            iterations=iterations, queries=per_row, linf=linf, l2=l2n,
-            adv_outputs=best.out, clean_outputs=clean, trace=records,
-        )
 
 
 def unit_sphere(rng: np.random.Generator, n: int, q: int, dim: int, mask: np.ndarray) -> np.ndarray:

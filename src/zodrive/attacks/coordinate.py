@@ -7,7 +7,7 @@ Each iteration picks q coordinates e_i at random (without replacement, among the
 perturbable ones), estimates g_i = [f(x + mu e_i) - f(x - mu e_i)] / (2 mu) and moves those
 coordinates by -step_size * sign(g_i).
 
-Queries per environment step: at most 1 + T * (2q + 1).
+Queries per environment step: at most T * (2q + 1).
 """
 
 from __future__ import annotations

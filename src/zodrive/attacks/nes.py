@@ -6,7 +6,7 @@ Information", ICML 2018.
 g = (1 / (2 mu q)) sum_k [f(x + mu u_k) - f(x - mu u_k)] u_k with u_k ~ N(0, I), then a
 signed (PGD-style) step x <- Proj(x - step_size * sign(g)).
 
-Queries per environment step: at most 1 + T * (2q + 1).
+Queries per environment step: at most T * (2q + 1).
 """
 
 from __future__ import annotations

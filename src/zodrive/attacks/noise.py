@@ -8,32 +8,26 @@ Queries per environment step: 2 (the clean observation and the noisy one).
 
 from __future__ import annotations
 
-import numpy as np
-import torch
+from typing import Any
 
-from zodrive.attacks.base import Attack, AttackResult
-from zodrive.attacks.objectives import Objective
-from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.threat import distortion
+import numpy as np
+
+from zodrive.attacks.base import Attack
 
 
 class UniformNoise(Attack):
     name = "uniform-noise"
     reference = "baseline (no paper): uniform noise in the threat model"
 
+    def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
+        kwargs["steps"] = 1  # one draw, queried once
+        super().__init__(threat, **kwargs)
+
     def queries_per_step(self) -> int:
         return 2
 
-    def perturb(
-        self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
-    ) -> AttackResult:
-        clean, already = self.clean_query(x0, oracle, objective)
-        x = self.threat.project(x0 + self.threat.random_delta(x0, self.rng), x0)
-        out = oracle(x).astype(np.float32)
-        ok = objective.success(torch.from_numpy(out)[:, None], torch.from_numpy(clean)).numpy()[:, 0]
-        linf, l2 = distortion(x, x0)
-        n = len(x0)
-        return AttackResult(
-            x_adv=x, success=ok & ~already, already=already, iterations=np.zeros(n, dtype=np.int64),
-            queries=np.full(n, 2), linf=linf, l2=l2, adv_outputs=out, clean_outputs=clean,
-        )
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        return x0 + self.threat.random_delta(x0.shape, mask, self.rng)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        raise AssertionError("uniform noise takes no step")  # steps = 1: the driver never asks

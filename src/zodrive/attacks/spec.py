@@ -7,7 +7,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any
 
-from zodrive.agents.victims import Victim
+from zodrive.attacks.victim import Victim
 from zodrive.attacks.base import Attack
 from zodrive.attacks.objectives import Objective, make_objective
 from zodrive.attacks.oracle import QueryOracle
@@ -73,27 +73,33 @@ class AttackSpec:
     def resolved_target(self, kind: str) -> Any:
         return PAPER_TARGETS[kind] if self.target in ("auto", None) else self.target
 
-    def threat(self, features: tuple[str, ...]) -> ThreatModel:
-        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=self.frozen, features=features)  # type: ignore[arg-type]
+    def threat(self, features: tuple[str, ...], bounds: tuple[float, float]) -> ThreatModel:
+        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=self.frozen,  # type: ignore[arg-type]
+                           features=features, low=float(bounds[0]), high=float(bounds[1]))
 
     def _make(self, threat: ThreatModel, steps: int) -> Attack:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            seed=self.seed)
 
-    def build(self, victim: Victim, features: tuple[str, ...]) -> tuple[Attack, Objective, QueryOracle]:
-        """The attack, its objective for this victim, and the oracle that counts queries."""
-        threat = self.threat(features)
-        if self.mode == "budgeted" and self.norm == "linf" and self.eps >= 2.0:
-            log.warning("eps=%g covers the whole observation box [-1, 1] (width 2): the budget constrains nothing, "
-                        "only the box clips the perturbation", self.eps)
+    def build(
+        self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int
+    ) -> tuple[Attack, Objective, QueryOracle]:
+        """The attack, its objective for this victim, and the oracle that counts queries.
+
+        `features`, `bounds` (the observation box) and `n_actions` describe the preset
+        (`zodrive.envs.attack_context`)."""
+        threat = self.threat(features, bounds)
+        width = threat.high - threat.low
+        if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
+            log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
+                        "only the box clips the perturbation", self.eps, threat.low, threat.high)
         attack = self._make(threat, self.steps)
         if self.query_budget is not None and self.query_budget >= 1:  # < 1: the oracle says so
             one = self._make(threat, 1).queries_per_step()  # the cost of a single iteration
             if self.query_budget < one:
                 raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
                                    f"({one} queries with these settings): the attack could do nothing")
-        n_actions = 5 if victim.kind == "discrete" else 2
         objective = make_objective(
             victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,
             kappa=self.kappa, tol=self.tol, n_actions=n_actions,

@@ -7,7 +7,7 @@ approximation", IEEE TAC 1992; as an attack: Uesato, O'Donoghue, van den Oord, K
 g = (1 / (2 mu q)) sum_k [f(x + mu v_k) - f(x - mu v_k)] v_k, v_k in {-1, +1}^d, then an
 Adam step with learning rate `step_size` (torch.optim.Adam) and projection.
 
-Queries per environment step: at most 1 + T * (2q + 1).
+Queries per environment step: at most T * (2q + 1).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ programming", SIAM J. Optim. 2013; as used for attacks in Liu et al., ICLR 2019.
 Same estimator as ZO-SignSGD, g = (d / (mu q)) sum_k [f(x + mu u_k) - f(x)] u_k, and the
 step x <- Proj(x - step_size * g).
 
-Queries per environment step: at most 1 + T * (q + 1).
+Queries per environment step: at most T * (q + 1).
 """
 
 from __future__ import annotations

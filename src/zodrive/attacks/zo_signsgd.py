@@ -6,8 +6,9 @@ Gradient estimate from q random unit directions with forward differences,
     g = (d / (mu q)) * sum_k [f(x + mu u_k) - f(x)] u_k,
 then a sign step x <- Proj(x - step_size * sign(g)). Objective f = L1 + l2_weight * L2.
 
-Queries per environment step: at most 1 + T * (q + 1) (the clean observation, then per
-iteration the base point and q probes in one batch); fewer with early stopping.
+Queries per environment step: at most T * (q + 1) (per iteration the base point and q
+probes in one batch; the clean observation is iteration 0's base point); fewer with early
+stopping.
 """
 
 from __future__ import annotations

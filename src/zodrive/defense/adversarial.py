@@ -13,12 +13,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-import torch
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from zodrive.compute import one_torch_thread
 from zodrive.agents.loading import load_model, model_algo, model_file
 from zodrive.agents.training import action_noise, check_run_folder
 from zodrive.agents.victims import sb3_victim
@@ -30,6 +30,7 @@ from zodrive.wrappers import make_attacked_env
 log = logging.getLogger(__name__)
 
 
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
 def adversarial_train(
     model_path: str | Path,
     preset: dict[str, Any],
@@ -48,7 +49,6 @@ def adversarial_train(
     if steps < 1:
         raise ZodriveError(f"steps must be >= 1, not {steps}")
     check_run_folder(out, resume=False, force=force)
-    torch.set_num_threads(1)
     source = model_file(model_path)
     algo = model_algo(source)
     model = load_model(source, preset, trust=trust)  # an SB3 object to train further

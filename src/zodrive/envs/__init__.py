@@ -3,9 +3,12 @@
 from zodrive.envs.presets import (
     ACTION_NAMES,
     action_kind,
+    attack_context,
     feature_names,
     load_preset,
     make_env,
+    n_actions,
+    observation_bounds,
     observation_shape,
     preset_names,
 )
@@ -13,9 +16,12 @@ from zodrive.envs.presets import (
 __all__ = [
     "ACTION_NAMES",
     "action_kind",
+    "attack_context",
     "feature_names",
     "load_preset",
     "make_env",
+    "n_actions",
+    "observation_bounds",
     "observation_shape",
     "preset_names",
 ]

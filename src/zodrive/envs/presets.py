@@ -81,6 +81,30 @@ def feature_names(config: dict[str, Any]) -> list[str]:
     return list(config["highway"]["observation"].get("features", ["presence", "x", "y", "vx", "vy"]))
 
 
+def observation_bounds(config: dict[str, Any]) -> tuple[float, float]:
+    """The range of a clean observation value: [-1, 1] when the preset normalizes and clips
+    (highway-env's Kinematics), otherwise unbounded. highway-env declares its observation
+    space as (-inf, inf) either way, so the preset, not the space, is the source."""
+    obs = config["highway"]["observation"]
+    if obs.get("normalize", True) and obs.get("clip", True):
+        return -1.0, 1.0
+    return float("-inf"), float("inf")
+
+
+def n_actions(config: dict[str, Any]) -> int:
+    """Outputs of a policy for the preset: 5 meta-actions, or [acceleration, steering]."""
+    action = config["highway"]["action"]
+    if action_kind(config) == "discrete":
+        return len(ACTION_NAMES)
+    return int(action.get("longitudinal", True)) + int(action.get("lateral", True))
+
+
+def attack_context(config: dict[str, Any]) -> dict[str, Any]:
+    """What an attack needs to know about the preset's observations and actions."""
+    return {"features": tuple(feature_names(config)), "bounds": observation_bounds(config),
+            "n_actions": n_actions(config)}
+
+
 def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     """Build the environment a preset describes, capped at `max_episode_steps` decisions."""
     register()

@@ -22,14 +22,16 @@ import numpy as np
 from zodrive.agents.baselines import is_baseline
 from zodrive.agents.policies import check_policy, make_policy_env
 from zodrive.attacks.spec import AttackSpec
+from zodrive.compute import torch_threads
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import run_episode
-from zodrive.evaluation.stats import mean_ci, rate_ci
-from zodrive.runinfo import command_line, versions, write_json
+from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
+from zodrive.runinfo import command_line, to_json, versions, write_json
+from zodrive.seeds import EVAL_SEED
 
 log = logging.getLogger(__name__)
 
-DEFAULT_EVAL_SEED = 100_000  # training uses seeds < 100,000; evaluation starts here
+DEFAULT_EVAL_SEED = EVAL_SEED
 
 
 @dataclass
@@ -59,12 +61,17 @@ _WORKER: dict[str, Any] = {}
 
 
 def _setup(job: EvalJob) -> None:
-    import torch
-
-    torch.set_num_threads(1)
     spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
     victim, env = make_policy_env(job.model, job.preset, spec)
     _WORKER.update(job=job, victim=victim, env=env)
+
+
+def _worker_setup(job: EvalJob) -> None:
+    """A worker process owns its torch setting: one thread per process."""
+    import torch
+
+    torch.set_num_threads(1)
+    _setup(job)
 
 
 def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -95,7 +102,7 @@ def _read_jsonl(path: Path) -> list[dict[str, Any]]:
 def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
     with path.open("a") as handle:
         for row in rows:
-            handle.write(json.dumps(row) + "\n")
+            handle.write(to_json(row) + "\n")
         handle.flush()
         os.fsync(handle.fileno())
 
@@ -103,12 +110,13 @@ def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
 def run_episodes(job: EvalJob, indices: list[int], workers: int) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
     """Yield (episode record, step records) as episodes finish, in any order."""
     if workers <= 1 or len(indices) <= 1:
-        _setup(job)
-        for i in indices:
-            yield _episode(i)
+        with torch_threads(1):  # the caller's torch setting is restored afterwards
+            _setup(job)
+            for i in indices:
+                yield _episode(i)
         return
     ctx = mp.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_setup, initargs=(job,)) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_setup, initargs=(job,)) as pool:
         yield from pool.map(_episode, indices, chunksize=1)
 
 
@@ -177,10 +185,10 @@ def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
     """Drop step records of episodes that never finished (the run was cut mid-episode)."""
     steps = [s for s in _read_jsonl(out / "steps.jsonl") if s["episode"] in done]
     tmp = out / ".steps.jsonl.tmp"
-    tmp.write_text("".join(json.dumps(s) + "\n" for s in steps))
+    tmp.write_text("".join(to_json(s) + "\n" for s in steps))
     os.replace(tmp, out / "steps.jsonl")
     tmp = out / ".episodes.jsonl.tmp"
-    tmp.write_text("".join(json.dumps(done[i]) + "\n" for i in sorted(done)))
+    tmp.write_text("".join(to_json(done[i]) + "\n" for i in sorted(done)))
     os.replace(tmp, out / "episodes.jsonl")
 
 
@@ -234,7 +242,7 @@ def summarize(
             mode=job.attack["mode"],
             target=job.attack["target"],
             attack_success_rate=successes / applicable if applicable else float("nan"),
-            attack_success_ci95=list(rate_ci(successes, applicable)),
+            attack_success_ci95=list(ratio_ci([r["successes"] for r in records], [r["applicable"] for r in records])),
             target_base_rate=1.0 - applicable / steps_total if steps_total else float("nan"),
             queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
             max_linf=float(max(r["max_linf"] for r in records)),

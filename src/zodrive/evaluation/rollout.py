@@ -8,7 +8,7 @@ from typing import Any, Callable
 import gymnasium as gym
 import numpy as np
 
-from zodrive.agents.victims import Victim
+from zodrive.attacks.victim import Victim
 from zodrive.wrappers import AttackWrapper
 
 

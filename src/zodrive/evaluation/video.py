@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.agents.victims import Victim
+from zodrive.attacks.victim import Victim
 from zodrive.envs import ACTION_NAMES
 from zodrive.evaluation.rollout import act
 

@@ -9,10 +9,10 @@ import numpy as np
 
 from zodrive.agents.policies import load_victim
 from zodrive.attacks.spec import AttackSpec
-from zodrive.envs import feature_names, make_env
+from zodrive.envs import attack_context, make_env
 from zodrive.evaluation.rollout import clean_states
 
-TUNING_SEED = 50_000  # states for figures come from seeds outside the evaluation range
+from zodrive.seeds import TUNING_SEED  # states come from seeds outside the evaluation range
 
 
 def _plt():
@@ -29,8 +29,7 @@ def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: in
     """Attack clean-rollout states with early stopping off; return the trace of the first success."""
     victim = load_victim(str(model), preset)
     x0 = clean_states(make_env(preset), victim, seed, max_states)
-    attack, objective, oracle = spec.build(victim, tuple(feature_names(preset)))
-    oracle.begin_step(rows=len(x0))
+    attack, objective, oracle = spec.build(victim, **attack_context(preset))
     result = attack.perturb(x0, oracle, objective, trace=True)
     hits = np.flatnonzero(result.success)
     if hits.size == 0:
