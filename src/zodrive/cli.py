@@ -12,6 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
+from zodrive.config import MODELS_ENV
 from zodrive.errors import ZodriveError
 
 log = logging.getLogger("zodrive")
@@ -60,6 +61,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="zodrive", description="Black-box attacks on deep-RL driving policies.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--models", type=Path, default=None, metavar="DIR",
+                        help="folder of shipped models and their SHA256SUMS (default: $ZODRIVE_MODELS or ./models)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     env = sub.add_parser("env", help="environment presets")
@@ -108,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     adv = sub.add_parser("adv-train", help="adversarial training (paper Algorithm 2)")
     adv.add_argument("model")
     adv.add_argument("--attack", default="zo-signsgd", help="attack config name/YAML or registry name")
+    adv.add_argument("--no-attack", action="store_true",
+                     help="the control run: the same continued training on clean observations")
     adv.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
                      help="attack override, e.g. steps=50 (T) or eps=0.1")
     adv.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
@@ -142,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
     demo.add_argument("--episodes", type=_positive_int, default=3, help="episodes, clean and attacked")
-    demo.add_argument("--model", default=None, help="model folder or zip; None = the shipped DQN (models/dqn)")
+    demo.add_argument("--model", default=None, help="model folder or zip; None = the DQN shipped inside the package")
     demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
 
     curves = sub.add_parser("curves", help="learning curves of training runs side by side (table, --plot PNG)")
@@ -302,7 +307,9 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     from zodrive.defense.adversarial import adversarial_train
 
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    spec = load_attack(args.attack, args.attack_set)
+    if args.no_attack and args.attack_set:
+        raise ZodriveError("--attack-set has no effect with --no-attack")
+    spec = None if args.no_attack else load_attack(args.attack, args.attack_set)
     path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
                              warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model,
                              force=args.force)
@@ -343,9 +350,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
-    from zodrive.experiments.reproduce import models_dir
+    from zodrive.config import demo_model
 
-    model = args.model or str(models_dir() / "dqn")
+    model = args.model or str(demo_model())
     preset = resolve_model_preset(model, None, [])
     ref, name = policy_ref(model), ("the shipped DQN" if args.model is None else policy_label(model))
     spec = load_attack("zo-signsgd")
@@ -399,6 +406,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.verbose:
             logging.getLogger("zodrive").setLevel(logging.INFO)
+        if args.models is not None:
+            if not args.models.is_dir():
+                raise ZodriveError(f"--models {args.models}: not a folder")
+            os.environ[MODELS_ENV] = str(args.models)
         _check_out(getattr(args, "out", None))
         return COMMANDS[args.command](args)
     except ZodriveError as exc:

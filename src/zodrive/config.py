@@ -7,6 +7,7 @@ itself before handing the result over.
 from __future__ import annotations
 
 import copy
+import os
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
@@ -16,16 +17,26 @@ import yaml
 from zodrive.errors import ZodriveError
 
 CONFIG_ROOT_ENV = "ZODRIVE_CONFIGS"
+MODELS_ENV = "ZODRIVE_MODELS"
 
 
 def config_root() -> Path:
-    """The `configs/` folder: beside the source tree in a checkout, or packaged."""
-    here = Path(__file__).resolve()
-    for parent in here.parents:
-        candidate = parent / "configs"
-        if (candidate / "presets").is_dir():
-            return candidate
-    return Path(str(resources.files("zodrive"))) / "configs"
+    """The shipped `configs/` folder: package data (in a checkout, `src/zodrive/configs` links
+    to the repository's `configs/`); `$ZODRIVE_CONFIGS` points elsewhere. No other folder is
+    ever adopted."""
+    override = os.environ.get(CONFIG_ROOT_ENV)
+    return Path(override) if override else Path(str(resources.files("zodrive"))) / "configs"
+
+
+def models_dir() -> Path:
+    """Where shipped models live: `--models DIR` / `$ZODRIVE_MODELS`, default `./models`
+    (the repository's folder when run from a checkout)."""
+    return Path(os.environ.get(MODELS_ENV, "models"))
+
+
+def demo_model() -> Path:
+    """The model `zodrive demo` attacks: shipped inside the package, so that a wheel has it."""
+    return Path(str(resources.files("zodrive"))) / "data" / "demo-model.zip"
 
 
 def deep_merge(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
@@ -86,7 +97,7 @@ def read_yaml(path: Path) -> dict[str, Any]:
 def resolve_path(name: str, kind: str) -> Path:
     """A config by name (`configs/<kind>/<name>.yaml`) or by path to a YAML file."""
     as_path = Path(name)
-    if as_path.suffix in (".yaml", ".yml") or as_path.exists():
+    if as_path.suffix in (".yaml", ".yml"):  # a name never means a path: `--out dqn` shadows nothing
         if not as_path.is_file():
             raise ZodriveError(f"config file not found: {name}")
         return as_path

@@ -62,9 +62,9 @@ def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> Poli
 
 def is_shipped(file: Path) -> bool:
     """True if `file` is one of the repository's shipped models and its SHA-256 matches."""
-    from zodrive.config import config_root
+    from zodrive.config import models_dir
 
-    models = config_root().parent / "models"
+    models = models_dir()
     try:
         relative = file.resolve().relative_to(models.resolve())
     except ValueError:

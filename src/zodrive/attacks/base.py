@@ -34,6 +34,11 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
+ENGINE_VERSION = 2
+"""Bumped whenever the driver's behaviour changes what an attack returns (results on disk
+made by another version are not mixed with new ones). 2: one driver loop, per-row budgets,
+the clean query reused, the best of every queried point."""
+
 
 @dataclass
 class AttackResult:

@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 def adversarial_train(
     model_path: str | Path,
     preset: dict[str, Any],
-    spec: AttackSpec,
+    spec: AttackSpec | None,
     steps: int,
     out: Path,
     *,
@@ -45,7 +45,11 @@ def adversarial_train(
     trust: bool = False,
     force: bool = False,
 ) -> Path:
-    """Train `model_path` for `steps` more steps on attacked observations; save to `out`."""
+    """Train `model_path` for `steps` more steps on attacked observations; save to `out`.
+
+    `spec=None` is the control run: the very same continued training (same seed, buffer,
+    exploration, updates) on clean observations, so that what the attack changes can be told
+    apart from what restarting the training changes."""
     if steps < 1:
         raise ZodriveError(f"steps must be >= 1, not {steps}")
     check_run_folder(out, resume=False, force=force)
@@ -54,12 +58,13 @@ def adversarial_train(
     model = load_model(source, preset, trust=trust)  # an SB3 object to train further
     victim = sb3_victim(model)  # live view of the networks being trained
     out.mkdir(parents=True, exist_ok=True)
-    write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec.to_dict(),
+    write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec and spec.to_dict(),
                          "steps": steps, "warmup": warmup, "action_noise": noise}, seed)
 
     def build():
         env = make_attacked_env(preset, victim, spec)  # reseeded by the seeded reset below
-        return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed", "attack_success_rate", "attack_queries"))
+        keys = ("crashed",) if spec is None else ("crashed", "attack_success_rate", "attack_queries")
+        return Monitor(env, filename=str(out / "monitor"), info_keywords=keys)
 
     venv = DummyVecEnv([build])
     venv.seed(seed)
@@ -80,11 +85,11 @@ def adversarial_train(
     wall = time.perf_counter() - start
     path = out / "model.zip"
     model.save(path)
-    oracle = venv.envs[0].env.oracle
+    oracle = getattr(venv.envs[0].env, "oracle", None)
     write_json(out / "train.json", {
-        "algo": algo, "kind": "adversarial", "source_model": str(source), "total_timesteps": steps,
+        "algo": algo, "kind": "adversarial" if spec is not None else "control (no attack)", "source_model": str(source), "total_timesteps": steps,
         "seed": seed, "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1),
-        "attack_queries": int(oracle.total_queries),
+        "attack_queries": int(oracle.total_queries) if oracle is not None else 0,
     })
     venv.close()
     return path

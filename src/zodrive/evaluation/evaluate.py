@@ -21,6 +21,7 @@ import numpy as np
 
 from zodrive.agents.baselines import is_baseline
 from zodrive.agents.policies import check_policy, make_policy_env
+from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.errors import ZodriveError
@@ -47,14 +48,16 @@ class EvalJob:
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
-        not), the preset, the attack and the first seed."""
+        not), the preset, the attack (with the version of the attack engine that ran it) and
+        the first seed."""
         if is_baseline(self.model):
             model = self.model
         else:
             from zodrive.agents.safe_load import sha256
 
             model = "sha256:" + sha256(Path(self.model))
-        return {"model": model, "preset": self.preset, "attack": self.attack, "seed": self.seed}
+        attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
+        return {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
 
 
 _WORKER: dict[str, Any] = {}
@@ -176,7 +179,7 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
         return
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
     what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
-            "attack": "the attack settings", "seed": "the first seed"}
+            "attack": "the attack settings or the attack engine's version", "seed": "the first seed"}
     raise ZodriveError(f"{out} holds a different evaluation ({', '.join(what.get(k, k) for k in differs)} "
                        "differ); choose another --out")
 

@@ -19,7 +19,7 @@ from typing import Any
 from zodrive.agents.loading import model_file
 from zodrive.agents.policies import policy_ref
 from zodrive.attacks.spec import AttackSpec, load_attack
-from zodrive.config import config_root
+from zodrive.config import models_dir
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
@@ -35,10 +35,6 @@ BASELINE_ROWS = {
     "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil"),
     "ddpg": ("baseline:brake", "baseline:accelerate", "baseline:idm-mobil"),
 }
-
-
-def models_dir() -> Path:
-    return config_root().parent / "models"
 
 
 def _done(path: Path) -> bool:

@@ -1,0 +1,5 @@
+import sys
+
+from zodrive.cli import main
+
+sys.exit(main())

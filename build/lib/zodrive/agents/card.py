@@ -1,0 +1,131 @@
+"""Model cards: how a shipped model was made and how it scores, from its run folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from zodrive.agents.safe_load import sha256
+from zodrive.errors import ZodriveError
+from zodrive.runinfo import write_atomic
+
+PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
+PAPER_BUDGETS = {"dqn": 20_000, "ddpg": 120_000}
+
+
+def _load(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise ZodriveError(f"{path} is missing (train and evaluate into the folder first)")
+    return yaml.safe_load(path.read_text()) if path.suffix == ".yaml" else json.loads(path.read_text())
+
+
+def _result_line(summary: dict[str, Any]) -> str:
+    low, high = summary["ci95"]
+    return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
+            f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
+            + (f"{summary['lane_changes_per_episode']:.1f} lane changes per episode, "
+               f"{summary['mean_distance']:.0f} m travelled, " if "lane_changes_per_episode" in summary else "")
+            + f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
+            f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
+
+
+def seed_table(folders: list[Path]) -> list[str]:
+    """Markdown lines: each training seed's evaluation, then the median and range across seeds."""
+    import numpy as np
+
+    rows = []
+    for folder in folders:
+        train, summary = _load(folder / "train.json"), _load(folder / "eval" / "summary.json")
+        rows.append((train["seed"], folder, summary))
+    lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
+             "|---|---|---|---|---|---|---|"]
+    for seed, folder, s in sorted(rows, key=lambda r: r[0]):
+        lines.append(f"| {seed} | `{folder.name}` | {s['mean_return']:.2f} ({s['ci95'][0]:.2f}–{s['ci95'][1]:.2f}) | "
+                     f"{s['collision_rate']:.0%} | {s.get('offroad_rate', 0):.0%} | {s['mean_speed']:.1f} | "
+                     f"{s.get('lane_changes_per_episode', float('nan')):.1f} |")
+    lines.append("")
+    for key, label, fmt in (("mean_return", "Mean return", "{:.2f}"), ("collision_rate", "Collisions", "{:.0%}"),
+                            ("mean_speed", "Speed (m/s)", "{:.1f}"),
+                            ("lane_changes_per_episode", "Lane changes/ep", "{:.1f}")):
+        values = np.array([s.get(key, np.nan) for _, _, s in rows], dtype=float)
+        lines.append(f"- {label} across {len(values)} seeds: median " + fmt.format(np.median(values))
+                     + ", range " + fmt.format(values.min()) + "–" + fmt.format(values.max()))
+    return lines
+
+
+def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
+               notes: list[str] | None = None, seeds: list[Path] | None = None) -> Path:
+    """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
+    summary.json (default `folder/eval`)."""
+    run, train = _load(folder / "run.json"), _load(folder / "train.json")
+    config = _load(folder / "config.yaml")
+    summary = _load((evaluation or folder / "eval") / "summary.json")
+    algo = train["algo"]
+    adversarial = train.get("kind") == "adversarial"
+    recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "steps", "warmup") if k in config}
+    kind = "adversarially trained " if adversarial else ""
+    lines = [
+        f"# {folder.name}: {kind}{algo.upper()} on the `{config['preset']['name']}` preset",
+        "",
+        "Made by this repository's own commands:",
+        "",
+        "```",
+        run["command"],
+        *run.get("continued_by", []),
+        summary["command"],
+        f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
+        + (f" --eval {evaluation}" if evaluation else "")
+        + (" --seeds " + " ".join(str(p) for p in seeds) if seeds else "") + "".join(f" --note {n!r}" for n in notes or []),
+        "```",
+        "",
+        f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
+        f"wall time: {train['wall_time_s'] / 60:.1f} min ({train['steps_per_s']:.0f} steps/s on a 2-core CPU)",
+        "- versions: " + ", ".join(f"{k} {v}" for k, v in run["versions"].items()),
+        f"- `model.zip` SHA-256: `{sha256(folder / 'model.zip')}` (shipped models are listed in "
+        "`models/SHA256SUMS`; zodrive checks the sum before it lets stable-baselines3 unpickle the file)",
+        "",
+        "## Evaluation",
+        "",
+        f"**Mean return {_result_line(summary)}.**",
+        "",
+    ]
+    if not adversarial:
+        lines.append(f"Paper (Table 1, Initial Training): {PAPER_TARGETS.get(algo, float('nan')):.2f}.")
+    else:
+        lines.append("Trained further on attacked observations (paper Algorithm 2); "
+                     f"{train.get('attack_queries', 0):,} attack queries during training.")
+    if summary.get("action_share"):
+        names = ["LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
+        lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(names, summary["action_share"])) + ".")
+    if not adversarial and recipe.get("hyperparameters"):
+        changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
+        budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)
+                  else f"{train['total_timesteps']:,} steps; the paper's budget is {PAPER_BUDGETS.get(algo, 0):,}")
+        lines += ["", f"Changed from stable-baselines3's defaults ({budget}): {changed}."]
+    if baseline is not None:
+        base = _load(baseline / "summary.json")
+        lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
+                      f"{_result_line(base)}."]
+    if seeds:
+        lines += ["", "## Training seeds", "", "Every seed trained with the same recipe and evaluated on the same "
+                  "episodes; report the median and range, not the best seed.", ""] + seed_table(seeds)
+    if notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
+    lines += [
+        "",
+        "## Recipe" if not adversarial else "## Adversarial training",
+        "",
+        "```yaml",
+        yaml.safe_dump(recipe, sort_keys=False).rstrip(),
+        "```",
+        "",
+        "The resolved environment preset is in `config.yaml`; the training curve in `monitor.monitor.csv`"
+        " (episode returns) and `progress.csv` (SB3 logger).",
+        "",
+    ]
+    path = folder / "CARD.md"
+    write_atomic(path, "\n".join(lines))
+    return path

@@ -1,0 +1,99 @@
+"""Open DQN/DDPG zips and check that they fit a preset, with one-line errors.
+
+By default nothing in a model file is unpickled (see `safe_load`): the acting network is
+rebuilt from the zip's plain JSON and its weights. `load_model(..., trust=True)` uses SB3's
+full loader, which unpickles and can run code from the file: only for models you trust
+(the shipped ones are checked against `models/SHA256SUMS`), and only where an SB3 object is
+needed (adversarial training continues training one).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from zodrive.agents.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
+from zodrive.agents.training import ALGOS, KIND_OF_ALGO
+from zodrive.envs import action_kind, n_actions, observation_shape
+from zodrive.errors import ZodriveError
+
+
+def model_file(path: str | Path) -> Path:
+    """`path` itself, or `path/model.zip` for a model folder."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "model.zip"
+    if not path.is_file():
+        raise ZodriveError(f"model file not found: {path}")
+    return path
+
+
+def inspect_model(path: Path) -> dict[str, Any]:
+    """Algorithm and space shapes stored in an SB3 zip, read without unpickling anything."""
+    return describe(*read_plain(path), path)
+
+
+def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None:
+    """Raise if the model's algorithm or spaces do not match the preset."""
+    kind = action_kind(preset)
+    if KIND_OF_ALGO[info["algo"]] != kind:
+        raise ZodriveError(
+            f"{path} is a {info['algo'].upper()} model; preset {preset['name']!r} has "
+            f"{kind} actions (use a {'DQN' if kind == 'discrete' else 'DDPG'} model)"
+        )
+    want = observation_shape(preset)
+    if info["obs_shape"] != want:
+        raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset gives {want}")
+    if info["n_actions"] != n_actions(preset):
+        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {n_actions(preset)}")
+
+
+def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
+    """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it."""
+    file = model_file(path)
+    data, weights = read_plain(file)  # the zip is read once
+    if preset is not None:
+        check_fits(describe(data, weights, file), preset, file)
+    return network_from(data, weights, file)
+
+
+def is_shipped(file: Path) -> bool:
+    """True if `file` is one of the repository's shipped models and its SHA-256 matches."""
+    from zodrive.config import models_dir
+
+    models = models_dir()
+    try:
+        relative = file.resolve().relative_to(models.resolve())
+    except ValueError:
+        return False
+    expected = shipped_sums(models).get(str(relative))
+    if expected is None:
+        return False
+    if sha256(file) != expected:
+        raise ZodriveError(f"{file} does not match its SHA-256 in {models / 'SHA256SUMS'}: it was changed")
+    return True
+
+
+def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False) -> BaseAlgorithm:
+    """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model)."""
+    file = model_file(path)
+    info = inspect_model(file)
+    if preset is not None:
+        check_fits(info, preset, file)
+    if not (trust or is_shipped(file)):
+        raise ZodriveError(f"loading {file} with stable-baselines3 would unpickle it, which can run code from "
+                           "the file; pass --trust-model if you trust where it came from")
+    try:
+        with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
+            warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
+            return ALGOS[info["algo"]].load(file, device="cpu")
+    except Exception as exc:
+        raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
+
+
+def model_algo(path: str | Path) -> str:
+    """`dqn` or `ddpg` for a model file, read from its weights."""
+    return inspect_model(model_file(path))["algo"]

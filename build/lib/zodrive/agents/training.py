@@ -1,0 +1,213 @@
+"""Train DQN / DDPG agents with stable-baselines3 from a recipe config."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import logging
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from stable_baselines3 import DDPG, DQN
+from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from zodrive.compute import one_torch_thread
+from zodrive.config import check_keys, load_config, read_yaml
+from zodrive.envs import action_kind, load_preset, make_env
+from zodrive.errors import ZodriveError
+from zodrive.runinfo import command_line, write_atomic, write_json, write_run_info
+
+log = logging.getLogger(__name__)
+
+ALGOS = {"dqn": DQN, "ddpg": DDPG}
+KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
+RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
+               "double_q"}
+
+
+def algorithm_class(recipe: dict[str, Any]):
+    """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target) or DDPG."""
+    if recipe.get("double_q"):
+        if recipe["algo"] != "dqn":
+            raise ZodriveError("double_q applies to dqn recipes only")
+        from zodrive.agents.double_dqn import DoubleDQN
+
+        return DoubleDQN
+    return ALGOS[recipe["algo"]]
+
+
+def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
+    """A training recipe (algorithm, preset, step budget, hyperparameters)."""
+    recipe = load_config(name, "recipes", overrides)
+    algo = recipe.get("algo")
+    if algo not in ALGOS:
+        raise ZodriveError(f"recipe {name!r}: algo must be one of {sorted(ALGOS)}, not {algo!r}")
+    check_keys(recipe, RECIPE_KEYS, f"recipe {name!r}")
+    params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
+                                                                        "verbose", "tensorboard_log", "action_noise"}
+    check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
+    steps = recipe.get("total_timesteps")
+    if not isinstance(steps, int) or steps < 1:
+        raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
+    return recipe
+
+
+def action_noise(spec: dict[str, Any] | None, n_actions: int):
+    """SB3 action noise from `{type, sigma}`; DDPG explores with it."""
+    if not spec:
+        return None
+    mean, sigma = np.zeros(n_actions), float(spec.get("sigma", 0.1)) * np.ones(n_actions)
+    kind = spec.get("type", "normal")
+    if kind == "normal":
+        return NormalActionNoise(mean, sigma)
+    if kind == "ornstein-uhlenbeck":
+        return OrnsteinUhlenbeckActionNoise(mean, sigma)
+    raise ZodriveError(f"unknown action noise type {kind!r} (normal, ornstein-uhlenbeck)")
+
+
+def make_training_env(preset: dict[str, Any], seed: int, log_dir: Path, *, append: bool = False) -> DummyVecEnv:
+    """One monitored environment; its episode returns become the training curve."""
+
+    def build():
+        return Monitor(make_env(preset), filename=str(log_dir / "monitor"), override_existing=not append)
+
+    venv = DummyVecEnv([build])
+    venv.seed(seed)
+    return venv
+
+
+def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
+    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
+    found = []
+    for path in (out / "checkpoints").glob(f"{algo}_*_steps.zip"):
+        try:
+            found.append((int(path.stem.split("_")[1]), path))
+        except (IndexError, ValueError):
+            continue
+    if not found:
+        return None
+    steps, path = max(found)
+    return path, steps
+
+
+def _without_budget(recipe: Any) -> Any:
+    return {k: v for k, v in recipe.items() if k != "total_timesteps"} if isinstance(recipe, dict) else recipe
+
+
+def check_run_folder(out: Path, *, resume: bool, force: bool) -> None:
+    """Refuse to write a run into a folder that already holds one, unless told what to do."""
+    if resume or force or not out.exists() or not any(out.iterdir()):
+        return
+    raise ZodriveError(f"{out} already holds a run; use --resume to continue it, --force to overwrite it, "
+                       "or choose another --out")
+
+
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
+def train(
+    recipe: dict[str, Any],
+    out: Path,
+    *,
+    seed: int | None = None,
+    preset_overrides: list[str] | None = None,
+    progress_bar: bool = True,
+    tensorboard: bool = False,
+    resume: bool = False,
+    force: bool = False,
+) -> Path:
+    """Train per `recipe` into run folder `out`; returns the saved model path.
+
+    Checkpoints (model and replay buffer) are written every `checkpoint_every` steps; with
+    `resume`, training continues from the newest one with the run's own recipe and seed (the
+    environment restarts from a fresh episode, so a resumed run is not bit-identical to an
+    uninterrupted one)."""
+    check_run_folder(out, resume=resume, force=force)
+    previous = read_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
+    if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
+        raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "
+                           "(only --steps may change, to train it longer)")
+    seed = int(recipe.get("seed", 0) if seed is None else seed)
+    if previous is not None:
+        seed = int(json.loads((out / "run.json").read_text())["seed"])
+    algo = recipe["algo"]
+    preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
+    if action_kind(preset) != KIND_OF_ALGO[algo]:
+        raise ZodriveError(f"{algo} needs a {KIND_OF_ALGO[algo]} preset, not {preset['name']!r}")
+    fresh = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
+                      tensorboard=tensorboard)
+    except (TypeError, ValueError, AssertionError) as exc:  # SB3 rejects a hyperparameter
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
+        raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
+
+
+def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
+           previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool) -> Path:
+    algo = recipe["algo"]
+    checkpoint = latest_checkpoint(out, algo) if resume else None
+    if previous is None:
+        write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
+    else:  # the run folder keeps the command that started it and lists those that continued it
+        run = json.loads((out / "run.json").read_text())
+        run["continued_by"] = [*run.get("continued_by", []), command_line()]
+        write_json(out / "run.json", run)
+        write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
+
+    env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,
+                            append=checkpoint is not None)
+    if checkpoint is None:
+        kwargs = dict(recipe.get("hyperparameters") or {})
+        if algo == "ddpg":
+            kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
+        model = algorithm_class(recipe)(
+            "MlpPolicy",
+            env,
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=str(out / "tb") if tensorboard else None,
+            **kwargs,
+        )
+        done = 0
+    else:
+        path, done = checkpoint
+        model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
+        if buffer.is_file():
+            model.load_replay_buffer(buffer)
+        log.warning("resuming %s from step %d (%s)", out, done, path.name)
+    model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
+    every = int(recipe.get("checkpoint_every", 0) or 0)
+    callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
+                                  save_replay_buffer=True) if every else None
+    start = time.perf_counter()
+    total = int(recipe["total_timesteps"])
+    if done < total:
+        model.learn(
+            total_timesteps=total - done,
+            callback=callback,
+            progress_bar=progress_bar,
+            log_interval=1 if algo == "ddpg" else 4,
+            reset_num_timesteps=checkpoint is None,
+        )
+    wall = time.perf_counter() - start  # of this invocation: steps done-total
+    path = out / "model.zip"
+    model.save(path)
+    write_json(
+        out / "train.json",
+        {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
+         "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1)},
+    )
+    env.close()
+    log.info("trained %s for %d steps in %.0f s", algo, recipe["total_timesteps"], wall)
+    return path

@@ -1,0 +1,287 @@
+"""The attack interface and the one driver loop every attack runs in.
+
+An attack turns clean observations `x0` (N environments at once) into perturbed ones
+inside a `ThreatModel`, talking to the victim only through a `QueryOracle`. The driver
+(`Attack.perturb`) owns everything attacks share, so that no attack can get it wrong:
+
+    query x0 (the clean outputs; iteration 0's base point, never queried twice)
+    x = init(x0)
+    for k in 0..T-1, over the rows still active:
+        candidates = [x, *propose(x)]      projected into the box and the eps-ball
+        skip rows whose own per-step budget cannot pay for them; query the rest in one
+        batch (a base point whose outputs are known is not queried again)
+        keep the best queried point so far (successful first, then lowest objective)
+        stop rows that succeeded (early_stop)
+        x = project(step(candidates, objective values))
+
+An attack only says how to start (`init`), what to query around the base point
+(`propose`) and where to go next (`step`). The objective is the paper's Eq. 8:
+L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
+False`) get the exact gradient of L1 at the base point instead of probes.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+import torch
+
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.threat import ThreatModel, distortion
+from zodrive.errors import ZodriveError
+
+
+@dataclass
+class AttackResult:
+    """What one attacked environment step produced, per environment row."""
+
+    x_adv: np.ndarray            # (N, *obs) the observation the policy will receive
+    success: np.ndarray          # (N,) goal met on x_adv
+    already: np.ndarray          # (N,) goal already met on the clean observation
+    iterations: np.ndarray       # (N,) iterations run
+    queries: np.ndarray          # (N,) victim queries spent on this row (the oracle's count)
+    linf: np.ndarray             # (N,) ||x_adv - x0||_inf
+    l2: np.ndarray               # (N,) ||x_adv - x0||_2
+    adv_outputs: np.ndarray      # (N, k) victim outputs on x_adv (seen by the attacker)
+    clean_outputs: np.ndarray    # (N, k) victim outputs on x0
+    trace: list[dict[str, np.ndarray]] = field(default_factory=list)  # per iteration: l1, l2 of the base point
+
+
+class Best:
+    """Tracks, per row, the best queried point: successful beats unsuccessful, then lower f."""
+
+    def __init__(self, x: np.ndarray, out: np.ndarray, f: np.ndarray, ok: np.ndarray) -> None:
+        self.x, self.out, self.f, self.ok = x.copy(), out.copy(), f.copy(), ok.copy()
+
+    def offer(self, rows: np.ndarray, x: np.ndarray, out: np.ndarray, f: np.ndarray, ok: np.ndarray) -> None:
+        better = (ok & ~self.ok[rows]) | ((ok == self.ok[rows]) & (f < self.f[rows]))
+        take = rows[better]
+        self.x[take], self.out[take] = x[better], out[better]
+        self.f[take], self.ok[take] = f[better], ok[better]
+
+
+class Attack(abc.ABC):
+    """Base class: validated hyperparameters, a seeded generator, the driver `perturb`."""
+
+    name: ClassVar[str]
+    black_box: ClassVar[bool] = True
+    reference: ClassVar[str] = ""
+
+    def __init__(
+        self,
+        threat: ThreatModel,
+        *,
+        steps: int = 100,
+        n_directions: int = 20,
+        mu: float = 0.005,
+        step_size: float = 0.01,
+        l2_weight: float = 0.0,
+        early_stop: bool = True,
+        seed: int = 0,
+    ) -> None:
+        if not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ZodriveError(f"steps (T) must be an integer >= 1, not {steps}")
+        if not isinstance(n_directions, (int, np.integer)) or n_directions < 1:
+            raise ZodriveError(f"n_directions (q) must be an integer >= 1, not {n_directions}")
+        if not mu > 0:
+            raise ZodriveError(f"mu must be > 0, not {mu}")
+        if not step_size > 0:
+            raise ZodriveError(f"step_size must be > 0, not {step_size}")
+        if not l2_weight >= 0:
+            raise ZodriveError(f"l2_weight must be >= 0, not {l2_weight}")
+        self.threat = threat
+        self.steps = int(steps)
+        self.n_directions = int(n_directions)
+        self.mu = float(mu)
+        self.step_size = float(step_size)
+        self.l2_weight = float(l2_weight)
+        self.early_stop = bool(early_stop)
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+
+    def reseed(self, seed: int) -> None:
+        """Restart the attack's random stream (e.g. per episode, for reproducible episodes)."""
+        self.rng = np.random.default_rng(seed)
+
+    # -- what an attack defines ---------------------------------------------------------
+    @abc.abstractmethod
+    def queries_per_step(self) -> int:
+        """Upper bound on victim queries per environment step (the docstring's formula)."""
+
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
+        return x0.copy()
+
+    def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """Points (A, P, dim) to query around the base points x (A, dim) of `rows`."""
+        return np.empty((len(x), 0, x.shape[1]), dtype=np.float32)
+
+    @abc.abstractmethod
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        """The next base points (A, dim) from the queried candidates (A, 1 + P, dim) (base
+        point first), their objective values f (A, 1 + P) and, for white-box attacks, the
+        gradient of L1 at the base point (A, dim)."""
+
+    # -- the driver ---------------------------------------------------------------------
+    def perturb(
+        self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
+    ) -> AttackResult:
+        """Attack clean observations `x0` (N, *obs); see the module docstring and `AttackResult`."""
+        n, shape = len(x0), x0.shape[1:]
+        dim = int(np.prod(shape))
+        mask = self.threat.mask(shape).reshape(-1)
+        flat0 = np.asarray(x0, dtype=np.float32).reshape(n, dim)
+        oracle.begin_step(rows=n)
+
+        def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
+            m = cand.shape[1]
+            inside = self.threat.project(cand.reshape(-1, *shape).astype(np.float32),
+                                         np.repeat(flat0[rows], m, axis=0).reshape(-1, *shape))
+            return inside.reshape(len(rows), m, dim)
+
+        def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+            out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean[rows])
+            l1 = objective.loss(out_t, clean_t).numpy().astype(np.float64)
+            l2 = ((cand - flat0[rows, None]).astype(np.float64) ** 2).sum(axis=-1)
+            return l1, l2, l1 + self.l2_weight * l2, objective.success(out_t, clean_t).numpy()
+
+        def white_box_loss(rows: np.ndarray):  # L1 at the base points of `rows`, for autograd
+            clean_t = None if rows is None else torch.from_numpy(clean[rows])
+            return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
+
+        everyone = np.arange(n)
+        if self.black_box:
+            clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
+        else:
+            clean, grad0 = oracle.gradient(flat0.reshape(n, *shape), white_box_loss(None), everyone)
+        clean = clean.astype(np.float32)
+        already = objective.already(torch.from_numpy(clean)).numpy()
+        _, _, f0, _ = values(flat0[:, None], clean[:, None], everyone)
+        best = Best(flat0, clean, f0[:, 0], already)
+        # the last evaluated base point of each row, so that it is never queried twice
+        known_x, known_out = flat0.copy(), clean.copy()
+        known_grad = None if grad0 is None else grad0.reshape(n, dim).astype(np.float32)
+
+        x = project(self.init(flat0.copy(), mask)[:, None].astype(np.float32), everyone)[:, 0]
+        active = ~already if self.early_stop else np.ones(n, dtype=bool)
+        iterations = np.zeros(n, dtype=np.int64)
+        records: list[dict[str, np.ndarray]] = []
+        for k in range(self.steps):
+            rows = np.flatnonzero(active)
+            if rows.size == 0:
+                break
+            probes = self.propose(k, x[rows], rows, mask)
+            cand = project(np.concatenate([x[rows, None], probes.astype(np.float32)], axis=1), rows)
+            need = np.ones(cand.shape[:2], dtype=bool)
+            need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
+            afford = oracle.remaining(rows) >= need.sum(axis=1)
+            if not afford.all():  # a row's own budget is spent: that row stops, the others go on
+                active[rows[~afford]] = False
+                rows, cand, need = rows[afford], cand[afford], need[afford]
+                if rows.size == 0:
+                    break
+            a, m = cand.shape[:2]
+            out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+            out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
+            owners = np.repeat(rows, need.sum(axis=1))
+            grad = None
+            if self.black_box:
+                if owners.size:
+                    out[need] = oracle(cand[need].reshape(-1, *shape), owners)
+            else:
+                grad = known_grad[rows].copy()
+                ask = need[:, 0]
+                if ask.any():
+                    o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]), rows[ask])
+                    out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
+                known_grad[rows] = grad
+            known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
+            iterations[rows] += 1
+            l1, l2, f, ok = values(cand, out, rows)
+            has_ok = ok.any(axis=1)
+            pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+            ar = np.arange(a)
+            best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+            if trace:
+                rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
+                rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
+                records.append(rec)
+            if self.early_stop:
+                active[rows[has_ok]] = False
+            if k == self.steps - 1:
+                break
+            x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
+            if self.black_box:  # a step onto a queried point (random search) costs no new query
+                same = np.all(cand == x[rows, None], axis=2)
+                hit = same.any(axis=1)
+                col = same.argmax(axis=1)[hit]
+                known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
+        x_adv = best.x.reshape(n, *shape).astype(x0.dtype)
+        linf, l2n = distortion(x_adv, x0)
+        return AttackResult(
+            x_adv=x_adv, success=best.ok & ~already, already=already, iterations=iterations,
+            queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
+            adv_outputs=best.out, clean_outputs=clean, trace=records,
+        )
+
+
+class GradientEstimateAttack(Attack):
+    """Attacks that estimate a gradient from finite differences around the base point.
+
+    They differ only in the directions they draw and the step they take (as in foolbox/ART).
+    Queries per environment step: at most T * (1 + q) with forward differences, T * (1 + 2q)
+    with central ones (the clean query is iteration 0's base point).
+    """
+
+    antithetic: ClassVar[bool] = False  # central differences f(x+mu u) - f(x-mu u)
+    unit_directions: ClassVar[bool] = False  # E[u u^T] = I/d: scale the estimate by d
+
+    def queries_per_step(self) -> int:
+        return self.steps * (1 + self.n_directions * (2 if self.antithetic else 1))
+
+    @abc.abstractmethod
+    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
+        """(n, q, dim) directions for n rows, zero on masked coordinates."""
+
+    def estimate(self, f: np.ndarray, u: np.ndarray, d: int) -> np.ndarray:
+        """Gradient estimate (A, dim) from objective values f (A, M) at [x, x+mu u(, x-mu u)].
+
+        `d` is the number of perturbable coordinates (the paper's `d` in Algorithm 1).
+        """
+        q = u.shape[1]
+        if self.antithetic:
+            diff = (f[:, 1 : 1 + q] - f[:, 1 + q :]) / (2 * self.mu)
+        else:
+            diff = (f[:, 1:] - f[:, :1]) / self.mu
+        scale = (d if self.unit_directions else 1.0) / q
+        return np.einsum("aq,aqd->ad", diff, u) * scale
+
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._d_free = int(mask.sum())
+        self.start(x0)
+        return x0.copy()
+
+    def start(self, x0: np.ndarray) -> None:
+        """Per-call state (e.g. an optimizer) before the first update."""
+
+    def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._u = self.directions(len(rows), x.shape[1], mask).astype(np.float32)
+        signs = (1.0, -1.0) if self.antithetic else (1.0,)
+        return np.concatenate([x[:, None] + (s * self.mu) * self._u for s in signs], axis=1)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        return self.update(cand[:, 0], self.estimate(f, self._u, self._d_free), rows)
+
+    @abc.abstractmethod
+    def update(self, x: np.ndarray, g: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """One step from flattened iterates x (A, dim) with estimate g (A, dim)."""
+
+
+def unit_sphere(rng: np.random.Generator, n: int, q: int, dim: int, mask: np.ndarray) -> np.ndarray:
+    """q directions per row, uniform on the unit sphere of the unmasked subspace."""
+    u = rng.standard_normal((n, q, dim)) * mask
+    return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)

@@ -1,0 +1,33 @@
+"""Uniform random noise inside the budget: the floor every real attack must beat.
+
+No optimization: one draw, uniform in the L-inf box (or L2 ball) of radius eps, masked and
+clipped. It queries only to report its effect.
+
+Queries per environment step: 2 (the clean observation and the noisy one).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from zodrive.attacks.base import Attack
+
+
+class UniformNoise(Attack):
+    name = "uniform-noise"
+    reference = "baseline (no paper): uniform noise in the threat model"
+
+    def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
+        kwargs["steps"] = 1  # one draw, queried once
+        super().__init__(threat, **kwargs)
+
+    def queries_per_step(self) -> int:
+        return 2
+
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        return x0 + self.threat.random_delta(x0.shape, mask, self.rng)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        raise AssertionError("uniform noise takes no step")  # steps = 1: the driver never asks

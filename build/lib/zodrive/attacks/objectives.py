@@ -1,0 +1,176 @@
+"""Attack objectives: the L1 term of the paper's Eq. 5-8 and the success test.
+
+Every objective maps victim outputs of shape (N, M, k) (N environments, M candidates
+each) and per-environment clean outputs (N, k) to losses (N, M) to *minimize*. They are
+written in torch so that the white-box baselines can differentiate the same code the
+black-box attacks only evaluate. The distortion term L2 = ||x' - x||^2 is added by the
+attack loop, which owns the observations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import torch
+
+from zodrive.errors import ZodriveError
+
+DQN_LOSSES = ("margin", "paper")
+
+
+def _others_max(q: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """max_{j != index} q[..., j]; `index` (..., 1) broadcasts over the leading axes."""
+    excluded = torch.arange(q.shape[-1]) == index
+    return torch.where(excluded, float("-inf"), q).amax(dim=-1)
+
+
+@dataclass(frozen=True)
+class Objective:
+    """Base: `loss(out, clean) -> (N, M)`, `success(out, clean) -> (N, M)` booleans."""
+
+    weight: float = 1.0  # the paper's constant `a`
+    targeted: bool = True
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def already(self, clean: torch.Tensor) -> torch.Tensor:
+        """(N,) True where the clean output already meets the goal (nothing to attack)."""
+        return self.success(clean[:, None], clean)[:, 0]
+
+
+@dataclass(frozen=True)
+class DiscreteTargeted(Objective):
+    """Make a discrete victim pick `target` (paper: FASTER = 3).
+
+    `loss="margin"`: C&W-style max(max_{j!=t} Q_j - Q_t + kappa, 0) - zero once the target
+    wins by kappa. `loss="paper"`: the literal Eq. 5, a * |Q_t - Q_y| with y the clean
+    action, which is minimized by a tie and not by a flip.
+    """
+
+    target: int = 3
+    kind: str = "margin"
+    kappa: float = 0.01
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        q_t = out[..., self.target]
+        if self.kind == "paper":
+            y = clean.argmax(dim=-1)[:, None, None].expand(*out.shape[:-1], 1)
+            return self.weight * (q_t - out.gather(-1, y).squeeze(-1)).abs()
+        others = _others_max(out, torch.tensor(self.target))
+        return self.weight * torch.clamp(others - q_t + self.kappa, min=0.0)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return out.argmax(dim=-1) == self.target
+
+
+@dataclass(frozen=True)
+class DiscreteUntargeted(Objective):
+    """Make a discrete victim pick anything but its clean action (margin loss)."""
+
+    targeted: bool = False
+    kappa: float = 0.01
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        y = clean.argmax(dim=-1)[:, None, None]
+        q_y = out.gather(-1, y.expand(*out.shape[:-1], 1)).squeeze(-1)
+        return self.weight * torch.clamp(q_y - _others_max(out, y) + self.kappa, min=0.0)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return out.argmax(dim=-1) != clean.argmax(dim=-1)[:, None]
+
+
+@dataclass(frozen=True)
+class ContinuousTargeted(Objective):
+    """Drive a continuous victim's action to `target` (paper: [1, 0.5], throttle + right).
+
+    L1 = a * ||pi(x') - target||_2 (the paper's Eq. 6 with the target in place of the
+    clean action, as its text describes). Success: every action dimension within `tol`.
+    """
+
+    target: tuple[float, ...] = (1.0, 0.5)
+    tol: float = 0.2
+
+    def _target(self, out: torch.Tensor) -> torch.Tensor:
+        return torch.as_tensor(self.target, dtype=out.dtype)
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return self.weight * torch.linalg.vector_norm(out - self._target(out), dim=-1)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return (out - self._target(out)).abs().amax(dim=-1) <= self.tol
+
+
+@dataclass(frozen=True)
+class ContinuousUntargeted(Objective):
+    """Push a continuous victim's action away from its clean action (Eq. 6, maximized)."""
+
+    targeted: bool = False
+    tol: float = 0.2
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return -self.weight * torch.linalg.vector_norm(out - clean[:, None], dim=-1)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return (out - clean[:, None]).abs().amax(dim=-1) >= self.tol
+
+
+DISCRETE_TARGETS = {"LANE_LEFT": 0, "IDLE": 1, "LANE_RIGHT": 2, "FASTER": 3, "SLOWER": 4}
+
+
+def make_objective(
+    kind: str,
+    target: str | int | Sequence[float] | None,
+    *,
+    loss: str = "margin",
+    weight: float = 1.0,
+    kappa: float = 0.01,
+    tol: float = 0.2,
+    n_actions: int | None = None,
+) -> Objective:
+    """Build the objective for a victim kind (`discrete`/`continuous`) and a target.
+
+    `target=None` or `"none"` means untargeted. Discrete targets are an index or an action
+    name (FASTER); continuous targets a sequence like [1, 0.5].
+    """
+    untargeted = target is None or (isinstance(target, str) and target.lower() in ("none", "untargeted"))
+    if kind == "discrete":
+        if untargeted:
+            return DiscreteUntargeted(weight=weight, kappa=kappa)
+        if loss not in DQN_LOSSES:
+            raise ZodriveError(f"unknown DQN loss {loss!r} (known: {', '.join(DQN_LOSSES)})")
+        if isinstance(target, str):
+            name = target.upper()
+            if name.lstrip("-").isdigit():
+                index = int(name)
+            elif name in DISCRETE_TARGETS:
+                index = DISCRETE_TARGETS[name]
+            else:
+                raise ZodriveError(f"unknown target {target!r} (known: {', '.join(DISCRETE_TARGETS)} or an index)")
+        elif isinstance(target, (int,)) and not isinstance(target, bool):
+            index = int(target)
+        else:
+            raise ZodriveError(f"a discrete victim needs an action target, not {target!r}")
+        if not 0 <= index < (n_actions or 5):
+            raise ZodriveError(f"target action {index} is out of range 0..{(n_actions or 5) - 1}")
+        return DiscreteTargeted(weight=weight, target=index, kind=loss, kappa=kappa)
+    if untargeted:
+        return ContinuousUntargeted(weight=weight, tol=tol)
+    if isinstance(target, str):
+        try:
+            target = [float(v) for v in target.replace("[", "").replace("]", "").split(",")]
+        except ValueError as exc:
+            raise ZodriveError(f"invalid continuous target {target!r}: expected e.g. '1,0.5'") from exc
+    try:
+        values = tuple(float(v) for v in target)  # type: ignore[union-attr]
+    except TypeError as exc:
+        raise ZodriveError(f"a continuous victim needs a target action like [1, 0.5], not {target!r}") from exc
+    if n_actions is not None and len(values) != n_actions:
+        raise ZodriveError(f"target {list(values)} has {len(values)} dims; the victim has {n_actions}")
+    if any(abs(v) > 1 for v in values):
+        raise ZodriveError(f"target {list(values)} is outside the action range [-1, 1]")
+    return ContinuousTargeted(weight=weight, target=values, tol=tol)

@@ -1,0 +1,57 @@
+"""WHITE-BOX baselines (not black-box): PGD and FGSM with the victim's exact gradient.
+
+Madry, Makelov, Schmidt, Tsipras, Vladu. "Towards Deep Learning Models Resistant to
+Adversarial Attacks", ICLR 2018 (PGD); Goodfellow, Shlens, Szegedy. "Explaining and
+Harnessing Adversarial Examples", ICLR 2015 (FGSM); Huang et al. 2017 for RL policies.
+
+The same driver, objective and projection as the black-box attacks, and the same signed
+step as ZO-SignSGD, with the gradient read from the network instead of estimated: the
+ceiling for the black-box attacks. They need a victim with `differentiable` access (SB3
+models); a plain query function is refused.
+
+Queries per environment step: PGD at most T (one forward+backward per iteration, the clean
+query being the first); FGSM 2 (the gradient at x0 and a check of x0 - eps * sign(grad)).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from zodrive.attacks.base import Attack
+
+
+class PGD(Attack):
+    name = "pgd"
+    black_box = False
+    reference = "Madry et al., ICLR 2018 (white-box)"
+
+    def queries_per_step(self) -> int:
+        return self.steps
+
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._x0, self._mask = x0, mask
+        return x0.copy()
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        x = cand[:, 0]
+        full = grad + 2 * self.l2_weight * (x - self._x0[rows])
+        return x - self._step() * np.sign(full) * self._mask
+
+    def _step(self) -> float:
+        return self.step_size
+
+
+class FGSM(PGD):
+    """One signed-gradient step of size eps (PGD with T = 2 and step = eps)."""
+
+    name = "fgsm"
+    reference = "Goodfellow et al., ICLR 2015 (white-box)"
+
+    def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
+        kwargs["steps"] = 2  # gradient at x0, then evaluate x0 - eps * sign(grad)
+        super().__init__(threat, **kwargs)
+
+    def _step(self) -> float:
+        return self.threat.eps

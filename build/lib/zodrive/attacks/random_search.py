@@ -1,0 +1,51 @@
+"""Random search (Square-attack style) on the vertices of the L-inf ball.
+
+Andriushchenko, Croce, Flammarion, Hein. "Square Attack: a query-efficient black-box
+adversarial attack via random search", ECCV 2020.
+
+Starts from a random vertex perturbation (+-eps per free coordinate). Each iteration
+proposes q candidates, each re-drawing the signs of a random subset of coordinates (a
+fraction that shrinks over iterations, as Square's schedule), queries them in one batch and
+moves to the best if it lowers the objective. With the L2 norm, candidates are projected.
+
+Queries per environment step: at most 2 + T * q (the clean observation, the starting
+vertex, q proposals per iteration).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zodrive.attacks.base import Attack
+
+
+class RandomSearch(Attack):
+    name = "random-search"
+    reference = "Andriushchenko et al., Square Attack, ECCV 2020"
+    p_init: float = 0.3  # initial fraction of coordinates re-drawn per proposal
+
+    def queries_per_step(self) -> int:
+        return 2 + self.steps * self.n_directions
+
+    def _fraction(self, k: int) -> float:
+        return max(self.p_init * 0.5 ** int(np.log2(1 + 10 * k / self.steps)), 1.0 / 25)
+
+    def _vertices(self, shape: tuple[int, ...]) -> np.ndarray:
+        eps = self.threat.eps
+        return self.rng.choice(np.array([-eps, eps], dtype=np.float32), size=shape)
+
+    def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._x0 = x0
+        return x0 + self._vertices(x0.shape) * mask
+
+    def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        a, dim = x.shape
+        change = (self.rng.random((a, self.n_directions, dim)) < self._fraction(k)) & (mask > 0)
+        current = (x - self._x0[rows])[:, None]
+        return self._x0[rows, None] + np.where(change, self._vertices(change.shape), current)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        pick = 1 + f[:, 1:].argmin(axis=1)
+        ar = np.arange(len(rows))
+        improved = f[ar, pick] < f[:, 0]
+        return np.where(improved[:, None], cand[ar, pick], cand[:, 0])

@@ -1,0 +1,31 @@
+"""The attack registry: one name per attack, used by code, configs and the CLI."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from zodrive.attacks.base import Attack
+from zodrive.attacks.coordinate import CoordinateFD
+from zodrive.attacks.nes import NES
+from zodrive.attacks.noise import UniformNoise
+from zodrive.attacks.pgd import FGSM, PGD
+from zodrive.attacks.random_search import RandomSearch
+from zodrive.attacks.spsa import SPSA
+from zodrive.attacks.threat import ThreatModel
+from zodrive.attacks.zo_sgd import ZOSGD
+from zodrive.attacks.zo_signsgd import ZOSignSGD
+from zodrive.errors import ZodriveError
+
+ATTACKS: dict[str, type[Attack]] = {
+    cls.name: cls
+    for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD)
+}
+
+
+def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
+    """Build a registered attack by name with validated hyperparameters."""
+    try:
+        cls = ATTACKS[name]
+    except KeyError:
+        raise ZodriveError(f"unknown attack {name!r} (known: {', '.join(ATTACKS)})") from None
+    return cls(threat, **hyper)

@@ -1,0 +1,125 @@
+"""An attack as configured: one dataclass read from config files and CLI flags."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+from zodrive.attacks.victim import Victim
+from zodrive.attacks.base import Attack
+from zodrive.attacks.objectives import Objective, make_objective
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.registry import make_attack
+from zodrive.attacks.threat import ThreatModel
+from zodrive.config import load_config
+from zodrive.errors import ZodriveError
+
+log = logging.getLogger(__name__)
+
+PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
+
+
+@dataclass
+class AttackSpec:
+    """Everything that defines an attack run; field names are the CLI flags."""
+
+    attack: str = "zo-signsgd"            # registry name
+    eps: float = 0.2                      # [normalized units] budget radius
+    norm: str = "linf"                    # linf | l2
+    mode: str = "budgeted"                # budgeted (projected) | paper (unconstrained)
+    frozen: tuple[str, ...] = ("presence",)  # features the attacker may not touch
+    steps: int = 100                      # T, iterations per environment step
+    n_directions: int = 20                # q, random directions per iteration
+    mu: float = 0.005                     # smoothing radius of the finite differences
+    step_size: float = 0.02               # delta, per-iteration step
+    l2_weight: float = 0.0                # weight of L2 = ||x' - x||^2 in the objective
+    target: Any = "auto"                  # auto (paper: FASTER / [1, 0.5]) | action | none
+    loss: str = "margin"                  # DQN L1: margin (C&W) | paper (literal Eq. 5)
+    weight: float = 1.0                   # the paper's constant a in front of L1
+    kappa: float = 0.01                   # margin confidence (discrete)
+    tol: float = 0.2                      # success tolerance on continuous actions
+    early_stop: bool = True               # stop a step's iterations once the goal is met
+    query_budget: int | None = None       # max queries per environment step (None: no cap)
+    seed: int = 0                         # the attack's random stream
+
+    @classmethod
+    def from_mapping(cls, data: dict[str, Any]) -> "AttackSpec":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names - {"name", "description"}
+        if unknown:
+            raise ZodriveError(f"unknown attack option(s): {', '.join(sorted(unknown))}")
+        values = {k: v for k, v in data.items() if k in names}
+        for field in dataclasses.fields(cls):
+            value = values.get(field.name)
+            numeric = field.type in ("float", "int", "int | None")
+            if numeric and value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ZodriveError(f"attack option {field.name} must be a number, not {value!r}")
+        if "frozen" in values:
+            values["frozen"] = tuple(values["frozen"] or ())
+        return cls(**values)
+
+    def with_overrides(self, **changes: Any) -> "AttackSpec":
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def to_dict(self) -> dict[str, Any]:
+        data = dataclasses.asdict(self)
+        data["frozen"] = list(self.frozen)
+        if isinstance(data["target"], tuple):
+            data["target"] = list(data["target"])
+        return data
+
+    def resolved_target(self, kind: str) -> Any:
+        return PAPER_TARGETS[kind] if self.target in ("auto", None) else self.target
+
+    def threat(self, features: tuple[str, ...], bounds: tuple[float, float]) -> ThreatModel:
+        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=self.frozen,  # type: ignore[arg-type]
+                           features=features, low=float(bounds[0]), high=float(bounds[1]))
+
+    def _make(self, threat: ThreatModel, steps: int) -> Attack:
+        return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
+                           step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
+                           seed=self.seed)
+
+    def build(
+        self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int
+    ) -> tuple[Attack, Objective, QueryOracle]:
+        """The attack, its objective for this victim, and the oracle that counts queries.
+
+        `features`, `bounds` (the observation box) and `n_actions` describe the preset
+        (`zodrive.envs.attack_context`)."""
+        threat = self.threat(features, bounds)
+        width = threat.high - threat.low
+        if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
+            log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
+                        "only the box clips the perturbation", self.eps, threat.low, threat.high)
+        attack = self._make(threat, self.steps)
+        if self.query_budget is not None and self.query_budget >= 1:  # < 1: the oracle says so
+            one = self._make(threat, 1).queries_per_step()  # the cost of a single iteration
+            if self.query_budget < one:
+                raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
+                                   f"({one} queries with these settings): the attack could do nothing")
+        objective = make_objective(
+            victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,
+            kappa=self.kappa, tol=self.tol, n_actions=n_actions,
+        )
+        if not attack.black_box and victim.differentiable is None:
+            raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
+        return attack, objective, QueryOracle(victim, self.query_budget)
+
+
+def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
+    """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too."""
+    from zodrive.attacks.registry import ATTACKS
+    from zodrive.config import available
+
+    if name in ATTACKS and name not in available("attacks"):
+        data: dict[str, Any] = {"attack": name}
+        for text in overrides or []:
+            from zodrive.config import deep_merge, parse_override
+
+            data = deep_merge(data, parse_override(text))
+    else:
+        data = load_config(name, "attacks", overrides)
+    return AttackSpec.from_mapping(data)

@@ -1,0 +1,98 @@
+"""The threat model: what the attacker may change in an observation, and by how much."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Sequence
+
+import numpy as np
+
+from zodrive.errors import ZodriveError
+
+Norm = Literal["linf", "l2"]
+Mode = Literal["budgeted", "paper"]
+
+
+@dataclass(frozen=True)
+class ThreatModel:
+    """An Lp budget in normalized observation units, a feature mask and a box.
+
+    `mode="budgeted"` projects every candidate onto the eps-ball (the default);
+    `mode="paper"` leaves the perturbation unconstrained, as published, and only reports
+    its size. Either way every point the attacker queries or feeds is kept inside the
+    observation box [low, high] (the values a real sensor can produce: the preset's
+    normalization range, or unbounded), masked features (by default `presence`) are never
+    changed, and a clean coordinate is never moved by the box: a clean value outside it
+    stays reachable. Where a guarantee cannot hold (a frozen feature the observation does
+    not have), `mask` raises instead of skipping it.
+    """
+
+    eps: float = 0.2                      # [normalized units] 0.2 = 10 % of [-1, 1]
+    norm: Norm = "linf"
+    mode: Mode = "budgeted"
+    frozen: tuple[str, ...] = ("presence",)
+    features: tuple[str, ...] = ("presence", "x", "y", "vx", "vy")
+    low: float = -1.0                     # observation box (the preset's range)
+    high: float = 1.0
+    _mask_cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.eps) or self.eps <= 0:
+            raise ZodriveError(f"eps must be > 0, not {self.eps}")
+        if self.norm not in ("linf", "l2"):
+            raise ZodriveError(f"norm must be linf or l2, not {self.norm!r}")
+        if self.mode not in ("budgeted", "paper"):
+            raise ZodriveError(f"mode must be budgeted or paper, not {self.mode!r}")
+        unknown = set(self.frozen) - set(self.features)
+        if unknown:
+            raise ZodriveError(f"frozen features {sorted(unknown)} are not observation features")
+        if not self.low < self.high:
+            raise ZodriveError(f"observation box [{self.low}, {self.high}] is empty")
+
+    def mask(self, obs_shape: Sequence[int]) -> np.ndarray:
+        """1.0 where the attacker may write, 0.0 on frozen features (last axis)."""
+        key = tuple(obs_shape)
+        if key not in self._mask_cache:
+            mask = np.ones(key, dtype=np.float32)
+            if self.frozen and (len(key) < 1 or key[-1] != len(self.features)):
+                raise ZodriveError(
+                    f"cannot freeze {', '.join(self.frozen)}: observations of shape {key} do not end in the "
+                    f"{len(self.features)} features {', '.join(self.features)}"
+                )
+            for name in self.frozen:
+                mask[..., self.features.index(name)] = 0.0
+            self._mask_cache[key] = mask
+        return self._mask_cache[key]
+
+    def project(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        """Map candidates `x` (B, *obs) around clean `x0` (B, *obs) into the threat model."""
+        delta = (x - x0) * self.mask(x0.shape[1:])
+        if self.mode == "budgeted":
+            if self.norm == "linf":
+                delta = np.clip(delta, -self.eps, self.eps)
+            else:
+                flat = delta.reshape(len(delta), -1)
+                norms = np.linalg.norm(flat, axis=1)
+                scale = np.minimum(1.0, self.eps / np.maximum(norms, 1e-12))
+                delta = (flat * scale[:, None]).reshape(delta.shape)
+        low, high = np.minimum(self.low, x0), np.maximum(self.high, x0)  # never move a clean value
+        return np.clip(x0 + delta, low, high).astype(x0.dtype, copy=False)
+
+    def random_delta(self, shape: tuple[int, ...], mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Uniform draws (shape = (N, dim)) from the budget set (L-inf box or L2 ball) on the
+        free coordinates (`mask`, (dim,)); radius eps in both modes."""
+        n, dim = shape
+        if self.norm == "linf":
+            delta = rng.uniform(-self.eps, self.eps, size=shape)
+        else:
+            free = max(int(mask.sum()), 1)
+            flat = rng.standard_normal(shape) * mask
+            flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-12)
+            delta = flat * self.eps * rng.uniform(size=(n, 1)) ** (1.0 / free)
+        return (delta * mask).astype(np.float32)
+
+
+def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-row L-inf and L2 size of `x - x0`."""
+    flat = (x - x0).reshape(len(x), -1).astype(np.float64)
+    return np.abs(flat).max(axis=1), np.linalg.norm(flat, axis=1)

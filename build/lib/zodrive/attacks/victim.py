@@ -1,0 +1,37 @@
+"""What an attack may see of a policy: a query function over numpy observations.
+
+A `Victim` is a callable (observation batch -> outputs) plus how outputs map to the action
+taken. The attack library needs nothing else; adapters for SB3 models and torch networks
+live in `zodrive.agents.victims`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Literal
+
+import numpy as np
+
+QueryFn = Callable[[np.ndarray], np.ndarray]
+"""Observation batch (B, *obs_shape) -> outputs (B, k): Q-values or actions."""
+
+
+@dataclass(frozen=True)
+class Victim:
+    """A query function and what its outputs are.
+
+    `kind="discrete"`: outputs are per-action scores (e.g. Q-values); the action taken is
+    their argmax. `kind="continuous"`: outputs are the action itself.
+    """
+
+    query: QueryFn
+    kind: Literal["discrete", "continuous"]
+    obs_shape: tuple[int, ...]
+    differentiable: Callable[[Any], Any] | None = None
+    """White-box access (torch forward with gradients); only the FGSM/PGD baselines use it."""
+    reads: Literal["observation", "nothing", "simulator"] = "observation"
+    """What the decisions depend on: built-in baselines read nothing or the simulator."""
+
+    def actions(self, outputs: np.ndarray) -> np.ndarray:
+        """The action(s) the victim takes given its outputs."""
+        return outputs.argmax(axis=-1) if self.kind == "discrete" else outputs

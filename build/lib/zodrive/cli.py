@@ -1,0 +1,420 @@
+"""The `zodrive` command line. Every user-facing failure is one line on stderr, exit 2."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import yaml
+
+from zodrive.config import MODELS_ENV
+from zodrive.errors import ZodriveError
+
+log = logging.getLogger("zodrive")
+
+
+def _int_at_least(least: int, what: str):
+    """An argparse type: an integer >= `least`, with a one-line message naming `what`."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        return value
+
+    return parse
+
+
+_positive_int = _int_at_least(1, "a positive integer")
+_seed = _int_at_least(0, "a seed (an integer >= 0)")
+_nonnegative_int = _int_at_least(0, "an integer >= 0")
+
+
+def _check_out(path: Path | None) -> None:
+    """An --out must be a folder (or not exist yet) that we can write to."""
+    if path is None:
+        return
+    if path.exists() and not path.is_dir():
+        raise ZodriveError(f"--out {path} is a file, not a folder")
+    parent = path if path.exists() else next((p for p in path.parents if p.exists()), Path("."))
+    if not os.access(parent, os.W_OK):
+        raise ZodriveError(f"--out {path}: {parent} is not writable")
+
+
+class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)  # --help shows defaults
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> None:  # one line, exit 2, like every other error
+        raise ZodriveError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="zodrive", description="Black-box attacks on deep-RL driving policies.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--models", type=Path, default=None, metavar="DIR",
+                        help="folder of shipped models and their SHA256SUMS (default: $ZODRIVE_MODELS or ./models)")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    env = sub.add_parser("env", help="environment presets")
+    env_sub = env.add_subparsers(dest="env_command", required=True, parser_class=_Parser)
+    show = env_sub.add_parser("show", help="print a preset's resolved config")
+    show.add_argument("preset")
+    show.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (deep merge)")
+    env_sub.add_parser("list", help="list presets")
+
+    sub.add_parser("baselines", help="list the built-in baseline policies (baseline:NAME)")
+
+    train = sub.add_parser("train", help="train a DQN or DDPG agent")
+    train.add_argument("--algo", choices=["dqn", "ddpg"], required=True)
+    train.add_argument("--recipe", help="recipe name or YAML (default: the tuned recipe of --algo)")
+    train.add_argument("--seed", type=_seed, help="training seed (default: the recipe's)")
+    train.add_argument("--steps", type=_positive_int, help="total timesteps (default: the recipe's budget)")
+    train.add_argument("--out", type=Path, required=True, help="run folder")
+    train.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="recipe override")
+    train.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    train.add_argument("--tensorboard", action="store_true")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
+    train.add_argument("--force", action="store_true", help="overwrite a run already in --out")
+    train.add_argument("--no-progress", action="store_true")
+
+    ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
+    ev.add_argument("model", help="SB3 zip, model folder or baseline:NAME (see `zodrive baselines`)")
+    ev.add_argument("--preset", help="preset (default: from the model's algorithm)")
+    ev.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    ev.add_argument("--episodes", type=_positive_int, default=100)
+    ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
+    ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
+    ev.add_argument("--workers", type=_positive_int, default=1)
+    _attack_flags(ev)
+    ev.add_argument("--no-progress", action="store_true")
+
+    render = sub.add_parser("render", help="render an episode (PNG + GIF), optionally attacked")
+    render.add_argument("model", help="SB3 zip, model folder or baseline:NAME")
+    render.add_argument("--preset")
+    render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
+    render.add_argument("--out", type=Path, required=True)
+    render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
+                        help="try up to N seeds until an episode ends in a collision")
+    _attack_flags(render)
+
+    adv = sub.add_parser("adv-train", help="adversarial training (paper Algorithm 2)")
+    adv.add_argument("model")
+    adv.add_argument("--attack", default="zo-signsgd", help="attack config name/YAML or registry name")
+    adv.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
+                     help="attack override, e.g. steps=50 (T) or eps=0.1")
+    adv.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
+    adv.add_argument("--out", type=Path, required=True)
+    adv.add_argument("--preset")
+    adv.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    adv.add_argument("--seed", type=_seed, default=1, help="seed of the adversarial phase")
+    adv.add_argument("--warmup", type=_nonnegative_int, default=0,
+                     help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
+    adv.add_argument("--force", action="store_true", help="overwrite a run already in --out")
+    adv.add_argument("--trust-model", action="store_true",
+                     help="load MODEL with stable-baselines3's full loader, which unpickles it (can run code "
+                          "from the file); needed for any model but the shipped ones")
+    adv.add_argument("--no-progress", action="store_true")
+
+    rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
+    rep.add_argument("--out", type=Path, required=True)
+    rep.add_argument("--episodes", type=_positive_int, default=100)
+    rep.add_argument("--workers", type=_positive_int, default=2)
+    rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes)")
+    rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
+    rep.add_argument("--no-progress", action="store_true")
+
+    cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
+    cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
+    cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack")
+    cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
+    cmp_.add_argument("--episodes", type=_positive_int, default=20)
+    cmp_.add_argument("--workers", type=_positive_int, default=1)
+    cmp_.add_argument("--out", type=Path, required=True)
+    cmp_.add_argument("--no-progress", action="store_true")
+
+    demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
+    demo.add_argument("--episodes", type=_positive_int, default=3, help="episodes, clean and attacked")
+    demo.add_argument("--model", default=None, help="model folder or zip; None = the DQN shipped inside the package")
+    demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
+
+    curves = sub.add_parser("curves", help="learning curves of training runs side by side (table, --plot PNG)")
+    curves.add_argument("runs", nargs="+", type=Path, help="run folders (with monitor.monitor.csv)")
+    curves.add_argument("--bin", type=_positive_int, default=20000, help="steps per window")
+    curves.add_argument("--plot", type=Path, help="also draw the curves to this PNG")
+
+    card = sub.add_parser("card", help="write CARD.md for a trained model folder")
+    card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
+    card.add_argument("--baseline", type=Path, help="evaluation folder of the SB3-defaults recipe, for comparison")
+    card.add_argument("--eval", type=Path, help="evaluation folder to report (default FOLDER/eval)")
+    card.add_argument("--note", action="append", default=[], help="a line for the card's Notes section")
+    card.add_argument("--seeds", nargs="+", type=Path, default=None, metavar="RUN",
+                      help="run folders of every training seed (each with eval/): median and range in the card")
+    return parser
+
+
+def _attack_flags(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("attack (black-box unless the name says otherwise)")
+    group.add_argument("--attack", help="attack config name/YAML or registry name")
+    group.add_argument("--eps", type=float)
+    group.add_argument("--norm", choices=["linf", "l2"])
+    group.add_argument("--mode", choices=["budgeted", "paper"])
+    group.add_argument("--steps", type=int, help="T, iterations per environment step")
+    group.add_argument("--n-directions", type=int, help="q, directions per iteration")
+    group.add_argument("--mu", type=float)
+    group.add_argument("--step-size", type=float)
+    group.add_argument("--l2-weight", type=float)
+    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto or none")
+    group.add_argument("--loss", choices=["margin", "paper"])
+    group.add_argument("--query-budget", type=int, help="max queries per environment step")
+    group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
+    group.add_argument("--no-early-stop", dest="early_stop", action="store_false")
+    group.add_argument("--attack-seed", type=_seed)
+
+
+ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "steps",
+                "--n-directions": "n_directions", "--mu": "mu", "--step-size": "step_size",
+                "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
+                "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
+                "--attack-seed": "attack_seed"}
+
+
+def attack_spec_from_args(args: argparse.Namespace):
+    """The AttackSpec named by --attack with the CLI's flags on top (None without --attack)."""
+    from zodrive.attacks.spec import load_attack
+
+    if not args.attack:
+        given = [flag for flag, dest in ATTACK_FLAGS.items() if getattr(args, dest, None) is not None]
+        if given:
+            raise ZodriveError(f"{', '.join(given)} set an attack's options, but no --attack was given")
+        return None
+    spec = load_attack(args.attack)
+    return spec.with_overrides(
+        eps=args.eps, norm=args.norm, mode=args.mode, steps=args.steps,
+        n_directions=args.n_directions, mu=args.mu, step_size=args.step_size,
+        l2_weight=args.l2_weight, target=args.target, loss=args.loss,
+        query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
+    )
+
+
+def cmd_env(args: argparse.Namespace) -> int:
+    from zodrive.envs import load_preset, preset_names
+
+    if args.env_command == "list":
+        print("\n".join(preset_names()))
+        return 0
+    print(yaml.safe_dump(load_preset(args.preset, args.set), sort_keys=False), end="")
+    return 0
+
+
+def cmd_baselines(args: argparse.Namespace) -> int:
+    from zodrive.agents.baselines import BASELINES, PREFIX
+
+    for b in BASELINES.values():
+        print(f"{PREFIX + b.name:22} {'/'.join(b.kinds):20} reads {b.reads:10} {b.description}")
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from zodrive.agents.training import load_recipe, train
+
+    overrides = list(args.set)
+    if args.steps:
+        overrides.append(f"total_timesteps={args.steps}")
+    recipe = load_recipe(args.recipe or args.algo, overrides)
+    if recipe["algo"] != args.algo:
+        raise ZodriveError(f"recipe {args.recipe!r} trains {recipe['algo']}, not {args.algo}")
+    path = train(recipe, args.out, seed=args.seed, preset_overrides=args.env_set,
+                 progress_bar=not args.no_progress, tensorboard=args.tensorboard,
+                 resume=args.resume, force=args.force)
+    print(f"saved {path}")
+    return 0
+
+
+def resolve_model_preset(model: str, preset: str | None, env_set: list[str]) -> dict[str, Any]:
+    """The preset to evaluate `model` in: given, or the one its algorithm trains on."""
+    from zodrive.agents.policies import policy_kind
+    from zodrive.envs import load_preset
+
+    return load_preset(preset or policy_kind(model), env_set)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from zodrive.agents.policies import check_policy, load_victim, policy_ref
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary
+
+    spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    check_policy(args.model, preset, attacked=spec is not None)
+    if spec is not None:  # validate the whole attack before any episode runs
+        from zodrive.envs import attack_context
+
+        spec.build(load_victim(args.model, preset), **attack_context(preset))
+    job = EvalJob(
+        model=policy_ref(args.model), preset=preset,
+        attack=spec.to_dict() if spec else None,
+        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed,
+    )
+    summary = evaluate(job, args.episodes, args.out, workers=args.workers, progress=not args.no_progress)
+    print(format_summary(summary))
+    if args.out:
+        print(f"results: {args.out}/summary.json")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from zodrive.agents.policies import make_policy_env
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
+    from zodrive.evaluation.video import record_episode, save_gif, save_png
+
+    spec = attack_spec_from_args(args)
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array")
+    first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
+    for seed in range(first, first + args.until_crash):
+        frames, info = record_episode(env, victim, seed)
+        if info["crashed"]:
+            break
+    if float(np.asarray(frames[0].image).max()) == 0:
+        raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
+    title = f"{spec.attack} eps={spec.eps} | " if spec else "clean | "
+    save_png(frames, args.out / "episode.png", title=title)
+    save_gif(frames, args.out / "episode.gif", title=title)
+    from zodrive.runinfo import write_json
+
+    write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None})
+    print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
+          f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
+          f" -> {args.out}/episode.png, episode.gif")
+    return 0
+
+
+def cmd_adv_train(args: argparse.Namespace) -> int:
+    from zodrive.attacks.spec import load_attack
+    from zodrive.defense.adversarial import adversarial_train
+
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    spec = load_attack(args.attack, args.attack_set)
+    path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
+                             warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model,
+                             force=args.force)
+    print(f"saved {path}")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from zodrive.experiments.report import table_markdown
+    from zodrive.experiments.reproduce import reproduce
+
+    table = reproduce(args.out, episodes=args.episodes, workers=args.workers, quick=args.quick,
+                      retrain=args.retrain, progress=not args.no_progress)
+    print(table_markdown(table["rows"]), end="")
+    print(f"report: {args.out}/report.html")
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from zodrive.attacks.registry import ATTACKS
+    from zodrive.experiments.compare import compare, markdown
+
+    for eps in args.eps:
+        if not eps > 0:
+            raise ZodriveError(f"eps must be > 0, not {eps}")
+    from zodrive.attacks.spec import load_attack
+
+    for attack in args.attacks or []:
+        load_attack(attack)  # an unknown attack fails now, not after the clean cells ran
+    rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
+                   workers=args.workers, progress=not args.no_progress)
+    print(markdown(rows), end="")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from zodrive.agents.policies import policy_label, policy_ref
+    from zodrive.attacks.spec import load_attack
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary
+    from zodrive.config import demo_model
+
+    model = args.model or str(demo_model())
+    preset = resolve_model_preset(model, None, [])
+    ref, name = policy_ref(model), ("the shipped DQN" if args.model is None else policy_label(model))
+    spec = load_attack("zo-signsgd")
+    results = {}
+    for label, attack in (("clean", None), ("attacked", spec)):
+        job = EvalJob(model=ref, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
+        print(f"== {label}: {args.episodes} episodes of {name}" + (f" under {spec.attack}" if attack else ""))
+        results[label] = evaluate(job, args.episodes, args.out / label, progress=True)
+        print(format_summary(results[label]))
+    drop = 1 - results["attacked"]["mean_return"] / results["clean"]["mean_return"]
+    print(f"== the black-box attack (L-inf eps={spec.eps}) cut the mean return by {drop:.0%} "
+          f"({results['clean']['mean_return']:.1f} -> {results['attacked']['mean_return']:.1f}); "
+          f"results in {args.out}/")
+    print("   target=auto: the paper's target action (FASTER for a DQN, [1, 0.5] for a DDPG).")
+    print("   base rate: how often the clean policy already takes the target; success counts only the other steps.")
+    print("   queries/step: observations the attacker sent to the policy per decision (black-box cost).")
+    return 0
+
+
+def cmd_curves(args: argparse.Namespace) -> int:
+    from zodrive.experiments.curves import curves_markdown, plot_curves
+
+    print("mean training return / episode length, per window of training steps (ε-greedy or noisy actions)")
+    print(curves_markdown(args.runs, args.bin), end="")
+    if args.plot:
+        plot_curves(args.runs, args.bin, args.plot)
+        print(f"plot: {args.plot}")
+    return 0
+
+
+def cmd_card(args: argparse.Namespace) -> int:
+    from zodrive.agents.card import write_card
+
+    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note, seeds=args.seeds)
+    print(f"wrote {path}")
+    return 0
+
+
+COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
+            "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
+            "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from zodrive.runinfo import set_command
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    argv = list(sys.argv[1:] if argv is None else argv)
+    set_command(argv)
+    try:
+        args = build_parser().parse_args(argv)
+        if args.verbose:
+            logging.getLogger("zodrive").setLevel(logging.INFO)
+        if args.models is not None:
+            if not args.models.is_dir():
+                raise ZodriveError(f"--models {args.models}: not a folder")
+            os.environ[MODELS_ENV] = str(args.models)
+        _check_out(getattr(args, "out", None))
+        return COMMANDS[args.command](args)
+    except ZodriveError as exc:
+        print(f"zodrive: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("zodrive: interrupted; results written so far are kept (run again to resume)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""Adversarial training (the paper's Algorithm 2, after Pattanaik et al. 2018).
+
+Continue training a trained DQN/DDPG where every observation the agent acts on and stores
+in its replay buffer is the attacked one. The attack queries the *current* policy: the
+victim wraps the very networks that SB3 updates, so attacker and learner stay in sync.
+The same `AttackWrapper` as evaluation does the work; reward per episode is logged.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.utils import LinearSchedule
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from zodrive.compute import one_torch_thread
+from zodrive.agents.loading import load_model, model_algo, model_file
+from zodrive.agents.training import action_noise, check_run_folder
+from zodrive.agents.victims import sb3_victim
+from zodrive.attacks.spec import AttackSpec
+from zodrive.errors import ZodriveError
+from zodrive.runinfo import write_json, write_run_info
+from zodrive.wrappers import make_attacked_env
+
+log = logging.getLogger(__name__)
+
+
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
+def adversarial_train(
+    model_path: str | Path,
+    preset: dict[str, Any],
+    spec: AttackSpec,
+    steps: int,
+    out: Path,
+    *,
+    seed: int = 1,
+    warmup: int = 0,
+    noise: dict[str, Any] | None = None,
+    progress_bar: bool = True,
+    trust: bool = False,
+    force: bool = False,
+) -> Path:
+    """Train `model_path` for `steps` more steps on attacked observations; save to `out`."""
+    if steps < 1:
+        raise ZodriveError(f"steps must be >= 1, not {steps}")
+    check_run_folder(out, resume=False, force=force)
+    source = model_file(model_path)
+    algo = model_algo(source)
+    model = load_model(source, preset, trust=trust)  # an SB3 object to train further
+    victim = sb3_victim(model)  # live view of the networks being trained
+    out.mkdir(parents=True, exist_ok=True)
+    write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec.to_dict(),
+                         "steps": steps, "warmup": warmup, "action_noise": noise}, seed)
+
+    def build():
+        env = make_attacked_env(preset, victim, spec)  # reseeded by the seeded reset below
+        return Monitor(env, filename=str(out / "monitor"), info_keywords=("crashed", "attack_success_rate", "attack_queries"))
+
+    venv = DummyVecEnv([build])
+    venv.seed(seed)
+    model.set_env(venv)
+    model.set_random_seed(seed)
+    # SB3 takes *random* actions until `learning_starts`; Algorithm 2 acts with the attacked
+    # policy from the first step, so updates start at once (the buffer begins empty).
+    model.learning_starts = warmup
+    if algo == "dqn":  # keep exploring at the final rate instead of restarting the schedule at 1.0
+        eps = model.exploration_final_eps
+        model.exploration_schedule = LinearSchedule(eps, eps, 1.0)
+    else:
+        model.action_noise = action_noise(noise or {"type": "normal", "sigma": 0.1}, venv.action_space.shape[0])
+    model.set_logger(configure(str(out), ["csv"]))
+    start = time.perf_counter()
+    model.learn(total_timesteps=steps, reset_num_timesteps=True, progress_bar=progress_bar,
+                log_interval=1 if algo == "ddpg" else 4)
+    wall = time.perf_counter() - start
+    path = out / "model.zip"
+    model.save(path)
+    oracle = venv.envs[0].env.oracle
+    write_json(out / "train.json", {
+        "algo": algo, "kind": "adversarial", "source_model": str(source), "total_timesteps": steps,
+        "seed": seed, "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1),
+        "attack_queries": int(oracle.total_queries),
+    })
+    venv.close()
+    return path

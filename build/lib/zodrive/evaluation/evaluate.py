@@ -1,0 +1,260 @@
+"""Evaluate a model over fixed seeds, clean or under attack, resumably and in parallel.
+
+Episodes run with seeds S, S+1, ..., the same in every run, so two evaluations of the same
+episodes can be compared pair by pair. Per-episode records (`episodes.jsonl`) and per-step
+attack records (`steps.jsonl`) are appended as episodes finish; a run interrupted and
+started again with the same settings skips the episodes already on disk.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing as mp
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from zodrive.agents.baselines import is_baseline
+from zodrive.agents.policies import check_policy, make_policy_env
+from zodrive.attacks.spec import AttackSpec
+from zodrive.compute import torch_threads
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.rollout import run_episode
+from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
+from zodrive.runinfo import command_line, to_json, versions, write_json
+from zodrive.seeds import EVAL_SEED
+
+log = logging.getLogger(__name__)
+
+DEFAULT_EVAL_SEED = EVAL_SEED
+
+
+@dataclass
+class EvalJob:
+    """Everything a worker needs to roll out episodes (picklable)."""
+
+    model: str                 # model file or `baseline:NAME`
+    preset: dict[str, Any]
+    attack: dict[str, Any] | None = None
+    seed: int = DEFAULT_EVAL_SEED
+    record_steps: bool = True
+
+    def key(self) -> dict[str, Any]:
+        """What must match for a resumed run to reuse episodes on disk: the policy (a model by
+        the SHA-256 of its file, so a moved checkout still matches and a swapped file does
+        not), the preset, the attack and the first seed."""
+        if is_baseline(self.model):
+            model = self.model
+        else:
+            from zodrive.agents.safe_load import sha256
+
+            model = "sha256:" + sha256(Path(self.model))
+        return {"model": model, "preset": self.preset, "attack": self.attack, "seed": self.seed}
+
+
+_WORKER: dict[str, Any] = {}
+
+
+def _setup(job: EvalJob) -> None:
+    spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
+    victim, env = make_policy_env(job.model, job.preset, spec)
+    _WORKER.update(job=job, victim=victim, env=env)
+
+
+def _worker_setup(job: EvalJob) -> None:
+    """A worker process owns its torch setting: one thread per process."""
+    import torch
+
+    torch.set_num_threads(1)
+    _setup(job)
+
+
+def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    job: EvalJob = _WORKER["job"]
+    env = _WORKER["env"]
+    seed = job.seed + index
+    steps: list[dict[str, Any]] = []
+    record = run_episode(
+        env, _WORKER["victim"], episode=index, seed=seed,
+        max_return=float(job.preset["max_episode_steps"]),
+        on_step=steps.append if job.record_steps else None,
+    )
+    return record.to_dict(), steps
+
+
+def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    rows = []
+    for line in path.read_text().splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            break  # a line cut by an interruption: everything after it is redone
+    return rows
+
+
+def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
+    with path.open("a") as handle:
+        for row in rows:
+            handle.write(to_json(row) + "\n")
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def run_episodes(job: EvalJob, indices: list[int], workers: int) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
+    """Yield (episode record, step records) as episodes finish, in any order."""
+    if workers <= 1 or len(indices) <= 1:
+        with torch_threads(1):  # the caller's torch setting is restored afterwards
+            _setup(job)
+            for i in indices:
+                yield _episode(i)
+        return
+    ctx = mp.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_setup, initargs=(job,)) as pool:
+        yield from pool.map(_episode, indices, chunksize=1)
+
+
+def evaluate(
+    job: EvalJob,
+    episodes: int,
+    out: Path | None,
+    *,
+    workers: int = 1,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run `episodes` episodes (resuming from `out` if it holds part of this run); summarize."""
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
+    if workers < 1:
+        raise ZodriveError(f"workers must be >= 1, not {workers}")
+    check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
+    done: dict[int, dict[str, Any]] = {}
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        key_path = out / "eval_key.json"
+        if key_path.exists():
+            check_same_evaluation(json.loads(key_path.read_text()), json.loads(json.dumps(job.key())), out)
+            done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl")}
+            if len(done) > episodes:
+                raise ZodriveError(f"{out} already holds {len(done)} episodes; ask for at least {len(done)} "
+                                   "(or use another --out): zodrive never drops recorded episodes")
+            _rewrite_consistent(out, done)
+        else:
+            for name in ("episodes.jsonl", "steps.jsonl"):
+                (out / name).unlink(missing_ok=True)
+            write_json(key_path, job.key())
+    todo = [i for i in range(episodes) if i not in done]
+    if done:
+        log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
+    bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
+    for record, steps in run_episodes(job, todo, workers):
+        done[record["episode"]] = record
+        if out is not None:
+            _append_jsonl(out / "steps.jsonl", steps)
+            _append_jsonl(out / "episodes.jsonl", [record])
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
+    if bar is not None:
+        bar.close()
+    records = [done[i] for i in range(episodes)]
+    summary = summarize(records, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    if out is not None:
+        write_json(out / "summary.json", summary)
+    return summary
+
+
+def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
+    """Refuse to mix episodes of two different evaluations, saying what differs."""
+    if on_disk == wanted:
+        return
+    differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
+    what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
+            "attack": "the attack settings", "seed": "the first seed"}
+    raise ZodriveError(f"{out} holds a different evaluation ({', '.join(what.get(k, k) for k in differs)} "
+                       "differ); choose another --out")
+
+
+def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
+    """Drop step records of episodes that never finished (the run was cut mid-episode)."""
+    steps = [s for s in _read_jsonl(out / "steps.jsonl") if s["episode"] in done]
+    tmp = out / ".steps.jsonl.tmp"
+    tmp.write_text("".join(to_json(s) + "\n" for s in steps))
+    os.replace(tmp, out / "steps.jsonl")
+    tmp = out / ".episodes.jsonl.tmp"
+    tmp.write_text("".join(to_json(done[i]) + "\n" for i in sorted(done)))
+    os.replace(tmp, out / "episodes.jsonl")
+
+
+def _progress(total: int, enabled: bool, label: str):
+    if not enabled or total == 0:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=f"{label} episodes", unit="ep", dynamic_ncols=True)
+
+
+def summarize(
+    records: list[dict[str, Any]], job: EvalJob, steps: list[dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """The `summary.json` of an evaluation: return with CI, collision rate, attack stats."""
+    returns = np.array([r["return"] for r in records])
+    crashes = int(sum(r["crashed"] for r in records))
+    max_return = float(job.preset["max_episode_steps"])
+    low, high = mean_ci(returns, seed=job.seed)
+    summary: dict[str, Any] = {
+        "model": job.model,
+        "preset": job.preset.get("name"),
+        "episodes": len(records),
+        "seed": job.seed,
+        "mean_return": float(returns.mean()),
+        "ci95": [low, high],
+        "std_return": float(returns.std(ddof=1)) if len(returns) > 1 else 0.0,
+        "pct_of_max": float(100.0 * returns.mean() / max_return),
+        "collision_rate": crashes / len(records),
+        "collision_ci95": list(rate_ci(crashes, len(records))),
+        "offroad_rate": sum(bool(r.get("offroad")) for r in records) / len(records),
+        "mean_length": float(np.mean([r["length"] for r in records])),
+        "mean_speed": float(np.mean([r["mean_speed"] for r in records])),
+        "right_lane_share": float(np.mean([r["right_lane_share"] for r in records])),
+        "lane_changes_per_episode": float(np.mean([r.get("lane_changes", 0) for r in records])),
+        "mean_distance": float(np.mean([r.get("distance", 0.0) for r in records])),
+        "attack": None,
+    }
+    counts = [r["action_counts"] for r in records if r.get("action_counts")]
+    if counts:
+        total = np.sum(counts, axis=0)
+        summary["action_share"] = (total / total.sum()).round(4).tolist()
+    if job.attack is not None:
+        steps_total = sum(r["attacked_steps"] for r in records)
+        applicable = sum(r["applicable"] for r in records)
+        successes = sum(r["successes"] for r in records)
+        summary.update(
+            attack=job.attack["attack"],
+            eps=job.attack["eps"],
+            norm=job.attack["norm"],
+            mode=job.attack["mode"],
+            target=job.attack["target"],
+            attack_success_rate=successes / applicable if applicable else float("nan"),
+            attack_success_ci95=list(ratio_ci([r["successes"] for r in records], [r["applicable"] for r in records])),
+            target_base_rate=1.0 - applicable / steps_total if steps_total else float("nan"),
+            queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
+            max_linf=float(max(r["max_linf"] for r in records)),
+            attack_config=job.attack,
+        )
+        if steps:
+            summary.update(
+                mean_linf=float(np.mean([s["linf"] for s in steps])),
+                mean_l2=float(np.mean([s["l2"] for s in steps])),
+                iterations_per_step=float(np.mean([s["iterations"] for s in steps])),
+                attack_ms_per_step=float(1000 * np.mean([s["wall_time"] for s in steps])),
+            )
+    summary["command"] = command_line()
+    summary["versions"] = versions()
+    return summary

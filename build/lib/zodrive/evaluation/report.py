@@ -1,0 +1,31 @@
+"""Human-readable summaries of evaluations."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """A few lines a person reads: return with CI, collisions, and the attack's numbers."""
+    low, high = summary["ci95"]
+    lines = [
+        f"episodes: {summary['episodes']} (seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
+        f"mean return: {summary['mean_return']:.2f}  "
+        + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
+        + f"({summary['pct_of_max']:.2f}% of max)",
+        f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
+        f"mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
+        f"{summary.get('lane_changes_per_episode', float('nan')):.2f}  distance: {summary.get('mean_distance', float('nan')):.0f} m  "
+        f"right lane: {summary['right_lane_share']:.1%}",
+    ]
+    if summary.get("attack"):
+        lines.append(
+            f"attack: {summary['attack']} ({summary['norm']}, eps={summary['eps']}, {summary['mode']}, "
+            f"target={summary['target']})"
+        )
+        lines.append(
+            f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
+            f"missed the target (base rate {summary['target_base_rate']:.1%}); "
+            f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
+        )
+    return "\n".join(lines)

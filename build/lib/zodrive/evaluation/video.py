@@ -1,0 +1,130 @@
+"""Rendered episodes: the simulator's frame beside what the (attacked) policy perceived.
+
+Frames come from highway-env (`render_mode="rgb_array"`); the perception panel draws the
+observed vehicles where the policy was told they are (attacked) over where they really
+were (clean). Figures are drawn with matplotlib and animations written by its PillowWriter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zodrive.attacks.victim import Victim
+from zodrive.envs import ACTION_NAMES
+from zodrive.evaluation.rollout import act
+
+X_RANGE, Y_RANGE = 100.0, 100.0  # [m] the presets' features_range for x and y
+
+
+@dataclass
+class Frame:
+    image: np.ndarray          # (H, W, 3) simulator render
+    clean: np.ndarray          # (V, F) true observation
+    perceived: np.ndarray      # (V, F) what the policy received
+    action: Any
+    stats: dict[str, Any] = field(default_factory=dict)
+
+
+def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[str, Any]]:
+    """Roll out one episode from `seed`, keeping a frame per decision (env renders rgb_array)."""
+    obs, info = env.reset(seed=seed)
+    frames: list[Frame] = []
+    done, total, crashed, terminated = False, 0.0, False, False
+    while not done:
+        clean = info.get("clean_obs")
+        action = act(victim, obs)
+        frames.append(Frame(env.render(), np.asarray(obs if clean is None else clean), np.asarray(obs),
+                            action, dict(info.get("attack", {}))))
+        obs, reward, terminated, truncated, info = env.step(action)
+        total += float(reward)
+        crashed = bool(info.get("crashed", False))
+        done = terminated or truncated
+    last = frames[-1]
+    frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}))
+    return frames, {"seed": seed, "return": total, "length": len(frames) - 1, "crashed": crashed,
+                    "offroad": bool(terminated and not crashed)}
+
+
+def _action_label(action: Any) -> str:
+    if isinstance(action, (int, np.integer)):
+        return ACTION_NAMES[int(action)]
+    return "accel {:+.2f} steer {:+.2f}".format(*np.asarray(action, dtype=float))
+
+
+def draw(frame: Frame, fig, step: int, title: str = "") -> None:
+    """Draw one frame on `fig`: simulator left, perception right."""
+    fig.clear()
+    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [2.2, 1]})
+    left.imshow(frame.image)
+    left.set_axis_off()
+    left.set_title(f"{title}step {step}: {_action_label(frame.action)}", fontsize=9)
+    for obs, style, label in ((frame.clean, dict(facecolor="tab:green", alpha=0.5), "real"),
+                              (frame.perceived, dict(facecolor="none", edgecolor="tab:red", lw=1.5, zorder=3), "perceived")):
+        for i, row in enumerate(obs):
+            if row[0] <= 0 or i == 0:
+                continue
+            x, y = row[1] * X_RANGE, row[2] * Y_RANGE
+            right.add_patch(_car(x, y, **style, label=label if i == 1 else None))
+    right.add_patch(_car(0.0, 0.0, facecolor="tab:blue", label="ego"))
+    (x_low, x_high), y_half = panel_extent(frame)
+    right.set_xlim(x_low, x_high)
+    right.set_ylim(y_half, -y_half)  # right lanes down, as in the simulator's image
+    right.set_xlabel("longitudinal x [m] (ego frame)")
+    right.set_ylabel("lateral y [m]")
+    right.set_title("observation", fontsize=9)
+    right.legend(loc="best", fontsize=7)
+    if frame.stats:
+        right.text(0.02, 0.98, f"Linf {frame.stats.get('linf', 0):.3f}\nqueries {frame.stats.get('queries', 0)}",
+                   transform=right.transAxes, va="top", fontsize=7)
+
+
+def panel_extent(frame: Frame) -> tuple[tuple[float, float], float]:
+    """Axis limits of the perception panel: the four lanes at least, and every vehicle drawn,
+    real or perceived (an attack may move a vehicle 20 m sideways)."""
+    rows = [row for obs in (frame.clean, frame.perceived) for i, row in enumerate(obs) if i > 0 and row[0] > 0]
+    xs = [row[1] * X_RANGE for row in rows] or [0.0]
+    ys = [abs(row[2] * Y_RANGE) for row in rows] or [0.0]
+    return (min(-30.0, min(xs) - 5.0), max(90.0, max(xs) + 5.0)), max(14.0, max(ys) + 3.0)
+
+
+def _car(x: float, y: float, **style):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((x - 2.5, y - 1.0), 5.0, 2.0, **style)  # a 5 m x 2 m car
+
+
+def save_png(frames: list[Frame], path: Path, *, title: str = "", index: int = -1) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(12, 3.0), dpi=110)
+    draw(frames[index], fig, index % len(frames), title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def save_gif(frames: list[Frame], path: Path, *, title: str = "", every: int = 3, last: int = 150) -> None:
+    """An animated GIF of the last `last` decisions (every `every`-th), ending on the crash."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    start = max(0, len(frames) - last)
+    picks = list(range(start, len(frames), every))
+    if picks[-1] != len(frames) - 1:
+        picks.append(len(frames) - 1)
+    fig = plt.figure(figsize=(10, 2.6), dpi=80)
+    anim = FuncAnimation(fig, lambda i: draw(frames[i], fig, i, title), frames=picks)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    anim.save(path, writer=PillowWriter(fps=5))
+    plt.close(fig)

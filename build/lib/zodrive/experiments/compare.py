@@ -1,0 +1,84 @@
+"""`zodrive compare`: every attack (and a range of eps) on every model, one table.
+
+Each cell is an ordinary resumable evaluation in OUT/cells/<model>-<attack>-eps<eps>/;
+the table is rebuilt from their summaries, so an interrupted comparison resumes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+from zodrive.agents.baselines import get_baseline, is_baseline
+from zodrive.agents.policies import check_policy, policy_kind, policy_label, policy_ref
+from zodrive.attacks.spec import load_attack
+from zodrive.envs import load_preset
+from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+from zodrive.runinfo import write_atomic, write_json
+
+
+def compare(models: list[str], attacks: list[str], eps_values: list[float], episodes: int, out: Path, *,
+            workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED) -> list[dict[str, Any]]:
+    rows = []
+    for model in models:
+        preset = load_preset(policy_kind(model))
+        check_policy(model, preset)
+        ref, name = policy_ref(model), policy_label(model)
+        attackable = not (is_baseline(model) and get_baseline(model).reads == "simulator")
+        for attack in ["none", *attacks] if attackable else ["none"]:
+            for eps in ([None] if attack == "none" else eps_values):
+                spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps)
+                cell = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}"))
+                job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed)
+                s = evaluate(job, episodes, cell, workers=workers, progress=progress)
+                low, high = s["ci95"]
+                rows.append({
+                    "model": name, "attack": _label(attack), "eps": eps, "mean_return": s["mean_return"], "ci95_low": low,
+                    "ci95_high": high, "collision_rate": s["collision_rate"],
+                    "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
+                    "lane_changes_per_episode": s.get("lane_changes_per_episode"),
+                    "right_lane_share": s["right_lane_share"], "attack_success_rate": s.get("attack_success_rate"), "target_base_rate": s.get("target_base_rate"),
+                    "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
+                    "episodes": s["episodes"],
+                })
+                write_tables(rows, out)
+    return rows
+
+
+def _label(attack: str) -> str:
+    from zodrive.attacks.registry import ATTACKS
+
+    if attack in ATTACKS and not ATTACKS[attack].black_box:
+        return f"{attack} (white-box)"
+    return attack
+
+
+def _cell(value: Any, pattern: str) -> str:
+    return "–" if value is None else pattern.format(value)
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    lines = ["| Model | Attack | ε (L∞) | Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
+             "| Success (base rate) | Queries/step | max L∞ |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        success = "–" if r["attack_success_rate"] is None else \
+            f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
+        lines.append(f"| {r['model']} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {r['mean_return']:.1f} "
+                     f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
+                     f"{_cell(r.get('offroad_rate'), '{:.0%}')} | {_cell(r.get('mean_speed'), '{:.1f}')} | "
+                     f"{_cell(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
+                     f"{_cell(r['queries_per_step'], '{:.0f}')} | {_cell(r['max_linf'], '{:.3f}')} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(rows: list[dict[str, Any]], out: Path) -> None:
+    write_json(out / "table.json", rows)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0].keys()))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomic(out / "table.csv", buf.getvalue())
+    write_atomic(out / "table.md", markdown(rows))

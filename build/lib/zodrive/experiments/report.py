@@ -1,0 +1,160 @@
+"""Table 1 and the reproduction report (Markdown and a self-contained HTML page)."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+from zodrive.agents.baselines import get_baseline
+from zodrive.evaluation.stats import paired_difference_ci
+from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
+from zodrive.runinfo import write_atomic, write_json
+
+MAX_RETURN = 450.0
+
+
+def _returns(out: Path, algo: str, row: str) -> list[float]:
+    path = out / "cells" / f"{algo}-{row}" / "episodes.jsonl"
+    rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+    return [r["return"] for r in sorted(rows, key=lambda r: r["episode"])]
+
+
+def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> dict[str, Any]:
+    """Table 1 as data, and as table1.{json,csv,md} in `out`."""
+    records = []
+    for algo in ("dqn", "ddpg"):
+        clean = _returns(out, algo, "initial")
+        baselines = [row for row in summaries[algo] if row.startswith("baseline-")]
+        for row in [*ROWS, *baselines]:
+            s = summaries[algo][row]
+            label = ROWS.get(row) or _baseline_label(row)
+            rec = {
+                "algo": algo.upper(), "row": label, "mean_return": s["mean_return"],
+                "ci95_low": s["ci95"][0], "ci95_high": s["ci95"][1], "pct_of_max": s["pct_of_max"],
+                "collision_rate": s["collision_rate"], "episodes": s["episodes"],
+                "attack_success_rate": s.get("attack_success_rate"),
+                "target_base_rate": s.get("target_base_rate"),
+                "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
+                "paper_return": TABLE1[algo].get(row), "paper_pct": TABLE1_PCT[algo].get(row),
+                "offroad_rate": s.get("offroad_rate"), "mean_speed": s.get("mean_speed"),
+                "lane_changes_per_episode": s.get("lane_changes_per_episode"),
+            }
+            if row != "initial":
+                mine = _returns(out, algo, row)
+                if len(mine) == len(clean) and clean:
+                    diff, low, high = paired_difference_ci(mine, clean)
+                    rec.update(change_vs_initial=diff, change_ci95_low=low, change_ci95_high=high)
+            records.append(rec)
+    write_json(out / "table1.json", records)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(records[0].keys()) + ["change_vs_initial", "change_ci95_low", "change_ci95_high"],
+                            extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(records)
+    write_atomic(out / "table1.csv", buf.getvalue())
+    write_atomic(out / "table1.md", table_markdown(records))
+    return {"rows": records}
+
+
+def _baseline_label(row: str) -> str:
+    """`baseline-slower` -> `Baseline: always SLOWER` for the table."""
+    baseline = get_baseline("baseline:" + row[len("baseline-"):])
+    return f"Baseline: {baseline.label}"
+
+
+def _fmt(value: Any, pattern: str) -> str:
+    return "–" if value is None else pattern.format(value)
+
+
+def _success(r: dict[str, Any]) -> str:
+    rate = r.get("attack_success_rate")
+    if rate is None:
+        return "–"
+    shown = "n/a" if rate != rate else f"{rate:.1%}"  # NaN: the clean policy always chose the target
+    return f"{shown} ({r['target_base_rate']:.1%})"
+
+
+def table_markdown(records: list[dict[str, Any]]) -> str:
+    lines = [
+        "| Policy | Scenario | zodrive return (95% CI) | % of 450 | Paper | Paper % | Collisions | Off-road | "
+        "Speed (m/s) | Lane changes/ep | Attack success (base rate) | Queries/step | max L∞ |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in records:
+        success = _success(r)
+        lines.append(
+            f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
+            f"{r['pct_of_max']:.2f}% | {_fmt(r['paper_return'], '{:.2f}')} | {_fmt(r['paper_pct'], '{:.2f}%')} | "
+            f"{r['collision_rate']:.0%} | {_fmt(r.get('offroad_rate'), '{:.0%}')} | {_fmt(r.get('mean_speed'), '{:.1f}')} | "
+            f"{_fmt(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
+            f"{_fmt(r['max_linf'], '{:.3f}')} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+FIGURES = [
+    ("fig2_loss.png", "Fig. 2 — Loss1 (attack) and Loss2 (distortion) over ZO-SignSGD iterations on a step the attack won (early stopping off, L2 weight 0.1)."),
+    ("fig3_attacked_episode.png", "Fig. 3 — The attacked DQN at its collision: simulator (left), what it perceived (red outlines) over what was there (green), right."),
+    ("fig3_attacked_episode.gif", "Fig. 3 (animated) — the last decisions before the collision."),
+    ("fig4_ddpg_adversarial_training.png", "Fig. 4 — DDPG reward per episode during adversarial training."),
+    ("fig5_dqn_adversarial_training.png", "Fig. 5 — DQN reward per episode during adversarial training."),
+]
+
+
+def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timings: dict[str, float], *,
+                 episodes: int, retrain: bool, quick: bool) -> None:
+    """report.md (figures linked) and report.html (figures embedded, one file)."""
+    md_table = table_markdown(table["rows"])
+    intro = (
+        f"Reproduction of Table 1 with {episodes} episodes per cell (seeds 100000–{100000 + episodes - 1}, the same "
+        f"in every cell), {'models retrained by this run' if retrain else 'the shipped models in models/'}"
+        f"{' (quick mode: not the full study)' if quick else ''}. Attack: ZO-SignSGD, L∞ ε = 0.2, budgeted, "
+        "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in table1.json. "
+        "The baseline rows are policies that ignore their observation (one constant action; no observation attack can "
+        "change them) or read the simulator (IDM + MOBIL): a number that one of them also reaches is not a result."
+    )
+    timing_lines = "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
+    md = ["# zodrive reproduction of Table 1", "", intro, "", md_table, "## Figures", ""]
+    for name, caption in FIGURES:
+        if (out / "figures" / name).is_file():
+            md += [f"![{caption}](figures/{name})", "", f"*{caption}*", ""]
+    md += ["## Timings", "", timing_lines, ""]
+    write_atomic(out / "report.md", "\n".join(md))
+
+    parts = [f"<h1>zodrive reproduction of Table 1</h1><p>{html.escape(intro)}</p>", _html_table(table["rows"]),
+             "<h2>Figures</h2>"]
+    for name, caption in FIGURES:
+        path = out / "figures" / name
+        if path.is_file():
+            mime = "image/gif" if name.endswith(".gif") else "image/png"
+            data = base64.b64encode(path.read_bytes()).decode()
+            parts.append(f'<figure><img src="data:{mime};base64,{data}" style="max-width:100%">'
+                         f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+    parts.append("<h2>Timings</h2><ul>" + "".join(f"<li>{html.escape(k)}: {v:.0f} s</li>" for k, v in timings.items()) + "</ul>")
+    page = ("<!doctype html><html><head><meta charset='utf-8'><title>zodrive: Table 1</title><style>"
+            "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+            "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}"
+            "td:nth-child(-n+2),th{text-align:left}figure{margin:1.5em 0}</style></head><body>"
+            + "".join(parts) + "</body></html>\n")
+    write_atomic(out / "report.html", page)
+
+
+def _html_table(records: list[dict[str, Any]]) -> str:
+    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road", "Speed (m/s)",
+            "Lane changes/ep", "Attack success",
+            "Queries/step", "max L∞"]
+    rows = []
+    for r in records:
+        cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",
+                 f"{r['pct_of_max']:.2f}%", _fmt(r["paper_return"], "{:.2f}"), f"{r['collision_rate']:.0%}",
+                 _fmt(r.get("offroad_rate"), "{:.0%}"), _fmt(r.get("mean_speed"), "{:.1f}"),
+                 _fmt(r.get("lane_changes_per_episode"), "{:.1f}"),
+                 _success(r),
+                 _fmt(r["queries_per_step"], "{:.0f}"), _fmt(r["max_linf"], "{:.3f}")]
+        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+    return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")

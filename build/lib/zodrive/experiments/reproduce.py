@@ -1,0 +1,171 @@
+"""`zodrive reproduce`: the paper's whole study in one resumable command.
+
+Stages, each skipped when its output is already on disk (so an interrupted run resumes):
+  1. models    shipped ones from models/, or (--retrain) train + adversarially train anew
+  2. cells     8 evaluations = {DQN, DDPG} x {Initial, Under Attack, Adversarial, After}
+  3. figures   Fig. 2 loss trace, Fig. 3 attacked crash (PNG + GIF), Figs. 4/5 rewards
+  4. report    Table 1 (CSV, JSON, Markdown) beside the paper's numbers; report.md/.html
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from zodrive.agents.loading import model_file
+from zodrive.agents.policies import policy_ref
+from zodrive.attacks.spec import AttackSpec, load_attack
+from zodrive.config import models_dir
+from zodrive.envs import load_preset
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+from zodrive.experiments.paper import ADV_STEPS
+from zodrive.runinfo import write_json
+
+log = logging.getLogger(__name__)
+
+PRESET_OF = {"dqn": "discrete", "ddpg": "continuous"}
+# Policies that ignore their observation (or read the simulator), evaluated beside each agent:
+# a number one of these also reaches is not a result.
+BASELINE_ROWS = {
+    "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil"),
+    "ddpg": ("baseline:brake", "baseline:accelerate", "baseline:idm-mobil"),
+}
+
+
+def _done(path: Path) -> bool:
+    return path.is_file()
+
+
+def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> dict[str, Path]:
+    """Paths of the four models: shipped, or retrained into out/models (resumable)."""
+    if not retrain:
+        paths = {name: models_dir() / name for name in ("dqn", "dqn-adv", "ddpg", "ddpg-adv")}
+        for name, path in paths.items():
+            model_file(path)  # a clear error if a shipped model is missing
+        return paths
+    from zodrive.agents.training import load_recipe, train
+    from zodrive.defense.adversarial import adversarial_train
+
+    paths: dict[str, Path] = {}
+    for algo in ("dqn", "ddpg"):
+        base, adv = out / "models" / algo, out / "models" / f"{algo}-adv"
+        overrides = ["total_timesteps=2000"] if quick else []
+        if not _done(base / "model.zip"):
+            train(load_recipe(algo, overrides), base, progress_bar=progress)
+        if not _done(adv / "model.zip"):
+            adversarial_train(base, load_preset(PRESET_OF[algo]), load_attack("zo-signsgd"),
+                              500 if quick else ADV_STEPS[algo], adv, progress_bar=progress,
+                              trust=True)  # trained by this very run
+        paths[algo], paths[f"{algo}-adv"] = base, adv
+    return paths
+
+
+def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str, AttackSpec | None]]:
+    """(algo, row, model, attack) for the eight cells of Table 1 and the baseline rows."""
+    table = []
+    for algo in ("dqn", "ddpg"):
+        table += [
+            (algo, "initial", policy_ref(models[algo]), None),
+            (algo, "under_attack", policy_ref(models[algo]), spec),
+            (algo, "adversarial", policy_ref(models[f"{algo}-adv"]), spec),
+            (algo, "after", policy_ref(models[f"{algo}-adv"]), None),
+        ]
+        table += [(algo, baseline.replace(":", "-"), baseline, None) for baseline in BASELINE_ROWS[algo]]
+    return table
+
+
+def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool = False,
+              retrain: bool = False, progress: bool = True, seed: int = DEFAULT_EVAL_SEED) -> dict[str, Any]:
+    """Run (or resume) the whole reproduction into `out`; returns the Table 1 data."""
+    from zodrive.experiments.report import build_table, write_report
+
+    if episodes < 1:
+        raise ZodriveError(f"episodes must be >= 1, not {episodes}")
+    if quick:
+        episodes = min(episodes, 5)
+    out.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = _load_timings(out)
+    start = time.perf_counter()
+    models = prepare_models(out, retrain=retrain, quick=quick, progress=progress)
+    spec = load_attack("zo-signsgd")
+    summaries: dict[str, dict[str, dict[str, Any]]] = {"dqn": {}, "ddpg": {}}
+    for algo, row, model, attack in cells(models, spec):
+        folder = out / "cells" / f"{algo}-{row}"
+        job = EvalJob(model=model, preset=load_preset(PRESET_OF[algo]),
+                      attack=attack.to_dict() if attack else None, seed=seed)
+        t0 = time.perf_counter()
+        summary_path = folder / "summary.json"
+        if summary_path.is_file() and json.loads(summary_path.read_text()).get("episodes") == episodes \
+                and (folder / "eval_key.json").is_file() \
+                and json.loads((folder / "eval_key.json").read_text()) == json.loads(json.dumps(job.key())):
+            summaries[algo][row] = json.loads(summary_path.read_text())
+            continue
+        log.info("cell %s / %s", algo, row)
+        if progress:
+            print(f"cell {algo}-{row}: {episodes} episodes of {model}" + (" under attack" if attack else ""),
+                  file=sys.stderr)
+        summaries[algo][row] = evaluate(job, episodes, folder, workers=workers, progress=progress)
+        timings[f"cell {algo}-{row}"] = round(time.perf_counter() - t0, 1)
+        write_json(out / "timings.json", timings)
+    figures = make_figures(out, models, spec, quick=quick)
+    table = build_table(summaries, out)
+    runs = sum(1 for key in timings if key.startswith("invocation "))
+    timings[f"invocation {runs + 1} total"] = round(time.perf_counter() - start, 1)
+    write_json(out / "timings.json", timings)
+    write_report(out, table, figures, timings, episodes=episodes, retrain=retrain, quick=quick)
+    return table
+
+
+def _load_timings(out: Path) -> dict[str, float]:
+    path = out / "timings.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick: bool) -> dict[str, Any]:
+    """Figures 2-5 (each skipped if already drawn)."""
+    from zodrive.experiments.figures import loss_trace, plot_loss, plot_training_rewards
+
+    fig = out / "figures"
+    info_path = fig / "figures.json"
+    info: dict[str, Any] = json.loads(info_path.read_text()) if info_path.is_file() else {}
+    if not (fig / "fig2_loss.png").is_file():
+        trace_spec = spec.with_overrides(early_stop=False, l2_weight=0.1)
+        traces = {algo.upper(): loss_trace(str(models[algo]), load_preset(PRESET_OF[algo]), trace_spec,
+                                           max_states=60 if quick else 200)
+                  for algo in ("dqn", "ddpg")}
+        plot_loss(traces, fig / "fig2_loss.png")
+        info["fig2"] = {k: {kk: v[kk] for kk in ("found", "state", "linf") if kk in v} for k, v in traces.items()}
+        write_json(info_path, info)
+    if not (fig / "fig3_attacked_episode.png").is_file():
+        info["fig3"] = render_crash(models["dqn"], spec, fig, tries=3 if quick else 10)
+        write_json(info_path, info)
+    for algo, number in (("ddpg", 4), ("dqn", 5)):
+        png = fig / f"fig{number}_{algo}_adversarial_training.png"
+        monitor = Path(models[f"{algo}-adv"]) / "monitor.monitor.csv"
+        if not png.is_file() and monitor.is_file():
+            info[f"fig{number}"] = plot_training_rewards(
+                monitor, png, f"{algo.upper()}: reward per episode, adversarial training")
+            write_json(info_path, info)
+    return info
+
+
+def render_crash(model: Path, spec: AttackSpec, fig: Path, *, tries: int) -> dict[str, Any]:
+    """Fig. 3: the first attacked DQN episode (from seed 100000) that ends in a collision."""
+    from zodrive.agents.policies import make_policy_env
+    from zodrive.evaluation.video import record_episode, save_gif, save_png
+
+    victim, env = make_policy_env(str(model), load_preset("discrete"), spec, render_mode="rgb_array")
+    for seed in range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + tries):
+        frames, info = record_episode(env, victim, seed)
+        if info["crashed"]:
+            break
+    title = f"DQN under {spec.attack} (eps={spec.eps}) | "
+    save_png(frames, fig / "fig3_attacked_episode.png", title=title)
+    save_gif(frames, fig / "fig3_attacked_episode.gif", title=title)
+    env.close()
+    return info

@@ -1,0 +1,61 @@
+"""Adversarial training: attacked observations go into the replay buffer, crafted against
+the network being trained; the control run trains the same way without the attack."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from stable_baselines3 import DQN
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from zodrive.agents.victims import sb3_victim
+from zodrive.attacks import AttackSpec
+from zodrive.envs import load_preset, make_env
+from zodrive.wrappers import make_attacked_env
+
+PRESET = load_preset("discrete", ["max_episode_steps=30"])
+
+
+def test_replay_buffer_holds_attacked_observations_against_the_live_network() -> None:
+    model = DQN("MlpPolicy", make_env(PRESET), learning_starts=0, buffer_size=1000, train_freq=1, seed=0,
+                policy_kwargs={"net_arch": [16]})
+    victim = sb3_victim(model)
+    attacked = make_attacked_env(PRESET, victim, AttackSpec(steps=5, n_directions=4, eps=0.2, target="none"))
+    pairs: list[tuple[np.ndarray, np.ndarray]] = []
+    observe = attacked.observation
+
+    def spy(obs: np.ndarray) -> np.ndarray:
+        adv = observe(obs)
+        pairs.append((obs.copy(), adv.copy()))
+        return adv
+
+    attacked.observation = spy  # type: ignore[method-assign]
+    model.set_env(DummyVecEnv([lambda: attacked]))
+    probe = np.stack([make_env(PRESET).reset(seed=s)[0] for s in range(3)])
+    before = victim.query(probe)
+    model.learn(40)
+    clean, adv = (np.stack(x) for x in zip(*pairs))
+    stored = model.replay_buffer.observations[:40, 0]
+    assert np.abs(adv - clean).max() > 0  # the attack did change what the agent saw
+    assert all(any(np.array_equal(s, a) for a in adv) for s in stored)  # ... and that is what it learned from
+    after = victim.query(probe)
+    assert not np.allclose(before, after)  # the attacker queries the network being updated
+    with torch.no_grad():
+        np.testing.assert_allclose(after, model.q_net(torch.from_numpy(probe)).numpy(), atol=1e-6)
+
+
+def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path) -> None:
+    from zodrive.cli import main
+
+    base = tmp_path / "base"
+    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(base), "--no-progress",
+                 "--set", "hyperparameters.learning_starts=100", "--env-set", "max_episode_steps=30"]) == 0
+    control = tmp_path / "control"
+    assert main(["adv-train", str(base), "--no-attack", "--steps", "60", "--out", str(control), "--no-progress",
+                 "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
+    train = json.loads((control / "train.json").read_text())
+    assert train["kind"] == "control (no attack)" and train["attack_queries"] == 0
+    assert (control / "model.zip").is_file()
