@@ -59,3 +59,12 @@ def test_a_built_wheel_runs_without_the_checkout(tmp_path: Path) -> None:
     assert "DiscreteMetaAction" in run("env", "show", "discrete")
     out = run("demo", "--episodes", "1", "--out", str(work / "demo"))
     assert "cut the mean return" in out
+
+
+def test_a_missing_model_is_reported_before_torch_is_imported(tmp_path: Path) -> None:
+    code = ("import sys; from zodrive.cli import main; "
+            f"rc = main(['compare', 'baseline:slower', {str(tmp_path / 'nope.zip')!r}, '--out', {str(tmp_path / 'c')!r}]); "
+            "print(rc, 'torch' in sys.modules, 'highway_env' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.split() == ["2", "False", "False"]
+    assert "model file not found" in proc.stderr

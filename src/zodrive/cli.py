@@ -61,7 +61,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="zodrive", description="Black-box attacks on deep-RL driving policies.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
-    parser.add_argument("--models", type=Path, default=None, metavar="DIR",
+    parser.add_argument("--models", dest="models_dir", type=Path, default=None, metavar="DIR",
                         help="folder of shipped models and their SHA256SUMS (default: $ZODRIVE_MODELS or ./models)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -396,6 +396,14 @@ COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "eva
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
 
 
+def _check_model_paths(args: argparse.Namespace) -> None:
+    """A missing model file is reported at once, before torch and highway-env are imported."""
+    named = getattr(args, "models", None) if args.command == "compare" else [getattr(args, "model", None)]
+    for model in named or []:
+        if model is not None and not str(model).startswith("baseline:") and not Path(model).exists():
+            raise ZodriveError(f"model file not found: {model}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from zodrive.runinfo import set_command
 
@@ -406,10 +414,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.verbose:
             logging.getLogger("zodrive").setLevel(logging.INFO)
-        if args.models is not None:
-            if not args.models.is_dir():
-                raise ZodriveError(f"--models {args.models}: not a folder")
-            os.environ[MODELS_ENV] = str(args.models)
+        if args.models_dir is not None:
+            if not args.models_dir.is_dir():
+                raise ZodriveError(f"--models {args.models_dir}: not a folder")
+            os.environ[MODELS_ENV] = str(args.models_dir)
+        _check_model_paths(args)
         _check_out(getattr(args, "out", None))
         return COMMANDS[args.command](args)
     except ZodriveError as exc:
