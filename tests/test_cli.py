@@ -209,3 +209,18 @@ def test_bad_yaml_values_and_hyperparameters(tmp_path: Path, capsys) -> None:
     out = tmp_path / "run"
     err = _error(capsys, ["train", "--algo", "dqn", "--out", str(out), "--set", "hyperparameters.learning_rate=banana"])
     assert "invalid setting" in err and not out.exists()
+
+
+def test_select_picks_a_checkpoint_on_tuning_seeds(tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(run), "--no-progress", "--env-set",
+                 "max_episode_steps=20", "--set", "hyperparameters.learning_starts=50", "--set", "checkpoint_every=100"]) == 0
+    assert main(["select", str(run), "--episodes", "2", "--no-progress"]) == 0
+    choice = json.loads((run / "selected.json").read_text())
+    steps = [c["steps"] for c in choice["candidates"]]
+    assert steps == [100, 200]  # the final model is the 200-step checkpoint: not evaluated twice
+    assert choice["selected"]["mean_return"] == max(c["mean_return"] for c in choice["candidates"])
+    summary = json.loads((run / "selection" / "100" / "summary.json").read_text())
+    assert summary["seed"] == 50_000  # tuning seeds, never the evaluation seeds
+    assert "selected:" in capsys.readouterr().out
+    assert main(["select", str(tmp_path), "--episodes", "2"]) == 2

@@ -108,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
 
+    sel = sub.add_parser("select", help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
+    sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
+    sel.add_argument("--episodes", type=_positive_int, default=20, help="tuning episodes per checkpoint")
+    sel.add_argument("--from-step", type=_nonnegative_int, default=0, help="ignore checkpoints before this step")
+    sel.add_argument("--workers", type=_positive_int, default=1)
+    sel.add_argument("--no-progress", action="store_true")
+
     adv = sub.add_parser("adv-train", help="adversarial training (paper Algorithm 2)")
     adv.add_argument("model")
     adv.add_argument("--attack", default="zo-signsgd", help="attack config name/YAML or registry name")
@@ -120,8 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     adv.add_argument("--preset")
     adv.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     adv.add_argument("--seed", type=_seed, default=1, help="seed of the adversarial phase")
-    adv.add_argument("--warmup", type=_nonnegative_int, default=0,
-                     help="random-action steps before updates (SB3 learning_starts); 0 = act with the policy throughout")
+    adv.add_argument("--warmup", type=_nonnegative_int, default=1000,
+                     help="steps the (attacked) policy acts to fill the empty replay buffer before updates start; "
+                          "0 = update from the first step (degrades the policy even without attack)")
     adv.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     adv.add_argument("--trust-model", action="store_true",
                      help="load MODEL with stable-baselines3's full loader, which unpickles it (can run code "
@@ -317,6 +325,16 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_select(args: argparse.Namespace) -> int:
+    from zodrive.experiments.select import select_checkpoint, selection_markdown
+
+    choice = select_checkpoint(args.run, args.episodes, from_step=args.from_step, workers=args.workers,
+                               progress=not args.no_progress)
+    print(selection_markdown(choice), end="")
+    print(f"selected: {choice['selected']['model']} ({choice['criterion']}); written to {args.run / 'selected.json'}")
+    return 0
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from zodrive.experiments.report import table_markdown
     from zodrive.experiments.reproduce import reproduce
@@ -392,7 +410,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "reproduce": cmd_reproduce,
+            "adv-train": cmd_adv_train, "select": cmd_select, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
 
 

@@ -84,17 +84,23 @@ def make_training_env(preset: dict[str, Any], seed: int, log_dir: Path, *, appen
     return venv
 
 
-def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
-    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
+def checkpoints(out: Path, algo: str) -> list[tuple[int, Path]]:
+    """Every `checkpoints/{algo}_{N}_steps.zip` of a run folder as (N, path), oldest first."""
     found = []
     for path in (out / "checkpoints").glob(f"{algo}_*_steps.zip"):
         try:
             found.append((int(path.stem.split("_")[1]), path))
         except (IndexError, ValueError):
             continue
+    return sorted(found)
+
+
+def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
+    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
+    found = checkpoints(out, algo)
     if not found:
         return None
-    steps, path = max(found)
+    steps, path = found[-1]
     return path, steps
 
 

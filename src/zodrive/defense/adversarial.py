@@ -39,7 +39,7 @@ def adversarial_train(
     out: Path,
     *,
     seed: int = 1,
-    warmup: int = 0,
+    warmup: int = 1000,
     noise: dict[str, Any] | None = None,
     progress_bar: bool = True,
     trust: bool = False,
@@ -70,9 +70,12 @@ def adversarial_train(
     venv.seed(seed)
     model.set_env(venv)
     model.set_random_seed(seed)
-    # SB3 takes *random* actions until `learning_starts`; Algorithm 2 acts with the attacked
-    # policy from the first step, so updates start at once (the buffer begins empty).
-    model.learning_starts = warmup
+    # Algorithm 2 acts with the (attacked) policy from the first step. SB3 would take *random*
+    # actions until `learning_starts`, and updating from the first step on a nearly empty
+    # buffer degrades the policy by itself (the control run without attack showed it). So the
+    # buffer is first filled with `warmup` transitions of the policy acting on attacked
+    # observations, without updates, and then `steps` steps of training follow.
+    model.learning_starts = 0
     if algo == "dqn":  # keep exploring at the final rate instead of restarting the schedule at 1.0
         eps = model.exploration_final_eps
         model.exploration_schedule = LinearSchedule(eps, eps, 1.0)
@@ -80,14 +83,21 @@ def adversarial_train(
         model.action_noise = action_noise(noise or {"type": "normal", "sigma": 0.1}, venv.action_space.shape[0])
     model.set_logger(configure(str(out), ["csv"]))
     start = time.perf_counter()
-    model.learn(total_timesteps=steps, reset_num_timesteps=True, progress_bar=progress_bar,
-                log_interval=1 if algo == "ddpg" else 4)
+    log_interval = 1 if algo == "ddpg" else 4
+    if warmup:
+        gradient_steps, model.gradient_steps = model.gradient_steps, 0
+        model.learn(total_timesteps=warmup, reset_num_timesteps=True, progress_bar=progress_bar,
+                    log_interval=log_interval)
+        model.gradient_steps = gradient_steps
+    model.learn(total_timesteps=steps, reset_num_timesteps=not warmup, progress_bar=progress_bar,
+                log_interval=log_interval)
     wall = time.perf_counter() - start
     path = out / "model.zip"
     model.save(path)
     oracle = getattr(venv.envs[0].env, "oracle", None)
     write_json(out / "train.json", {
-        "algo": algo, "kind": "adversarial" if spec is not None else "control (no attack)", "source_model": str(source), "total_timesteps": steps,
+        "algo": algo, "kind": "adversarial" if spec is not None else "control (no attack)", "source_model": str(source),
+        "total_timesteps": steps, "warmup_steps": warmup,
         "seed": seed, "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1),
         "attack_queries": int(oracle.total_queries) if oracle is not None else 0,
     })

@@ -53,7 +53,7 @@ def curves_markdown(runs: list[Path], bin_steps: int) -> str:
     """One row per run: mean training return (and length) per step window."""
     data = {run: {r["step"]: r for r in binned(run, bin_steps)} for run in runs}
     steps = sorted({s for rows in data.values() for s in rows})
-    lines = ["| Run | " + " | ".join(f"≤{s // 1000}k" for s in steps) + " |",
+    lines = ["| Run | " + " | ".join(f"≤{_kilo(s)}" for s in steps) + " |",
              "|---|" + "---|" * len(steps)]
     for label, rows in zip(labels(runs), data.values()):
         cells = [f"{rows[s]['mean_return']:.0f} / {rows[s]['mean_length']:.0f}" if s in rows else "" for s in steps]
@@ -70,9 +70,14 @@ def plot_curves(runs: list[Path], bin_steps: int, path: Path) -> None:
         rows = binned(run, bin_steps)
         ax.plot([r["step"] for r in rows], [r["mean_return"] for r in rows], ".-", label=label)
     ax.set_xlabel("training step")
-    ax.set_ylabel(f"mean training return per {bin_steps // 1000}k steps")
+    ax.set_ylabel(f"mean training return per {_kilo(bin_steps)} steps")
     ax.legend(fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _kilo(steps: int) -> str:
+    """25000 -> '25k', 500 -> '0.5k'."""
+    return f"{steps / 1000:g}k"

@@ -1,5 +1,0 @@
-import sys
-
-from zodrive.cli import main
-
-sys.exit(main())
