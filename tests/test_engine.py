@@ -171,3 +171,50 @@ def test_step_rates_are_resampled_by_episode() -> None:
     w_low, w_high = rate_ci(int(successes.sum()), int(applicable.sum()))
     assert low < successes.sum() / applicable.sum() < high
     assert high - low > 3 * (w_high - w_low)
+
+
+def test_warm_start_begins_where_the_last_step_ended_and_forgets_at_a_new_episode() -> None:
+    victim = linear_victim(seed=2)
+    x0 = observations(16, seed=5)
+    attack, objective, oracle = AttackSpec(attack="zo-signsgd", warm_start=True, eps=0.3).build(victim, **CONTEXT)
+    first = attack.perturb(x0, oracle, objective)
+    again = attack.perturb(x0, oracle, objective)  # the same observation: the carried point already succeeds
+    won = first.success
+    assert won.sum() >= 4
+    assert np.all(again.iterations[won] == 1) and again.queries[won].sum() < first.queries[won].sum()
+    attack.reseed(0)  # what the wrapper does at a seeded reset: the same stream, and no carried perturbation
+    fresh = attack.perturb(x0, oracle, objective)
+    np.testing.assert_array_equal(fresh.queries, first.queries)
+
+
+def test_patience_gives_up_a_step_that_stopped_improving() -> None:
+    victim = linear_victim(seed=2)
+    x0 = observations(32, seed=5)
+    slow, _, _ = _attack("zo-signsgd", victim, x0, eps=0.02, steps=100)
+    quick, _, _ = _attack("zo-signsgd", victim, x0, eps=0.02, steps=100, patience=5)
+    failed = ~slow.success & ~slow.already
+    assert failed.sum() >= 5
+    assert quick.queries[failed].mean() < 0.5 * slow.queries[failed].mean()
+
+
+def test_a_failed_step_can_feed_the_clean_observation() -> None:
+    victim = linear_victim(seed=2)
+    x0 = observations(32, seed=5)
+    result, _, _ = _attack("zo-signsgd", victim, x0, eps=0.08, on_failure="clean")
+    failed = ~result.success
+    assert failed.sum() >= 5 and result.success.sum() >= 1
+    np.testing.assert_array_equal(result.x_adv[failed], x0[failed])
+    assert np.all(result.linf[failed] == 0) and np.all(result.linf[result.success] > 0)
+    np.testing.assert_allclose(result.adv_outputs, victim.query(result.x_adv), atol=1e-5)
+
+
+def test_worst_action_target_aims_at_what_the_victim_values_least() -> None:
+    victim = linear_victim(seed=3)
+    x0 = observations(32, seed=6)
+    result, _, _ = _attack("zo-signsgd", victim, x0, target="worst", eps=0.5)
+    worst = victim.query(x0).argmin(axis=1)
+    taken = victim.query(result.x_adv).argmax(axis=1)
+    assert result.success.sum() >= 5
+    np.testing.assert_array_equal(taken[result.success], worst[result.success])
+    with pytest.raises(ZodriveError, match="worst"):
+        AttackSpec(target="worst").build(linear_victim(kind="continuous"), **context("continuous"))

@@ -184,11 +184,16 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mu", type=float)
     group.add_argument("--step-size", type=float)
     group.add_argument("--l2-weight", type=float)
-    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto or none")
+    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto, none (untargeted) or worst (discrete)")
     group.add_argument("--loss", choices=["margin", "paper"])
     group.add_argument("--query-budget", type=int, help="max queries per environment step")
     group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
     group.add_argument("--no-early-stop", dest="early_stop", action="store_false")
+    group.add_argument("--patience", type=_positive_int, help="give up a step after N iterations without progress")
+    group.add_argument("--warm-start", dest="warm_start", action="store_true", default=None,
+                       help="start each step's search from the previous step's perturbation")
+    group.add_argument("--on-failure", choices=["best", "clean"],
+                       help="what a step that missed the goal feeds the policy")
     group.add_argument("--attack-seed", type=_seed)
 
 
@@ -196,6 +201,7 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--n-directions": "n_directions", "--mu": "mu", "--step-size": "step_size",
                 "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
                 "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
+                "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure",
                 "--attack-seed": "attack_seed"}
 
 
@@ -214,6 +220,7 @@ def attack_spec_from_args(args: argparse.Namespace):
         n_directions=args.n_directions, mu=args.mu, step_size=args.step_size,
         l2_weight=args.l2_weight, target=args.target, loss=args.loss,
         query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
+        patience=args.patience, warm_start=args.warm_start, on_failure=args.on_failure,
     )
 
 

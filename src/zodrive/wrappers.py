@@ -83,6 +83,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         episode's perturbations depend only on (attack seed, episode seed)."""
         if kwargs.get("seed") is not None:
             self.attack.reseed(episode_seed(self.attack.seed, kwargs["seed"]))
+        self.attack.begin_episode()  # no warm start across episodes
         self.oracle.begin_episode()
         self._episode_hits = self._episode_applicable = 0
         obs, info = super().reset(**kwargs)

@@ -34,6 +34,11 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
+ON_FAILURE = ("best", "clean")
+"""What a step that did not reach the goal feeds the policy: the best point found (the
+paper's Algorithm 1 feeds its last iterate) or the clean observation (an attacker who
+never feeds a perturbation that failed, since it may well help the victim)."""
+
 ENGINE_VERSION = 2
 """Bumped whenever the driver's behaviour changes what an attack returns (results on disk
 made by another version are not mixed with new ones). 2: one driver loop, per-row budgets,
@@ -86,6 +91,9 @@ class Attack(abc.ABC):
         step_size: float = 0.01,
         l2_weight: float = 0.0,
         early_stop: bool = True,
+        patience: int | None = None,
+        warm_start: bool = False,
+        on_failure: str = "best",
         seed: int = 0,
     ) -> None:
         if not isinstance(steps, (int, np.integer)) or steps < 1:
@@ -98,6 +106,10 @@ class Attack(abc.ABC):
             raise ZodriveError(f"step_size must be > 0, not {step_size}")
         if not l2_weight >= 0:
             raise ZodriveError(f"l2_weight must be >= 0, not {l2_weight}")
+        if patience is not None and (not isinstance(patience, (int, np.integer)) or patience < 1):
+            raise ZodriveError(f"patience must be an integer >= 1 or none, not {patience}")
+        if on_failure not in ON_FAILURE:
+            raise ZodriveError(f"on_failure must be one of {', '.join(ON_FAILURE)}, not {on_failure!r}")
         self.threat = threat
         self.steps = int(steps)
         self.n_directions = int(n_directions)
@@ -105,12 +117,21 @@ class Attack(abc.ABC):
         self.step_size = float(step_size)
         self.l2_weight = float(l2_weight)
         self.early_stop = bool(early_stop)
+        self.patience = None if patience is None else int(patience)
+        self.warm_start = bool(warm_start)
+        self.on_failure = on_failure
         self.seed = seed
         self.rng = np.random.default_rng(seed)
+        self._carry: np.ndarray | None = None  # the last step's perturbation (warm start)
 
     def reseed(self, seed: int) -> None:
         """Restart the attack's random stream (e.g. per episode, for reproducible episodes)."""
         self.rng = np.random.default_rng(seed)
+        self.begin_episode()
+
+    def begin_episode(self) -> None:
+        """Forget the previous step's perturbation: a new episode starts from scratch."""
+        self._carry = None
 
     # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
@@ -171,8 +192,12 @@ class Attack(abc.ABC):
         known_x, known_out = flat0.copy(), clean.copy()
         known_grad = None if grad0 is None else grad0.reshape(n, dim).astype(np.float32)
 
-        x = project(self.init(flat0.copy(), mask)[:, None].astype(np.float32), everyone)[:, 0]
+        x = self.init(flat0.copy(), mask).astype(np.float32)
+        if self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
+            x = flat0 + self._carry  # consecutive observations differ little: start where the last step ended
+        x = project(x[:, None], everyone)[:, 0]
         active = ~already if self.early_stop else np.ones(n, dtype=bool)
+        stalled = np.zeros(n, dtype=np.int64)
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
         for k in range(self.steps):
@@ -210,7 +235,12 @@ class Attack(abc.ABC):
             has_ok = ok.any(axis=1)
             pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
             ar = np.arange(a)
+            before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
             best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+            improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
+            stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
+            if self.patience is not None:  # give up on a step that has stopped improving
+                active[rows[stalled[rows] >= self.patience]] = False
             if trace:
                 rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
                 rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
@@ -225,12 +255,17 @@ class Attack(abc.ABC):
                 hit = same.any(axis=1)
                 col = same.argmax(axis=1)[hit]
                 known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
-        x_adv = best.x.reshape(n, *shape).astype(x0.dtype)
+        self._carry = best.x - flat0
+        fed, fed_out = best.x, best.out
+        if self.on_failure == "clean":
+            failed = ~best.ok
+            fed, fed_out = np.where(failed[:, None], flat0, best.x), np.where(failed[:, None], clean, best.out)
+        x_adv = fed.reshape(n, *shape).astype(x0.dtype)
         linf, l2n = distortion(x_adv, x0)
         return AttackResult(
             x_adv=x_adv, success=best.ok & ~already, already=already, iterations=iterations,
             queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
-            adv_outputs=best.out, clean_outputs=clean, trace=records,
+            adv_outputs=fed_out, clean_outputs=clean, trace=records,
         )
 
 

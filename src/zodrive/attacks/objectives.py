@@ -85,6 +85,29 @@ class DiscreteUntargeted(Objective):
 
 
 @dataclass(frozen=True)
+class DiscreteWorst(Objective):
+    """Make a discrete victim pick the action it values least on the clean observation (its
+    own "worst action", per step): harm chosen by the victim's values, not fixed in advance.
+    Margin loss as `DiscreteTargeted`."""
+
+    kappa: float = 0.01
+
+    def _target(self, clean: torch.Tensor) -> torch.Tensor:
+        return clean.argmin(dim=-1)[:, None, None]
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        t = self._target(clean).expand(*out.shape[:-1], 1)
+        q_t = out.gather(-1, t).squeeze(-1)
+        return self.weight * torch.clamp(_others_max(out, t) - q_t + self.kappa, min=0.0)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return out.argmax(dim=-1) == self._target(clean)[..., 0]
+
+    def already(self, clean: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(len(clean), dtype=torch.bool)  # argmin != argmax unless all tie
+
+
+@dataclass(frozen=True)
 class ContinuousTargeted(Objective):
     """Drive a continuous victim's action to `target` (paper: [1, 0.5], throttle + right).
 
@@ -134,13 +157,17 @@ def make_objective(
 ) -> Objective:
     """Build the objective for a victim kind (`discrete`/`continuous`) and a target.
 
-    `target=None` or `"none"` means untargeted. Discrete targets are an index or an action
-    name (FASTER); continuous targets a sequence like [1, 0.5].
+    `target=None` or `"none"` means untargeted; `"worst"` (discrete) the action the victim
+    values least on the clean observation, per step. Discrete targets are an index or an
+    action name (FASTER); continuous targets a sequence like [1, 0.5].
     """
     untargeted = target is None or (isinstance(target, str) and target.lower() in ("none", "untargeted"))
+    worst = isinstance(target, str) and target.lower() == "worst"
     if kind == "discrete":
         if untargeted:
             return DiscreteUntargeted(weight=weight, kappa=kappa)
+        if worst:
+            return DiscreteWorst(weight=weight, kappa=kappa)
         if loss not in DQN_LOSSES:
             raise ZodriveError(f"unknown DQN loss {loss!r} (known: {', '.join(DQN_LOSSES)})")
         if isinstance(target, str):
@@ -160,6 +187,8 @@ def make_objective(
         return DiscreteTargeted(weight=weight, target=index, kind=loss, kappa=kappa)
     if untargeted:
         return ContinuousUntargeted(weight=weight, tol=tol)
+    if worst:
+        raise ZodriveError("target 'worst' needs action values (a discrete victim); a continuous one has none")
     if isinstance(target, str):
         try:
             target = [float(v) for v in target.replace("[", "").replace("]", "").split(",")]

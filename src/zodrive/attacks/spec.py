@@ -41,6 +41,9 @@ class AttackSpec:
     kappa: float = 0.01                   # margin confidence (discrete)
     tol: float = 0.2                      # success tolerance on continuous actions
     early_stop: bool = True               # stop a step's iterations once the goal is met
+    patience: int | None = None           # give up a step after this many iterations without progress
+    warm_start: bool = False              # start each step from the previous step's perturbation
+    on_failure: str = "best"              # what a failed step feeds: best (point found) | clean
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
 
@@ -80,6 +83,7 @@ class AttackSpec:
     def _make(self, threat: ThreatModel, steps: int) -> Attack:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
+                           patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
                            seed=self.seed)
 
     def build(
