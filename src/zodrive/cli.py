@@ -443,8 +443,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not args.models_dir.is_dir():
                 raise ZodriveError(f"--models {args.models_dir}: not a folder")
             os.environ[MODELS_ENV] = str(args.models_dir)
-        _check_model_paths(args)
         _check_out(getattr(args, "out", None))
+        _check_model_paths(args)
         return COMMANDS[args.command](args)
     except ZodriveError as exc:
         print(f"zodrive: error: {exc}", file=sys.stderr)
