@@ -68,3 +68,18 @@ def test_a_missing_model_is_reported_before_torch_is_imported(tmp_path: Path) ->
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.split() == ["2", "False", "False"]
     assert "model file not found" in proc.stderr
+
+
+@pytest.mark.slow
+def test_a_fresh_clone_resumes_the_committed_reproduction(tmp_path: Path) -> None:
+    """`git clone`, then the README's reproduce command: every cell is on disk, none recomputed."""
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
+    env = {**os.environ, "PYTHONPATH": str(clone / "src")}
+    env.pop("ZODRIVE_MODELS", None)
+    proc = subprocess.run([sys.executable, "-m", "zodrive", "reproduce", "--out", "results/reproduction"], cwd=clone,
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    computed = [line for line in proc.stderr.splitlines() if line.startswith("cell ")]
+    assert computed == []
+    assert "| DQN | Initial Training |" in proc.stdout

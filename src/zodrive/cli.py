@@ -194,6 +194,7 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
                        help="start each step's search from the previous step's perturbation")
     group.add_argument("--on-failure", choices=["best", "clean"],
                        help="what a step that missed the goal feeds the policy")
+    group.add_argument("--restarts", type=_nonnegative_int, help="further runs from random points (e.g. PGD)")
     group.add_argument("--attack-seed", type=_seed)
 
 
@@ -201,7 +202,7 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--n-directions": "n_directions", "--mu": "mu", "--step-size": "step_size",
                 "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
                 "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
-                "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure",
+                "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure", "--restarts": "restarts",
                 "--attack-seed": "attack_seed"}
 
 
@@ -220,7 +221,7 @@ def attack_spec_from_args(args: argparse.Namespace):
         n_directions=args.n_directions, mu=args.mu, step_size=args.step_size,
         l2_weight=args.l2_weight, target=args.target, loss=args.loss,
         query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
-        patience=args.patience, warm_start=args.warm_start, on_failure=args.on_failure,
+        patience=args.patience, warm_start=args.warm_start, on_failure=args.on_failure, restarts=args.restarts,
     )
 
 

@@ -94,6 +94,7 @@ class Attack(abc.ABC):
         patience: int | None = None,
         warm_start: bool = False,
         on_failure: str = "best",
+        restarts: int = 0,
         seed: int = 0,
     ) -> None:
         if not isinstance(steps, (int, np.integer)) or steps < 1:
@@ -108,6 +109,8 @@ class Attack(abc.ABC):
             raise ZodriveError(f"l2_weight must be >= 0, not {l2_weight}")
         if patience is not None and (not isinstance(patience, (int, np.integer)) or patience < 1):
             raise ZodriveError(f"patience must be an integer >= 1 or none, not {patience}")
+        if not isinstance(restarts, (int, np.integer)) or restarts < 0:
+            raise ZodriveError(f"restarts must be an integer >= 0, not {restarts}")
         if on_failure not in ON_FAILURE:
             raise ZodriveError(f"on_failure must be one of {', '.join(ON_FAILURE)}, not {on_failure!r}")
         self.threat = threat
@@ -120,6 +123,7 @@ class Attack(abc.ABC):
         self.patience = None if patience is None else int(patience)
         self.warm_start = bool(warm_start)
         self.on_failure = on_failure
+        self.restarts = int(restarts)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._carry: np.ndarray | None = None  # the last step's perturbation (warm start)
@@ -135,8 +139,12 @@ class Attack(abc.ABC):
 
     # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
+    def queries_per_run(self) -> int:
+        """Upper bound on victim queries of one run of T iterations (the docstring's formula)."""
+
     def queries_per_step(self) -> int:
-        """Upper bound on victim queries per environment step (the docstring's formula)."""
+        """Upper bound on victim queries per environment step: every restart is a new run."""
+        return (1 + self.restarts) * self.queries_per_run()
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
@@ -192,69 +200,73 @@ class Attack(abc.ABC):
         known_x, known_out = flat0.copy(), clean.copy()
         known_grad = None if grad0 is None else grad0.reshape(n, dim).astype(np.float32)
 
-        x = self.init(flat0.copy(), mask).astype(np.float32)
-        if self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
-            x = flat0 + self._carry  # consecutive observations differ little: start where the last step ended
-        x = project(x[:, None], everyone)[:, 0]
-        active = ~already if self.early_stop else np.ones(n, dtype=bool)
-        stalled = np.zeros(n, dtype=np.int64)
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
-        for k in range(self.steps):
-            rows = np.flatnonzero(active)
-            if rows.size == 0:
-                break
-            probes = self.propose(k, x[rows], rows, mask)
-            cand = project(np.concatenate([x[rows, None], probes.astype(np.float32)], axis=1), rows)
-            need = np.ones(cand.shape[:2], dtype=bool)
-            need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
-            afford = oracle.remaining(rows) >= need.sum(axis=1)
-            if not afford.all():  # a row's own budget is spent: that row stops, the others go on
-                active[rows[~afford]] = False
-                rows, cand, need = rows[afford], cand[afford], need[afford]
+        for run in range(1 + self.restarts):
+            x = self.init(flat0.copy(), mask).astype(np.float32)
+            if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
+                x = flat0 + self.threat.random_delta(flat0.shape, mask, self.rng)
+            elif self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
+                x = flat0 + self._carry  # consecutive observations differ little: start where the last step ended
+            x = project(x[:, None], everyone)[:, 0]
+            active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
+            active &= oracle.remaining(everyone) > 0
+            stalled = np.zeros(n, dtype=np.int64)
+            for k in range(self.steps):
+                rows = np.flatnonzero(active)
                 if rows.size == 0:
                     break
-            a, m = cand.shape[:2]
-            out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
-            out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
-            owners = np.repeat(rows, need.sum(axis=1))
-            grad = None
-            if self.black_box:
-                if owners.size:
-                    out[need] = oracle(cand[need].reshape(-1, *shape), owners)
-            else:
-                grad = known_grad[rows].copy()
-                ask = need[:, 0]
-                if ask.any():
-                    o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]), rows[ask])
-                    out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
-                known_grad[rows] = grad
-            known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
-            iterations[rows] += 1
-            l1, l2, f, ok = values(cand, out, rows)
-            has_ok = ok.any(axis=1)
-            pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
-            ar = np.arange(a)
-            before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
-            best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-            improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
-            stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
-            if self.patience is not None:  # give up on a step that has stopped improving
-                active[rows[stalled[rows] >= self.patience]] = False
-            if trace:
-                rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
-                rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
-                records.append(rec)
-            if self.early_stop:
-                active[rows[has_ok]] = False
-            if k == self.steps - 1:
-                break
-            x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
-            if self.black_box:  # a step onto a queried point (random search) costs no new query
-                same = np.all(cand == x[rows, None], axis=2)
-                hit = same.any(axis=1)
-                col = same.argmax(axis=1)[hit]
-                known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
+                probes = self.propose(k, x[rows], rows, mask)
+                cand = project(np.concatenate([x[rows, None], probes.astype(np.float32)], axis=1), rows)
+                need = np.ones(cand.shape[:2], dtype=bool)
+                need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
+                afford = oracle.remaining(rows) >= need.sum(axis=1)
+                if not afford.all():  # a row's own budget is spent: that row stops, the others go on
+                    active[rows[~afford]] = False
+                    rows, cand, need = rows[afford], cand[afford], need[afford]
+                    if rows.size == 0:
+                        break
+                a, m = cand.shape[:2]
+                out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+                out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
+                owners = np.repeat(rows, need.sum(axis=1))
+                grad = None
+                if self.black_box:
+                    if owners.size:
+                        out[need] = oracle(cand[need].reshape(-1, *shape), owners)
+                else:
+                    grad = known_grad[rows].copy()
+                    ask = need[:, 0]
+                    if ask.any():
+                        o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]), rows[ask])
+                        out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
+                    known_grad[rows] = grad
+                known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
+                iterations[rows] += 1
+                l1, l2, f, ok = values(cand, out, rows)
+                has_ok = ok.any(axis=1)
+                pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+                ar = np.arange(a)
+                before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
+                best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+                improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
+                stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
+                if self.patience is not None:  # give up on a step that has stopped improving
+                    active[rows[stalled[rows] >= self.patience]] = False
+                if trace:
+                    rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
+                    rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
+                    records.append(rec)
+                if self.early_stop:
+                    active[rows[has_ok]] = False
+                if k == self.steps - 1:
+                    break
+                x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
+                if self.black_box:  # a step onto a queried point (random search) costs no new query
+                    same = np.all(cand == x[rows, None], axis=2)
+                    hit = same.any(axis=1)
+                    col = same.argmax(axis=1)[hit]
+                    known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
         self._carry = best.x - flat0
         fed, fed_out = best.x, best.out
         if self.on_failure == "clean":
@@ -280,7 +292,7 @@ class GradientEstimateAttack(Attack):
     antithetic: ClassVar[bool] = False  # central differences f(x+mu u) - f(x-mu u)
     unit_directions: ClassVar[bool] = False  # E[u u^T] = I/d: scale the estimate by d
 
-    def queries_per_step(self) -> int:
+    def queries_per_run(self) -> int:
         return self.steps * (1 + self.n_directions * (2 if self.antithetic else 1))
 
     @abc.abstractmethod

@@ -27,7 +27,7 @@ class PGD(Attack):
     black_box = False
     reference = "Madry et al., ICLR 2018 (white-box)"
 
-    def queries_per_step(self) -> int:
+    def queries_per_run(self) -> int:
         return self.steps
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:

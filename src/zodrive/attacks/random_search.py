@@ -24,7 +24,7 @@ class RandomSearch(Attack):
     reference = "Andriushchenko et al., Square Attack, ECCV 2020"
     p_init: float = 0.3  # initial fraction of coordinates re-drawn per proposal
 
-    def queries_per_step(self) -> int:
+    def queries_per_run(self) -> int:
         return 2 + self.steps * self.n_directions
 
     def _fraction(self, k: int) -> float:

@@ -44,6 +44,7 @@ class AttackSpec:
     patience: int | None = None           # give up a step after this many iterations without progress
     warm_start: bool = False              # start each step from the previous step's perturbation
     on_failure: str = "best"              # what a failed step feeds: best (point found) | clean
+    restarts: int = 0                     # further runs from random points of the budget set
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
 
@@ -84,6 +85,7 @@ class AttackSpec:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
+                           restarts=self.restarts,
                            seed=self.seed)
 
     def build(
