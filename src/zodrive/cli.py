@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
     ev.add_argument("--workers", type=_positive_int, default=1)
+    ev.add_argument("--defense", choices=["kinematic"],
+                    help="filter between the (attacked) sensor and the policy; attacks query the defended system")
     _attack_flags(ev)
     ev.add_argument("--no-progress", action="store_true")
 
@@ -279,10 +281,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         from zodrive.envs import attack_context
 
         spec.build(load_victim(args.model, preset), **attack_context(preset))
+    if args.defense is not None:
+        from zodrive.defense.kinematic import make_defense
+
+        make_defense(args.defense, preset)  # the preset must be one the defense understands
     job = EvalJob(
         model=policy_ref(args.model), preset=preset,
         attack=spec.to_dict() if spec else None,
-        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed,
+        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense,
     )
     summary = evaluate(job, args.episodes, args.out, workers=args.workers, progress=not args.no_progress)
     print(format_summary(summary))

@@ -79,17 +79,27 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
 
 
 def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mode: str | None = None,
-                    trace: bool = False) -> tuple[Victim, gym.Env]:
-    """The policy's victim and the preset's environment, wrapped in the attack `spec` if given."""
+                    trace: bool = False, defense: str | None = None) -> tuple[Victim, gym.Env]:
+    """The policy's victim and the preset's environment, wrapped in the attack `spec` if given
+    and, with `defense`, in the defense between the (attacked) sensor and the policy; the
+    attacker then queries the defended system."""
     from zodrive.envs import make_env
     from zodrive.wrappers import make_attacked_env
 
     if bl.is_baseline(model) and bl.get_baseline(model).reads == "simulator":
         check_policy(model, preset, attacked=spec is not None)
+        if defense is not None:
+            raise ZodriveError(f"{model} reads the simulator: an observation defense does not apply to it")
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
         driver = bl.IdmMobilDriver(env, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
     victim = load_victim(model, preset)  # checks that the policy fits the preset
-    return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
+    if defense is None:
+        return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
+    from zodrive.defense.kinematic import FilterWrapper, defended_victim, make_defense
+
+    filt = make_defense(defense, preset)
+    env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
+    return victim, FilterWrapper(env, filt)

@@ -44,6 +44,7 @@ class EvalJob:
     attack: dict[str, Any] | None = None
     seed: int = DEFAULT_EVAL_SEED
     record_steps: bool = True
+    defense: str | None = None  # e.g. "kinematic": a filter between the (attacked) sensor and the policy
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
@@ -57,7 +58,10 @@ class EvalJob:
 
             model = "sha256:" + sha256(Path(self.model))
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
-        return {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
+        key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
+        if self.defense is not None:
+            key["defense"] = self.defense
+        return key
 
 
 _WORKER: dict[str, Any] = {}
@@ -65,7 +69,7 @@ _WORKER: dict[str, Any] = {}
 
 def _setup(job: EvalJob) -> None:
     spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
-    victim, env = make_policy_env(job.model, job.preset, spec)
+    victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense)
     _WORKER.update(job=job, victim=victim, env=env)
 
 
@@ -229,6 +233,7 @@ def summarize(
         "lane_changes_per_episode": float(np.mean([r.get("lane_changes", 0) for r in records])),
         "mean_distance": float(np.mean([r.get("distance", 0.0) for r in records])),
         "attack": None,
+        "defense": job.defense,
     }
     counts = [r["action_counts"] for r in records if r.get("action_counts")]
     if counts:

@@ -18,6 +18,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('lane_changes_per_episode', float('nan')):.2f}  distance: {summary.get('mean_distance', float('nan')):.0f} m  "
         f"right lane: {summary['right_lane_share']:.1%}",
     ]
+    if summary.get("defense"):
+        lines.append(f"defense: {summary['defense']} (between the sensor and the policy; the attacker queries the "
+                     "defended system)")
     if summary.get("attack"):
         lines.append(
             f"attack: {summary['attack']} ({summary['norm']}, eps={summary['eps']}, {summary['mode']}, "
