@@ -3,10 +3,12 @@
 1. Per environment step, ZO-SignSGD at T iterations and q directions (early stopping off,
    so both do all T iterations): Algorithm 1 done literally - one victim query per call,
    q + 1 calls per iteration - against zodrive's engine - one batched call per iteration.
-2. A clean and an attacked evaluation (default attack config: T = 100, q = 20, early
-   stopping on) of the same episodes (same seeds): total wall time, and time per step.
+2. A clean and attacked evaluations of the same episodes (same seeds): the default attack
+   config (T = 100, q = 20, early stopping on) and the query-saving one (`--warm-start
+   --patience 10`: start from the last step's perturbation, give up a stalled step); total
+   wall time, return and queries per step of each.
 
-Ends with one line: speedup_vs_naive=<x> attacked_over_clean=<y>
+Ends with one line: speedup_vs_naive=<x> attacked_over_clean=<y> saving_over_clean=<z>
 """
 
 from __future__ import annotations
@@ -69,19 +71,23 @@ def per_step(model: str, states: int, steps: int, q: int) -> tuple[float, float]
     return naive, batched
 
 
-def evaluation(model: str, episodes: int) -> tuple[float, float, int, int]:
+def evaluation(model: str, episodes: int) -> dict[str, tuple[float, int, float, float]]:
+    """{config: (wall time [s], steps, mean return, queries per step)} on the same seeds."""
     preset = load_preset("discrete")
     victim = sb3_victim(load_model(model, preset))
-    spec = load_attack("zo-signsgd")
-    times, lengths = [], []
-    for attacked in (False, True):
-        env = make_attacked_env(preset, victim, spec if attacked else None)
-        t0, n = time.perf_counter(), 0
+    default = load_attack("zo-signsgd")
+    configs = {"clean": None, "default": default,
+               "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}
+    results = {}
+    for name, spec in configs.items():
+        env = make_attacked_env(preset, victim, spec)
+        t0, n, returns, queries = time.perf_counter(), 0, [], 0
         for i in range(episodes):
-            n += run_episode(env, victim, episode=i, seed=SEED + i, max_return=450.0).length
-        times.append(time.perf_counter() - t0)
-        lengths.append(n)
-    return times[0], times[1], lengths[0], lengths[1]
+            record = run_episode(env, victim, episode=i, seed=SEED + i, max_return=450.0)
+            n, queries = n + record.length, queries + record.queries
+            returns.append(record.return_)
+        results[name] = (time.perf_counter() - t0, n, float(np.mean(returns)), queries / n)
+    return results
 
 
 def main() -> None:
@@ -97,14 +103,15 @@ def main() -> None:
     print(f"per environment step, T={args.steps}, q={args.n_directions}, all iterations:")
     print(f"  literal Algorithm 1 (1 query per call): {1000 * naive:8.1f} ms")
     print(f"  zodrive engine (1 call per iteration):  {1000 * batched:8.1f} ms")
-    clean, attacked, n_clean, n_att = evaluation(args.model, args.episodes)
+    results = evaluation(args.model, args.episodes)
+    clean = results["clean"][0]
     print(f"evaluation of {args.episodes} episodes (seeds {SEED}..{SEED + args.episodes - 1}):")
-    print(f"  clean:    {clean:7.1f} s for {n_clean} steps ({1000 * clean / n_clean:.2f} ms/step)")
-    print(f"  attacked: {attacked:7.1f} s for {n_att} steps ({1000 * attacked / n_att:.2f} ms/step; "
-          "attacked episodes end sooner when the agent crashes)")
-    print(f"  per-step cost ratio attacked/clean: {(attacked / n_att) / (clean / n_clean):.2f}")
-    print(f"speedup_vs_naive={naive / batched:.1f} attacked_over_clean={attacked / clean:.2f}")
-
+    for name, (wall, n, ret, queries) in results.items():
+        print(f"  {name:20s} {wall:7.1f} s for {n:5d} steps ({1000 * wall / n:6.2f} ms/step), mean return "
+              f"{ret:6.1f}, {queries:7.1f} queries/step, wall time x{wall / clean:.2f} of clean")
+    print("  (attacked episodes end sooner when the agent crashes)")
+    print(f"speedup_vs_naive={naive / batched:.1f} attacked_over_clean={results['default'][0] / clean:.2f} "
+          f"saving_over_clean={results['warm-start+patience'][0] / clean:.2f}")
 
 if __name__ == "__main__":
     main()
