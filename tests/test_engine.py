@@ -229,3 +229,34 @@ def test_restarts_never_lose_and_count_their_queries(name: str) -> None:
     assert more.success.sum() >= one.success.sum()
     assert np.all(more.success[one.success])  # a won row stays won: restarts only run for the others
     assert more.queries.max() <= attack.queries_per_step() == 4 * attack.queries_per_run()
+
+
+def test_episode_query_budget_caps_an_episode_then_the_policy_sees_clean_data() -> None:
+    victim = linear_victim(seed=2)
+    attack, objective, oracle = AttackSpec(attack="zo-signsgd", eps=0.02, episode_query_budget=500).build(
+        victim, **CONTEXT)
+    oracle.begin_episode()
+    spent = []
+    for i in range(6):
+        x0 = observations(1, seed=20 + i)
+        result = attack.perturb(x0, oracle, objective)
+        spent.append(int(result.queries[0]))
+    assert oracle.episode_queries == sum(spent) <= 500
+    assert spent[-1] == 0 and np.array_equal(result.x_adv, x0)  # nothing left: clean observation, no query
+    oracle.begin_episode()
+    assert attack.perturb(observations(1), oracle, objective).queries[0] > 0
+
+
+def test_strategic_timing_attacks_only_where_the_policy_cares() -> None:
+    from zodrive.attacks.base import preference
+
+    victim = linear_victim(seed=2)
+    x0 = observations(64, seed=5)
+    pref = preference(victim.query(x0))
+    threshold = float(np.median(pref))
+    result, _, _ = _attack("zo-signsgd", victim, x0, eps=0.3, timing=threshold)
+    low = pref < threshold
+    assert np.all(result.queries[low] == 1) and np.all(result.x_adv[low] == x0[low])  # clean query only
+    assert result.queries[~low].mean() > 1 and result.success[~low].any()
+    with pytest.raises(ZodriveError, match="timing"):
+        AttackSpec(timing=0.5).build(linear_victim(kind="continuous"), **context("continuous"))

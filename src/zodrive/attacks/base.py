@@ -95,6 +95,7 @@ class Attack(abc.ABC):
         warm_start: bool = False,
         on_failure: str = "best",
         restarts: int = 0,
+        timing: float | None = None,
         seed: int = 0,
     ) -> None:
         if not isinstance(steps, (int, np.integer)) or steps < 1:
@@ -111,6 +112,8 @@ class Attack(abc.ABC):
             raise ZodriveError(f"patience must be an integer >= 1 or none, not {patience}")
         if not isinstance(restarts, (int, np.integer)) or restarts < 0:
             raise ZodriveError(f"restarts must be an integer >= 0, not {restarts}")
+        if timing is not None and not 0.0 <= timing < 1.0:
+            raise ZodriveError(f"timing (a preference threshold in [0, 1)) must be in [0, 1) or none, not {timing}")
         if on_failure not in ON_FAILURE:
             raise ZodriveError(f"on_failure must be one of {', '.join(ON_FAILURE)}, not {on_failure!r}")
         self.threat = threat
@@ -124,6 +127,7 @@ class Attack(abc.ABC):
         self.warm_start = bool(warm_start)
         self.on_failure = on_failure
         self.restarts = int(restarts)
+        self.timing = timing
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._carry: np.ndarray | None = None  # the last step's perturbation (warm start)
@@ -145,6 +149,14 @@ class Attack(abc.ABC):
     def queries_per_step(self) -> int:
         """Upper bound on victim queries per environment step: every restart is a new run."""
         return (1 + self.restarts) * self.queries_per_run()
+
+    def first_iteration_cost(self) -> int:
+        """Queries of the clean observation and one iteration: the least a step can cost."""
+        saved, self.steps = self.steps, 1
+        try:
+            return self.queries_per_run()
+        finally:
+            self.steps = saved
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
@@ -188,6 +200,8 @@ class Attack(abc.ABC):
             return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
 
         everyone = np.arange(n)
+        if oracle.remaining(everyone).min() < self.first_iteration_cost():
+            return self._untouched(x0, oracle)  # the episode's budget cannot pay for one iteration: clean data
         if self.black_box:
             clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
         else:
@@ -211,6 +225,8 @@ class Attack(abc.ABC):
             x = project(x[:, None], everyone)[:, 0]
             active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
             active &= oracle.remaining(everyone) > 0
+            if self.timing is not None:  # strategically timed: only where the policy cares which action
+                active &= preference(clean) >= self.timing
             stalled = np.zeros(n, dtype=np.int64)
             for k in range(self.steps):
                 rows = np.flatnonzero(active)
@@ -279,6 +295,26 @@ class Attack(abc.ABC):
             queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
             adv_outputs=fed_out, clean_outputs=clean, trace=records,
         )
+
+
+    def _untouched(self, x0: np.ndarray, oracle: QueryOracle) -> AttackResult:
+        """A step the attacker cannot afford to look at: nothing queried, nothing changed."""
+        n = len(x0)
+        nothing = np.zeros(n, dtype=bool)
+        empty = np.full((n, 0), np.nan, dtype=np.float32)
+        return AttackResult(x_adv=x0.copy(), success=nothing, already=nothing.copy(),
+                            iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
+                            linf=np.zeros(n), l2=np.zeros(n), adv_outputs=empty, clean_outputs=empty)
+
+
+def preference(outputs: np.ndarray) -> np.ndarray:
+    """How much a discrete policy cares which action it takes (Lin et al., "Tactics of
+    Adversarial Attack on Deep Reinforcement Learning Agents", IJCAI 2017): the gap between
+    the most and least preferred action of softmax(Q). Near 0 where the choice hardly
+    matters, so an attacker with few queries attacks where it is large."""
+    z = np.exp(outputs - outputs.max(axis=-1, keepdims=True))
+    p = z / z.sum(axis=-1, keepdims=True)
+    return p.max(axis=-1) - p.min(axis=-1)
 
 
 class GradientEstimateAttack(Attack):

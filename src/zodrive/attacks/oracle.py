@@ -21,16 +21,21 @@ class QueryOracle:
     A step attacks `rows` environments at once (`begin_step`); every query belongs to one
     row (`owners`) and `query_budget` caps the queries of each row in one environment step
     (None = unlimited). Rows never share an allowance: a row that finishes early leaves
-    nothing to the others. Counters: `row_queries` (per row, since `begin_step`),
+    nothing to the others. `episode_query_budget` caps the queries of an episode (since
+    `begin_episode`; an oracle serves one environment, as in the attack wrapper). Counters: `row_queries` (per row, since `begin_step`),
     `step_queries`, `episode_queries` (since `begin_episode`), `total_queries`, and
     `calls` (victim invocations; one per batch).
     """
 
-    def __init__(self, victim: Victim, query_budget: int | None = None) -> None:
+    def __init__(self, victim: Victim, query_budget: int | None = None,
+                 episode_query_budget: int | None = None) -> None:
         if query_budget is not None and query_budget < 1:
             raise ZodriveError(f"query_budget must be >= 1, not {query_budget}")
+        if episode_query_budget is not None and episode_query_budget < 1:
+            raise ZodriveError(f"episode_query_budget must be >= 1, not {episode_query_budget}")
         self.victim = victim
         self.query_budget = query_budget
+        self.episode_query_budget = episode_query_budget
         self.row_queries = np.zeros(1, dtype=np.int64)
         self.episode_queries = 0
         self.total_queries = 0
@@ -46,9 +51,12 @@ class QueryOracle:
 
     def remaining(self, rows: np.ndarray) -> np.ndarray:
         """Queries each of `rows` may still make this step (inf without a budget)."""
-        if self.query_budget is None:
-            return np.full(len(rows), np.inf)
-        return (self.query_budget - self.row_queries[rows]).astype(np.float64)
+        left = np.full(len(rows), np.inf)
+        if self.query_budget is not None:
+            left = (self.query_budget - self.row_queries[rows]).astype(np.float64)
+        if self.episode_query_budget is not None:
+            left = np.minimum(left, self.episode_query_budget - self.episode_queries)
+        return left
 
     def begin_episode(self) -> None:
         self.episode_queries = 0
@@ -66,6 +74,9 @@ class QueryOracle:
             raise QueryBudgetExhausted(
                 f"row {over} would spend {int(self.row_queries[over] + counts[over])} of {self.query_budget} queries"
             )
+        if self.episode_query_budget is not None and self.episode_queries + len(owners) > self.episode_query_budget:
+            raise QueryBudgetExhausted(f"the episode would spend {self.episode_queries + len(owners)} of "
+                                       f"{self.episode_query_budget} queries")
         self.row_queries += counts
 
     def _owners(self, n: int, owners: np.ndarray | None) -> np.ndarray:

@@ -45,6 +45,8 @@ class AttackSpec:
     warm_start: bool = False              # start each step from the previous step's perturbation
     on_failure: str = "best"              # what a failed step feeds: best (point found) | clean
     restarts: int = 0                     # further runs from random points of the budget set
+    timing: float | None = None           # strategically timed: attack only where preference >= this (discrete)
+    episode_query_budget: int | None = None  # max queries per episode (None: no cap)
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
 
@@ -57,7 +59,7 @@ class AttackSpec:
         values = {k: v for k, v in data.items() if k in names}
         for field in dataclasses.fields(cls):
             value = values.get(field.name)
-            numeric = field.type in ("float", "int", "int | None")
+            numeric = field.type in ("float", "int", "int | None", "float | None")
             if numeric and value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
                 raise ZodriveError(f"attack option {field.name} must be a number, not {value!r}")
         if "frozen" in values:
@@ -85,7 +87,7 @@ class AttackSpec:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
-                           restarts=self.restarts,
+                           restarts=self.restarts, timing=self.timing,
                            seed=self.seed)
 
     def build(
@@ -101,18 +103,20 @@ class AttackSpec:
             log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps, threat.low, threat.high)
         attack = self._make(threat, self.steps)
-        if self.query_budget is not None and self.query_budget >= 1:  # < 1: the oracle says so
-            one = self._make(threat, 1).queries_per_step()  # the cost of a single iteration
-            if self.query_budget < one:
-                raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
+        one = attack.first_iteration_cost()
+        for name, budget in (("query budget", self.query_budget), ("episode query budget", self.episode_query_budget)):
+            if budget is not None and 1 <= budget < one:  # < 1: the oracle says so
+                raise ZodriveError(f"{name} {budget} is below one iteration of {self.attack} "
                                    f"({one} queries with these settings): the attack could do nothing")
         objective = make_objective(
             victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,
             kappa=self.kappa, tol=self.tol, n_actions=n_actions,
         )
+        if self.timing is not None and victim.kind != "discrete":
+            raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
-        return attack, objective, QueryOracle(victim, self.query_budget)
+        return attack, objective, QueryOracle(victim, self.query_budget, self.episode_query_budget)
 
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
