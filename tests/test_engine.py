@@ -260,3 +260,17 @@ def test_strategic_timing_attacks_only_where_the_policy_cares() -> None:
     assert result.queries[~low].mean() > 1 and result.success[~low].any()
     with pytest.raises(ZodriveError, match="timing"):
         AttackSpec(timing=0.5).build(linear_victim(kind="continuous"), **context("continuous"))
+
+
+def test_decision_only_access_hides_the_scores() -> None:
+    victim = linear_victim(seed=2)
+    x0 = observations(64, seed=5)
+    seen: list[np.ndarray] = []
+    attack, objective, oracle = AttackSpec(attack="random-search", access="decision", eps=0.3).build(
+        recording(victim, seen), **CONTEXT)
+    result = attack.perturb(x0, oracle, objective)
+    assert set(np.unique(result.adv_outputs)) <= {0.0, 1.0} and np.all(result.adv_outputs.sum(axis=1) == 1)
+    assert result.success.sum() >= 5  # searching on the decision alone still flips some steps
+    np.testing.assert_array_equal(victim.query(result.x_adv).argmax(axis=1)[result.success], 3)
+    with pytest.raises(ZodriveError, match="decision-only"):
+        AttackSpec(attack="pgd", access="decision").build(victim, **CONTEXT)

@@ -200,6 +200,8 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--timing", type=float,
                        help="strategically timed attack: only steps where the policy's action preference >= this (0-1)")
     group.add_argument("--episode-query-budget", type=_positive_int, help="max queries per episode")
+    group.add_argument("--access", choices=["score", "decision"],
+                       help="what the attacker's queries return: scores (Q-values/action) or only the decision")
     group.add_argument("--attack-seed", type=_seed)
 
 
@@ -208,7 +210,7 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
                 "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
                 "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure", "--restarts": "restarts",
-                "--timing": "timing", "--episode-query-budget": "episode_query_budget",
+                "--timing": "timing", "--episode-query-budget": "episode_query_budget", "--access": "access",
                 "--attack-seed": "attack_seed"}
 
 
@@ -228,7 +230,7 @@ def attack_spec_from_args(args: argparse.Namespace):
         l2_weight=args.l2_weight, target=args.target, loss=args.loss,
         query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
         patience=args.patience, warm_start=args.warm_start, on_failure=args.on_failure, restarts=args.restarts,
-        timing=args.timing, episode_query_budget=args.episode_query_budget,
+        timing=args.timing, episode_query_budget=args.episode_query_budget, access=args.access,
     )
 
 

@@ -7,11 +7,11 @@ import logging
 from dataclasses import dataclass
 from typing import Any
 
-from zodrive.attacks.victim import Victim
+from zodrive.attacks.victim import Victim, decision_only
 from zodrive.attacks.base import Attack
 from zodrive.attacks.objectives import Objective, make_objective
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.registry import make_attack
+from zodrive.attacks.registry import ATTACKS, make_attack
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
@@ -47,6 +47,7 @@ class AttackSpec:
     restarts: int = 0                     # further runs from random points of the budget set
     timing: float | None = None           # strategically timed: attack only where preference >= this (discrete)
     episode_query_budget: int | None = None  # max queries per episode (None: no cap)
+    access: str = "score"                 # what a query returns: score (Q-values / action) | decision (action only)
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
 
@@ -97,6 +98,12 @@ class AttackSpec:
 
         `features`, `bounds` (the observation box) and `n_actions` describe the preset
         (`zodrive.envs.attack_context`)."""
+        if self.access not in ("score", "decision"):
+            raise ZodriveError(f"access must be score or decision, not {self.access!r}")
+        if self.access == "decision":
+            if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
+                raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
+            victim = decision_only(victim)
         threat = self.threat(features, bounds)
         width = threat.high - threat.low
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
@@ -121,7 +128,6 @@ class AttackSpec:
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too."""
-    from zodrive.attacks.registry import ATTACKS
     from zodrive.config import available
 
     if name in ATTACKS and name not in available("attacks"):
