@@ -225,3 +225,15 @@ def test_select_picks_a_checkpoint_on_tuning_seeds(tmp_path: Path, capsys) -> No
     assert summary["seed"] == 50_000  # tuning seeds, never the evaluation seeds
     assert "selected:" in capsys.readouterr().out
     assert main(["select", str(tmp_path), "--episodes", "2"]) == 2
+
+
+def test_compare_over_query_budgets_draws_the_budget_curve(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "grid"
+    assert main(["compare", "baseline:slower", "--attacks", "zo-signsgd", "--query-budgets", "21", "42",
+                 "--episodes", "1", "--out", str(out), "--no-progress", "--plot", str(out / "budget.png")]) == 0
+    rows = json.loads((out / "table.json").read_text())
+    assert [r["query_budget"] for r in rows] == [None, 21, 42]
+    assert rows[1]["queries_per_step"] <= 21 < rows[2]["queries_per_step"] <= 42
+    assert (out / "cells" / "baseline-slower-zo-signsgd-eps0.2-qb21" / "summary.json").is_file()
+    assert (out / "budget.png").stat().st_size > 0
+    assert "Budget/step" in capsys.readouterr().out

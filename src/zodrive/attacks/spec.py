@@ -91,6 +91,18 @@ class AttackSpec:
                            restarts=self.restarts, timing=self.timing,
                            seed=self.seed)
 
+    def check(self) -> None:
+        """Validate the attack's options and budgets without a victim (before any episode runs)."""
+        self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=()),  # type: ignore[arg-type]
+                                       self.steps))
+
+    def _check_budgets(self, attack: Attack) -> None:
+        one = attack.first_iteration_cost()
+        for name, budget in (("query budget", self.query_budget), ("episode query budget", self.episode_query_budget)):
+            if budget is not None and 1 <= budget < one:  # < 1: the oracle says so
+                raise ZodriveError(f"{name} {budget} is below one iteration of {self.attack} "
+                                   f"({one} queries with these settings): the attack could do nothing")
+
     def build(
         self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int
     ) -> tuple[Attack, Objective, QueryOracle]:
@@ -110,11 +122,7 @@ class AttackSpec:
             log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps, threat.low, threat.high)
         attack = self._make(threat, self.steps)
-        one = attack.first_iteration_cost()
-        for name, budget in (("query budget", self.query_budget), ("episode query budget", self.episode_query_budget)):
-            if budget is not None and 1 <= budget < one:  # < 1: the oracle says so
-                raise ZodriveError(f"{name} {budget} is below one iteration of {self.attack} "
-                                   f"({one} queries with these settings): the attack could do nothing")
+        self._check_budgets(attack)
         objective = make_objective(
             victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,
             kappa=self.kappa, tol=self.tol, n_actions=n_actions,

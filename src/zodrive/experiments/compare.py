@@ -20,7 +20,14 @@ from zodrive.runinfo import write_atomic, write_json
 
 
 def compare(models: list[str], attacks: list[str], eps_values: list[float], episodes: int, out: Path, *,
-            workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED) -> list[dict[str, Any]]:
+            workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
+            query_budgets: list[int | None] | None = None) -> list[dict[str, Any]]:
+    """Every model x attack x eps x per-step query budget; one resumable evaluation per cell."""
+    budgets = query_budgets or [None]
+    for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
+        for budget in budgets:
+            for eps in eps_values:
+                load_attack(attack).with_overrides(eps=eps, query_budget=budget).check()
     rows = []
     for model in models:
         preset = load_preset(policy_kind(model))
@@ -28,14 +35,16 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         ref, name = policy_ref(model), policy_label(model)
         attackable = not (is_baseline(model) and get_baseline(model).reads == "simulator")
         for attack in ["none", *attacks] if attackable else ["none"]:
-            for eps in ([None] if attack == "none" else eps_values):
-                spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps)
-                cell = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}"))
+            grid = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
+            for eps, budget in grid:
+                spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps, query_budget=budget)
+                cell = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
+                                        + ("" if budget is None else f"-qb{budget}"))
                 job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed)
                 s = evaluate(job, episodes, cell, workers=workers, progress=progress)
                 low, high = s["ci95"]
                 rows.append({
-                    "model": name, "attack": _label(attack), "eps": eps, "mean_return": s["mean_return"], "ci95_low": low,
+                    "model": name, "attack": _label(attack), "eps": eps, "query_budget": budget, "mean_return": s["mean_return"], "ci95_low": low,
                     "ci95_high": high, "collision_rate": s["collision_rate"],
                     "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
                     "lane_changes_per_episode": s.get("lane_changes_per_episode"),
@@ -60,13 +69,15 @@ def _cell(value: Any, pattern: str) -> str:
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    lines = ["| Model | Attack | ε (L∞) | Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
+    budgets = any(r.get("query_budget") is not None for r in rows)
+    lines = ["| Model | Attack | ε (L∞) | " + ("Budget/step | " if budgets else "") + "Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
              "| Success (base rate) | Queries/step | max L∞ |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if budgets else "")]
     for r in rows:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
-        lines.append(f"| {r['model']} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {r['mean_return']:.1f} "
+        budget = f"{_cell(r.get('query_budget'), '{:d}')} | " if budgets else ""
+        lines.append(f"| {r['model']} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
                      f"{_cell(r.get('offroad_rate'), '{:.0%}')} | {_cell(r.get('mean_speed'), '{:.1f}')} | "
                      f"{_cell(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
@@ -82,3 +93,38 @@ def write_tables(rows: list[dict[str, Any]], out: Path) -> None:
     writer.writerows(rows)
     write_atomic(out / "table.csv", buf.getvalue())
     write_atomic(out / "table.md", markdown(rows))
+
+
+def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
+    """Return (left) and step success (right) against queries spent per step, one line per
+    model and attack; points are the cells of the grid (eps and budget)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_r, ax_s) = plt.subplots(1, 2, figsize=(10, 4))
+    for (model, attack), group in _groups(rows).items():
+        group = sorted(group, key=lambda r: r["queries_per_step"])
+        q = [r["queries_per_step"] for r in group]
+        label = f"{model} {attack}"
+        ax_r.plot(q, [r["mean_return"] for r in group], marker="o", label=label)
+        ax_s.plot(q, [100 * r["attack_success_rate"] for r in group], marker="o", label=label)
+    for r in rows:
+        if r["attack"] == "none":
+            ax_r.axhline(r["mean_return"], ls="--", lw=1, color="grey")
+    ax_r.set(xscale="log", xlabel="queries per step (mean)", ylabel="mean return", title="return (dashed: clean)")
+    ax_s.set(xscale="log", xlabel="queries per step (mean)", ylabel="steps won (%)", title="attack success")
+    ax_s.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _groups(rows: list[dict[str, Any]]) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in rows:
+        if r["attack"] != "none" and r.get("queries_per_step"):
+            groups.setdefault((r["model"], r["attack"]), []).append(r)
+    return groups
