@@ -110,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
 
+    exp = sub.add_parser("export", help="write a model's acting network as ONNX (a victim format with no pickle)")
+    exp.add_argument("model", help="SB3 zip or model folder")
+    exp.add_argument("--format", choices=["onnx"], default="onnx")
+    exp.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
+
     sel = sub.add_parser("select", help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
     sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
     sel.add_argument("--episodes", type=_positive_int, default=20, help="tuning episodes per checkpoint")
@@ -349,6 +354,13 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from zodrive.agents.onnx_policy import export_onnx
+
+    print(f"wrote {export_onnx(args.model, args.out)}")
+    return 0
+
+
 def cmd_select(args: argparse.Namespace) -> int:
     from zodrive.experiments.select import select_checkpoint, selection_markdown
 
@@ -430,7 +442,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "select": cmd_select, "reproduce": cmd_reproduce,
+            "adv-train": cmd_adv_train, "select": cmd_select, "export": cmd_export, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
 
 
@@ -456,7 +468,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not args.models_dir.is_dir():
                 raise ZodriveError(f"--models {args.models_dir}: not a folder")
             os.environ[MODELS_ENV] = str(args.models_dir)
-        _check_out(getattr(args, "out", None))
+        if args.command != "export":  # export's --out is a file
+            _check_out(getattr(args, "out", None))
         _check_model_paths(args)
         return COMMANDS[args.command](args)
     except ZodriveError as exc:

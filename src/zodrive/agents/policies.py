@@ -23,6 +23,10 @@ def policy_kind(model: str) -> str:
     """`discrete` or `continuous`: the preset kind the policy drives by default."""
     if bl.is_baseline(model):
         return bl.get_baseline(model).kinds[0]
+    from zodrive.agents.onnx_policy import is_onnx, onnx_metadata
+
+    if is_onnx(model):
+        return onnx_metadata(Path(model))["kind"]
     from zodrive.agents.loading import model_algo
     from zodrive.agents.training import KIND_OF_ALGO
 
@@ -56,9 +60,10 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
                                "an observation attack cannot reach it")
         return
     from zodrive.agents.loading import check_fits, inspect_model, model_file
+    from zodrive.agents.onnx_policy import is_onnx, onnx_metadata
 
     file = model_file(model)
-    check_fits(inspect_model(file), preset, file)
+    check_fits(onnx_metadata(file) if is_onnx(file) else inspect_model(file), preset, file)
 
 
 def load_victim(model: str, preset: dict[str, Any]) -> Victim:
@@ -72,8 +77,12 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
                                "(use make_policy_env)")
         return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset))
     from zodrive.agents.loading import load_network
+    from zodrive.agents.onnx_policy import is_onnx, onnx_victim
     from zodrive.agents.victims import network_victim
 
+    if is_onnx(model):
+        check_policy(model, preset)
+        return onnx_victim(Path(model))
     network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
     return network_victim(network.net, kind, network.obs_shape)
 
