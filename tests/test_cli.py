@@ -237,3 +237,12 @@ def test_compare_over_query_budgets_draws_the_budget_curve(tmp_path: Path, capsy
     assert (out / "cells" / "baseline-slower-zo-signsgd-eps0.2-qb21" / "summary.json").is_file()
     assert (out / "budget.png").stat().st_size > 0
     assert "Budget/step" in capsys.readouterr().out
+
+
+def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "video"
+    assert main(["render", "baseline:slower", "--out", str(out), "--env-set", "max_episode_steps=12"]) == 0
+    for name in ("episode.png", "episode.gif", "episode.mp4", "episode.json"):
+        assert (out / name).stat().st_size > 0, name
+    assert (out / "episode.mp4").read_bytes()[4:8] == b"ftyp"  # an MP4 container
+    assert "episode.mp4" in capsys.readouterr().out

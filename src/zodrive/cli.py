@@ -315,7 +315,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     from zodrive.agents.policies import make_policy_env
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
-    from zodrive.evaluation.video import record_episode, save_gif, save_png
+    from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
 
     spec = attack_spec_from_args(args)
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
@@ -330,12 +330,13 @@ def cmd_render(args: argparse.Namespace) -> int:
     title = f"{spec.attack} eps={spec.eps} | " if spec else "clean | "
     save_png(frames, args.out / "episode.png", title=title)
     save_gif(frames, args.out / "episode.gif", title=title)
+    mp4 = save_mp4(frames, args.out / "episode.mp4", title=title)
     from zodrive.runinfo import write_json
 
     write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None})
     print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
           f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
-          f" -> {args.out}/episode.png, episode.gif")
+          f" -> {args.out}/episode.png, episode.gif" + (", episode.mp4" if mp4 else " (MP4: pip install 'zodrive[video]')"))
     return 0
 
 
