@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -107,10 +108,16 @@ def test_card_reports_median_and_range_over_training_seeds(tmp_path: Path) -> No
         (run / "eval" / "summary.json").write_text(json.dumps({
             "mean_return": ret, "ci95": [ret - 5, ret + 5], "collision_rate": 0.01, "offroad_rate": 0.0,
             "mean_speed": speed, "lane_changes_per_episode": 1.5}))
+        episodes = [{"seed": 100 + i, "return": ret + (i % 5 - 2)} for i in range(20)]
+        (run / "eval" / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in episodes))
         runs.append(run)
     text = "\n".join(seed_table(runs))
     assert "Mean return across 3 seeds: median 340.00, range 300.00–360.00" in text
     assert "Speed (m/s) across 3 seeds: median 25.0, range 24.0–26.0" in text
+    iqm = re.search(r"Interquartile mean over 3 seeds x 20 episodes .*: ([\d.]+) \(([\d.]+)–([\d.]+)\)", text)
+    assert iqm, text
+    low, point, high = float(iqm.group(2)), float(iqm.group(1)), float(iqm.group(3))
+    assert 300 <= low <= point <= high <= 360 and low < high
 
 
 def test_learning_curves_bin_episodes_by_training_step(tmp_path: Path, capsys) -> None:

@@ -53,7 +53,28 @@ def seed_table(folders: list[Path]) -> list[str]:
         values = np.array([s.get(key, np.nan) for _, _, s in rows], dtype=float)
         lines.append(f"- {label} across {len(values)} seeds: median " + fmt.format(np.median(values))
                      + ", range " + fmt.format(values.min()) + "–" + fmt.format(values.max()))
+    lines.append(_iqm_line([folder for _, folder, _ in rows]))
     return lines
+
+
+def _iqm_line(folders: list[Path]) -> str:
+    """rliable's IQM over seeds x episodes, from each seed's per-episode returns."""
+    import json
+
+    from zodrive.evaluation.stats import iqm_over_seeds
+
+    per_seed = []
+    for folder in folders:
+        lines = (folder / "eval" / "episodes.jsonl").read_text().splitlines()
+        episodes = sorted((json.loads(line) for line in lines if line.strip()), key=lambda e: e["seed"])
+        per_seed.append([e["return"] for e in episodes])
+    if len({len(r) for r in per_seed}) != 1:
+        return "- IQM: not computed (the seeds were evaluated on different numbers of episodes)"
+    iqm = iqm_over_seeds(per_seed)
+    if iqm is None:
+        return "- IQM over seeds x episodes: install `zodrive[stats]` (rliable) to compute it"
+    return (f"- Interquartile mean over {len(per_seed)} seeds x {len(per_seed[0])} episodes (rliable, stratified "
+            f"bootstrap 95% CI): {iqm[0]:.2f} ({iqm[1]:.2f}–{iqm[2]:.2f})")
 
 
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,

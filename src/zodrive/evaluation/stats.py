@@ -67,3 +67,20 @@ def paired_difference_ci(a: Sequence[float], b: Sequence[float], *, seed: int = 
     diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
     low, high = mean_ci(diff, seed=seed)
     return float(diff.mean()), low, high
+
+
+def iqm_over_seeds(returns: Sequence[Sequence[float]], *, reps: int = 10_000, seed: int = 0) -> tuple[float, float, float] | None:
+    """Interquartile mean over training seeds x evaluation episodes with a stratified
+    bootstrap 95 % CI (rliable: Agarwal et al., "Deep RL at the Edge of the Statistical
+    Precipice", NeurIPS 2021): runs are the seeds, tasks the evaluation episodes (every
+    seed sees the same episodes). None when rliable (`zodrive[stats]`) is not installed."""
+    try:
+        from rliable import library as rly
+        from rliable import metrics
+    except ImportError:
+        return None
+    scores = np.asarray(returns, dtype=np.float64)  # (seeds, episodes)
+    np.random.seed(seed)  # rliable draws from numpy's global generator
+    point, interval = rly.get_interval_estimates({"agent": scores}, lambda x: np.array([metrics.aggregate_iqm(x)]),
+                                                 reps=reps)
+    return float(point["agent"][0]), float(interval["agent"][0, 0]), float(interval["agent"][1, 0])
