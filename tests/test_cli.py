@@ -246,3 +246,14 @@ def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
         assert (out / name).stat().st_size > 0, name
     assert (out / "episode.mp4").read_bytes()[4:8] == b"ftyp"  # an MP4 container
     assert "episode.mp4" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_compare_on_ray_gives_the_local_numbers(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    args = ["compare", "baseline:slower", "baseline:faster", "--attacks", "zo-signsgd", "--query-budgets", "21",
+            "--episodes", "2", "--no-progress"]
+    assert main(args + ["--out", str(tmp_path / "local")]) == 0
+    assert main(args + ["--out", str(tmp_path / "ray"), "--backend", "ray", "--workers", "2"]) == 0
+    local, ray = (json.loads((tmp_path / name / "table.json").read_text()) for name in ("local", "ray"))
+    assert local == ray  # same cells, same order, same numbers

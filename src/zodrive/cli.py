@@ -150,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes)")
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--no-progress", action="store_true")
+    _backend_flags(rep)
 
     cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
     cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
@@ -158,6 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
     cmp_.add_argument("--plot", type=Path, default=None, help="PNG: return and success against queries per step")
+    _backend_flags(cmp_)
     cmp_.add_argument("--episodes", type=_positive_int, default=20)
     cmp_.add_argument("--workers", type=_positive_int, default=1)
     cmp_.add_argument("--out", type=Path, required=True)
@@ -181,6 +183,13 @@ def build_parser() -> argparse.ArgumentParser:
     card.add_argument("--seeds", nargs="+", type=Path, default=None, metavar="RUN",
                       help="run folders of every training seed (each with eval/): median and range in the card")
     return parser
+
+
+def _backend_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", choices=["local", "ray"], default="local",
+                        help="where cells run: this process (episodes over --workers) or Ray tasks (cells in parallel)")
+    parser.add_argument("--address", default=None,
+                        help="Ray cluster address (default: a local Ray instance with --workers CPUs)")
 
 
 def _attack_flags(parser: argparse.ArgumentParser) -> None:
@@ -377,7 +386,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from zodrive.experiments.reproduce import reproduce
 
     table = reproduce(args.out, episodes=args.episodes, workers=args.workers, quick=args.quick,
-                      retrain=args.retrain, progress=not args.no_progress)
+                      retrain=args.retrain, progress=not args.no_progress, backend=args.backend, address=args.address)
     print(table_markdown(table["rows"]), end="")
     print(f"report: {args.out}/report.html")
     return 0
@@ -388,7 +397,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from zodrive.experiments.compare import compare, markdown, plot_budget_curves
 
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
-                   workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets)
+                   workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
+                   backend=args.backend, address=args.address)
     print(markdown(rows), end="")
     if args.plot:
         plot_budget_curves(rows, args.plot)

@@ -15,45 +15,55 @@ from zodrive.agents.baselines import get_baseline, is_baseline
 from zodrive.agents.policies import check_policy, policy_kind, policy_label, policy_ref
 from zodrive.attacks.spec import load_attack
 from zodrive.envs import load_preset
-from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+from zodrive.experiments.cells import Cell, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
 
 def compare(models: list[str], attacks: list[str], eps_values: list[float], episodes: int, out: Path, *,
             workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
-            query_budgets: list[int | None] | None = None) -> list[dict[str, Any]]:
+            query_budgets: list[int | None] | None = None, backend: str = "local",
+            address: str | None = None) -> list[dict[str, Any]]:
     """Every model x attack x eps x per-step query budget; one resumable evaluation per cell."""
     budgets = query_budgets or [None]
     for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
         for budget in budgets:
             for eps in eps_values:
                 load_attack(attack).with_overrides(eps=eps, query_budget=budget).check()
-    rows = []
+    grid: list[dict[str, Any]] = []
+    cells: list[Cell] = []
     for model in models:
         preset = load_preset(policy_kind(model))
         check_policy(model, preset)
         ref, name = policy_ref(model), policy_label(model)
         attackable = not (is_baseline(model) and get_baseline(model).reads == "simulator")
         for attack in ["none", *attacks] if attackable else ["none"]:
-            grid = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
-            for eps, budget in grid:
+            points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
+            for eps, budget in points:
                 spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps, query_budget=budget)
-                cell = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
-                                        + ("" if budget is None else f"-qb{budget}"))
+                folder = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
+                                          + ("" if budget is None else f"-qb{budget}"))
                 job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed)
-                s = evaluate(job, episodes, cell, workers=workers, progress=progress)
-                low, high = s["ci95"]
-                rows.append({
-                    "model": name, "attack": _label(attack), "eps": eps, "query_budget": budget, "mean_return": s["mean_return"], "ci95_low": low,
-                    "ci95_high": high, "collision_rate": s["collision_rate"],
-                    "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
-                    "lane_changes_per_episode": s.get("lane_changes_per_episode"),
-                    "right_lane_share": s["right_lane_share"], "attack_success_rate": s.get("attack_success_rate"), "target_base_rate": s.get("target_base_rate"),
-                    "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
-                    "episodes": s["episodes"],
-                })
-                write_tables(rows, out)
-    return rows
+                grid.append({"model": name, "attack": _label(attack), "eps": eps, "query_budget": budget})
+                cells.append(Cell(job, episodes, folder))
+    rows: list[dict[str, Any] | None] = [None] * len(cells)
+
+    def done(i: int, s: dict[str, Any]) -> None:
+        low, high = s["ci95"]
+        rows[i] = {
+            **grid[i], "mean_return": s["mean_return"], "ci95_low": low,
+            "ci95_high": high, "collision_rate": s["collision_rate"],
+            "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
+            "lane_changes_per_episode": s.get("lane_changes_per_episode"),
+            "right_lane_share": s["right_lane_share"], "attack_success_rate": s.get("attack_success_rate"),
+            "target_base_rate": s.get("target_base_rate"),
+            "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
+            "episodes": s["episodes"],
+        }
+        write_tables([r for r in rows if r is not None], out)  # in grid order, as cells finish
+
+    run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done)
+    return rows  # type: ignore[return-value]
 
 
 def _label(attack: str) -> str:

@@ -22,7 +22,8 @@ from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.config import models_dir
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+from zodrive.experiments.cells import Cell, run_cells
+from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
 from zodrive.experiments.paper import ADV_STEPS
 from zodrive.runinfo import write_json
 
@@ -80,7 +81,8 @@ def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str
 
 
 def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool = False,
-              retrain: bool = False, progress: bool = True, seed: int = DEFAULT_EVAL_SEED) -> dict[str, Any]:
+              retrain: bool = False, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
+              backend: str = "local", address: str | None = None) -> dict[str, Any]:
     """Run (or resume) the whole reproduction into `out`; returns the Table 1 data."""
     from zodrive.experiments.report import build_table, write_report
 
@@ -94,24 +96,31 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
     models = prepare_models(out, retrain=retrain, quick=quick, progress=progress)
     spec = load_attack("zo-signsgd")
     summaries: dict[str, dict[str, dict[str, Any]]] = {"dqn": {}, "ddpg": {}}
+    todo: list[tuple[str, str, Cell]] = []
     for algo, row, model, attack in cells(models, spec):
         folder = out / "cells" / f"{algo}-{row}"
         job = EvalJob(model=model, preset=load_preset(PRESET_OF[algo]),
                       attack=attack.to_dict() if attack else None, seed=seed)
-        t0 = time.perf_counter()
         summary_path = folder / "summary.json"
         if summary_path.is_file() and json.loads(summary_path.read_text()).get("episodes") == episodes \
                 and (folder / "eval_key.json").is_file() \
                 and json.loads((folder / "eval_key.json").read_text()) == json.loads(json.dumps(job.key())):
             summaries[algo][row] = json.loads(summary_path.read_text())
             continue
-        log.info("cell %s / %s", algo, row)
+        todo.append((algo, row, Cell(job, episodes, folder)))
         if progress:
             print(f"cell {algo}-{row}: {episodes} episodes of {model}" + (" under attack" if attack else ""),
                   file=sys.stderr)
-        summaries[algo][row] = evaluate(job, episodes, folder, workers=workers, progress=progress)
-        timings[f"cell {algo}-{row}"] = round(time.perf_counter() - t0, 1)
+    t0 = time.perf_counter()
+
+    def done(i: int, summary: dict[str, Any]) -> None:
+        algo, row, _ = todo[i]
+        summaries[algo][row] = summary
+        timings[f"cell {algo}-{row}"] = round(time.perf_counter() - t0, 1)  # since the grid started
         write_json(out / "timings.json", timings)
+
+    run_cells([cell for _, _, cell in todo], backend=backend, workers=workers, progress=progress,
+              address=address, on_done=done)
     figures = make_figures(out, models, spec, quick=quick)
     table = build_table(summaries, out)
     runs = sum(1 for key in timings if key.startswith("invocation "))

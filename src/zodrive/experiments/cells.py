@@ -1,0 +1,67 @@
+"""Run a grid of evaluation cells: in this process (default) or as Ray tasks.
+
+Every cell is an ordinary resumable evaluation writing to its own folder, so the backend
+only decides where cells run; what scales is the number of cells, not the steps inside one.
+`backend="ray"` starts a local Ray instance with `workers` CPUs, or joins the cluster at
+`address`; every worker must see the same output folder (a shared file system on a cluster).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.evaluate import EvalJob, evaluate
+
+BACKENDS = ("local", "ray")
+
+
+@dataclass
+class Cell:
+    job: EvalJob
+    episodes: int
+    folder: Path
+
+
+def _run_one(cell: Cell) -> dict[str, Any]:
+    return evaluate(cell.job, cell.episodes, cell.folder, workers=1, progress=False)
+
+
+def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, progress: bool = True,
+              address: str | None = None, on_done: Callable[[int, dict[str, Any]], None] | None = None
+              ) -> list[dict[str, Any]]:
+    """The summaries of `cells`, in order; `on_done(i, summary)` as each one finishes."""
+    if backend not in BACKENDS:
+        raise ZodriveError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+    results: list[dict[str, Any] | None] = [None] * len(cells)
+    stream = _local(cells, workers, progress) if backend == "local" else _ray(cells, workers, address)
+    for i, summary in stream:
+        results[i] = summary
+        if on_done is not None:
+            on_done(i, summary)
+    return results  # type: ignore[return-value]
+
+
+def _local(cells: list[Cell], workers: int, progress: bool) -> Iterator[tuple[int, dict[str, Any]]]:
+    for i, cell in enumerate(cells):  # one cell at a time, its episodes over `workers` processes
+        yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, progress=progress)
+
+
+def _ray(cells: list[Cell], workers: int, address: str | None) -> Iterator[tuple[int, dict[str, Any]]]:
+    try:
+        import ray
+    except ImportError:
+        raise ZodriveError("--backend ray needs Ray: pip install 'zodrive[ray]'") from None
+    if not ray.is_initialized():
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    task = ray.remote(num_cpus=1)(_run_one)
+    pending = {task.remote(cell): i for i, cell in enumerate(cells)}
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1)
+        for ref in done:
+            yield pending.pop(ref), ray.get(ref)
