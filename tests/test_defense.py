@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -59,3 +60,42 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path) -> 
     train = json.loads((control / "train.json").read_text())
     assert train["kind"] == "control (no attack)" and train["attack_queries"] == 0
     assert (control / "model.zip").is_file()
+
+
+def test_sa_dqn_regularizer_is_the_worst_case_margin_inside_the_ball() -> None:
+    from zodrive.agents.dqn_variants import SADQN
+
+    model = SADQN("MlpPolicy", make_env(PRESET), seed=0, policy_kwargs={"net_arch": [16]})
+    x = torch.from_numpy(np.stack([make_env(PRESET).reset(seed=s)[0] for s in range(8)])).float()
+    mask = np.ones((5, 5), dtype=np.float32)
+    mask[:, 0] = 0
+    model.configure_robust(eps=0.2, kappa=1.0, pgd_steps=10, mask=mask, eps_ramp=0.0, hinge=1e9)
+    model.num_timesteps = 0
+    reg = model.extra_loss(x)
+    with torch.no_grad():
+        q = model.q_net(x)
+        best = q.argmax(dim=1, keepdim=True)
+        clean_margin = (q.scatter(1, best, float("-inf")).amax(dim=1) - q.gather(1, best).squeeze(1)).mean()
+    assert reg is not None and reg.item() > clean_margin.item()  # PGD found worse points than the clean ones
+    reg.backward()  # differentiable in the network's weights
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.q_net.parameters())
+    model.configure_robust(eps=0.2, eps_ramp=0.5, total_steps=100)
+    model.num_timesteps = 0
+    assert model.current_eps() == 0.0  # the ramp starts at the first update
+    model.num_timesteps = 25
+    assert model.current_eps() == pytest.approx(0.1)
+
+
+def test_robust_train_sa_runs_and_records_its_method(tmp_path: Path) -> None:
+    from zodrive.cli import main
+
+    base = tmp_path / "base"
+    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(base), "--no-progress",
+                 "--set", "hyperparameters.learning_starts=100", "--env-set", "max_episode_steps=30"]) == 0
+    out = tmp_path / "sa"
+    assert main(["robust-train", str(base), "--method", "sa", "--eps", "0.05", "--steps", "150", "--warmup", "30",
+                 "--out", str(out), "--no-progress", "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
+    train = json.loads((out / "train.json").read_text())
+    assert train["kind"] == "sa-dqn" and train["method"]["eps"] == 0.05
+    progress = (out / "progress.csv").read_text()
+    assert "train/regularizer" in progress

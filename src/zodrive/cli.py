@@ -110,6 +110,22 @@ def build_parser() -> argparse.ArgumentParser:
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
 
+    rob = sub.add_parser("robust-train", help="continue a trained agent with a robustness method (sa: SA-DQN, at: Algorithm 2)")
+    rob.add_argument("model")
+    rob.add_argument("--method", choices=["sa", "at"], required=True)
+    rob.add_argument("--eps", type=float, required=True, help="L-inf radius the agent is trained to withstand")
+    rob.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
+    rob.add_argument("--out", type=Path, required=True)
+    rob.add_argument("--kappa", type=float, default=0.5, help="weight of the SA regularizer")
+    rob.add_argument("--pgd-steps", type=_positive_int, default=5, help="PGD steps for the regularizer's inner max")
+    rob.add_argument("--seed", type=_seed, default=1)
+    rob.add_argument("--warmup", type=_nonnegative_int, default=1000)
+    rob.add_argument("--preset")
+    rob.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    rob.add_argument("--force", action="store_true")
+    rob.add_argument("--trust-model", action="store_true")
+    rob.add_argument("--no-progress", action="store_true")
+
     exp = sub.add_parser("export", help="write a model's acting network as ONNX (a victim format with no pickle)")
     exp.add_argument("model", help="SB3 zip or model folder")
     exp.add_argument("--format", choices=["onnx"], default="onnx")
@@ -364,6 +380,17 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_robust_train(args: argparse.Namespace) -> int:
+    from zodrive.defense.robust import robust_train
+
+    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    path = robust_train(args.model, preset, args.method, args.eps, args.steps, args.out, seed=args.seed,
+                        warmup=args.warmup, kappa=args.kappa, pgd_steps=args.pgd_steps,
+                        progress_bar=not args.no_progress, trust=args.trust_model, force=args.force)
+    print(f"saved {path}")
+    return 0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from zodrive.agents.onnx_policy import export_onnx
 
@@ -453,7 +480,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "select": cmd_select, "export": cmd_export, "reproduce": cmd_reproduce,
+            "adv-train": cmd_adv_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
 
 

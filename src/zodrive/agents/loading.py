@@ -77,8 +77,10 @@ def is_shipped(file: Path) -> bool:
     return True
 
 
-def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False) -> BaseAlgorithm:
-    """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model)."""
+def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False,
+               cls: type[BaseAlgorithm] | None = None) -> BaseAlgorithm:
+    """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model);
+    `cls` loads it as a subclass of its algorithm (e.g. `SADQN` to continue with a regularizer)."""
     file = model_file(path)
     info = inspect_model(file)
     if preset is not None:
@@ -89,7 +91,12 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
     try:
         with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
             warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
-            return ALGOS[info["algo"]].load(file, device="cpu")
+            algo = ALGOS[info["algo"]]
+            if cls is not None and not issubclass(cls, algo):
+                raise ZodriveError(f"{file} is a {info['algo'].upper()} model; {cls.__name__} cannot continue it")
+            return (cls or algo).load(file, device="cpu")
+    except ZodriveError:
+        raise
     except Exception as exc:
         raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
 

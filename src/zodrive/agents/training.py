@@ -38,7 +38,7 @@ def algorithm_class(recipe: dict[str, Any]):
     if recipe.get("double_q"):
         if recipe["algo"] != "dqn":
             raise ZodriveError("double_q applies to dqn recipes only")
-        from zodrive.agents.double_dqn import DoubleDQN
+        from zodrive.agents.dqn_variants import DoubleDQN
 
         return DoubleDQN
     return ALGOS[recipe["algo"]]

@@ -37,11 +37,13 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
     obs_shape = tuple(model.observation_space.shape)
     policy = model.policy
     policy.set_training_mode(False)
+    from stable_baselines3 import DQN, TD3  # DDPG is a TD3 subclass in SB3
+
     name = type(model).__name__
-    if name == "DQN":
+    if isinstance(model, DQN):
         net, kind = policy.q_net, "discrete"
         head = net.q_net  # the MLP after SB3's flatten feature extractor
-    elif name in ("DDPG", "TD3"):
+    elif isinstance(model, TD3):
         net, kind = policy.actor, "continuous"
         head = net.mu  # MLP ending in tanh; SB3 predicts this action (space is [-1, 1])
     else:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -44,22 +44,27 @@ def adversarial_train(
     progress_bar: bool = True,
     trust: bool = False,
     force: bool = False,
+    algo_class: type | None = None,
+    setup: Callable[[Any], dict[str, Any]] | None = None,
 ) -> Path:
     """Train `model_path` for `steps` more steps on attacked observations; save to `out`.
 
     `spec=None` is the control run: the very same continued training (same seed, buffer,
     exploration, updates) on clean observations, so that what the attack changes can be told
-    apart from what restarting the training changes."""
+    apart from what restarting the training changes. `algo_class` loads the model as a
+    subclass of its algorithm (e.g. SA-DQN) and `setup(model)` sets it up before training;
+    what it returns is recorded in run.json and train.json."""
     if steps < 1:
         raise ZodriveError(f"steps must be >= 1, not {steps}")
     check_run_folder(out, resume=False, force=force)
     source = model_file(model_path)
     algo = model_algo(source)
-    model = load_model(source, preset, trust=trust)  # an SB3 object to train further
+    model = load_model(source, preset, trust=trust, cls=algo_class)  # an SB3 object to train further
     victim = sb3_victim(model)  # live view of the networks being trained
     out.mkdir(parents=True, exist_ok=True)
+    method = setup(model) if setup is not None else None
     write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec and spec.to_dict(),
-                         "steps": steps, "warmup": warmup, "action_noise": noise}, seed)
+                         "steps": steps, "warmup": warmup, "action_noise": noise, "method": method}, seed)
 
     def build():
         env = make_attacked_env(preset, victim, spec)  # reseeded by the seeded reset below
@@ -96,7 +101,8 @@ def adversarial_train(
     model.save(path)
     oracle = getattr(venv.envs[0].env, "oracle", None)
     write_json(out / "train.json", {
-        "algo": algo, "kind": "adversarial" if spec is not None else "control (no attack)", "source_model": str(source),
+        "algo": algo, "kind": "adversarial" if spec is not None else (method or {}).get("name", "control (no attack)"),
+        "method": method, "source_model": str(source),
         "total_timesteps": steps, "warmup_steps": warmup,
         "seed": seed, "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1),
         "attack_queries": int(oracle.total_queries) if oracle is not None else 0,

@@ -1,0 +1,55 @@
+"""`zodrive robust-train`: continue a trained agent with a robustness method.
+
+- `at`: the paper's Algorithm 2 (adversarial training with ZO-SignSGD at `eps`), kept for
+  comparison.
+- `sa`: SA-DQN's state-adversarial regularizer (`agents.dqn_variants.SADQN`) on clean
+  observations; DQN only for now.
+Both continue from the model's weights with the same warm-buffer start as Algorithm 2.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from zodrive.agents.loading import model_algo, model_file
+from zodrive.attacks.spec import load_attack
+from zodrive.defense.adversarial import adversarial_train
+from zodrive.envs import attack_context
+from zodrive.errors import ZodriveError
+
+METHODS = ("at", "sa")
+
+
+def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, steps: int, out: Path, *,
+                 seed: int = 1, warmup: int = 1000, kappa: float = 0.5, pgd_steps: int = 5,
+                 progress_bar: bool = True, trust: bool = False, force: bool = False) -> Path:
+    if method not in METHODS:
+        raise ZodriveError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    if not eps > 0:
+        raise ZodriveError(f"eps must be > 0, not {eps}")
+    common = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust, "force": force}
+    if method == "at":
+        return adversarial_train(model, preset, load_attack("zo-signsgd").with_overrides(eps=eps), steps, out, **common)
+    if model_algo(model_file(model)) != "dqn":
+        raise ZodriveError("--method sa is implemented for DQN models (SA-DQN); use --method at for DDPG")
+    from zodrive.agents.dqn_variants import SADQN
+    from zodrive.attacks.threat import ThreatModel
+
+    context = attack_context(preset)
+    low, high = context["bounds"]
+    mask = ThreatModel(eps=eps, features=context["features"]).mask(tuple(preset_obs_shape(preset)))
+
+    def configure(agent: SADQN) -> dict[str, Any]:
+        agent.configure_robust(eps=eps, kappa=kappa, pgd_steps=pgd_steps, mask=mask, low=low, high=high,
+                               total_steps=steps)
+        return {"name": "sa-dqn", "eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "hinge": 1.0,
+                "eps_ramp": 0.3, "reference": "Zhang et al., NeurIPS 2020"}
+
+    return adversarial_train(model, preset, None, steps, out, algo_class=SADQN, setup=configure, **common)
+
+
+def preset_obs_shape(preset: dict[str, Any]) -> tuple[int, int]:
+    from zodrive.envs import observation_shape
+
+    return observation_shape(preset)
