@@ -77,6 +77,17 @@ def _iqm_line(folders: list[Path]) -> str:
             f"bootstrap 95% CI): {iqm[0]:.2f} ({iqm[1]:.2f}–{iqm[2]:.2f})")
 
 
+def _selection_lines(folder: Path) -> list[str]:
+    """The checkpoint `zodrive select` picked on tuning seeds, with every candidate's numbers."""
+    if not (folder / "selected.json").is_file():
+        return []
+    from zodrive.experiments.select import selection_markdown
+
+    choice = _load(folder / "selected.json")
+    return ["", f"`model.zip` is the checkpoint at step {choice['selected']['steps']:,}, picked by `zodrive select` "
+            f"({choice['criterion']}; never the evaluation seeds):", "", selection_markdown(choice)]
+
+
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
                notes: list[str] | None = None, seeds: list[Path] | None = None) -> Path:
     """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
@@ -96,6 +107,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         "```",
         run["command"],
         *run.get("continued_by", []),
+        *([_load(folder / "selected.json")["command"]] if (folder / "selected.json").is_file() else []),
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
         + (f" --eval {evaluation}" if evaluation else "")
@@ -108,6 +120,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         f"- `model.zip` SHA-256: `{sha256(folder / 'model.zip')}` (shipped models are listed in "
         "`models/SHA256SUMS`; zodrive checks the sum before it lets stable-baselines3 unpickle the file)",
         "",
+        *_selection_lines(folder),
         "## Evaluation",
         "",
         f"**Mean return {_result_line(summary)}.**",
@@ -119,8 +132,9 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         lines.append("Trained further on attacked observations (paper Algorithm 2); "
                      f"{train.get('attack_queries', 0):,} attack queries during training.")
     if summary.get("action_share"):
-        names = ["LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
-        lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(names, summary["action_share"])) + ".")
+        from zodrive.envs import ACTION_NAMES
+
+        lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(ACTION_NAMES, summary["action_share"])) + ".")
     if not adversarial and recipe.get("hyperparameters"):
         changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
         budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)
