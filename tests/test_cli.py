@@ -142,13 +142,16 @@ def test_console_script_exits_nonzero_without_traceback(tmp_path: Path) -> None:
     assert proc.stderr.strip().splitlines() == [f"zodrive: error: model file not found: {tmp_path / 'nope.zip'}"]
 
 
-def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path) -> None:
-    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--env-set", "max_episode_steps=40"]
+@pytest.mark.parametrize("attack", [[], ["--attack", "random-search", "--steps", "5"]], ids=["clean", "attacked"])
+def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path, attack: list[str]) -> None:
+    args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--env-set", "max_episode_steps=40", *attack]
     assert main(args + ["--out", str(tmp_path / "one")]) == 0
     assert main(args + ["--out", str(tmp_path / "two"), "--workers", "2"]) == 0
     one = json.loads((tmp_path / "one" / "summary.json").read_text())
     two = json.loads((tmp_path / "two" / "summary.json").read_text())
     assert one["mean_return"] == two["mean_return"] and one["ci95"] == two["ci95"]
+    assert one.get("attack_success_rate") == two.get("attack_success_rate")
+    assert one.get("queries_per_step") == two.get("queries_per_step")
 
 
 def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: Path, capsys) -> None:

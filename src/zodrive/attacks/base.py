@@ -34,6 +34,9 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
+DEFAULT_MU = 0.005         # smoothing radius of finite differences [normalized units]
+DEFAULT_STEP_SIZE = 0.02   # per-iteration step; chosen by measurement (benchmarks/tune_attack.py)
+
 ON_FAILURE = ("best", "clean")
 """What a step that did not reach the goal feeds the policy: the best point found (the
 paper's Algorithm 1 feeds its last iterate) or the clean observation (an attacker who
@@ -87,8 +90,8 @@ class Attack(abc.ABC):
         *,
         steps: int = 100,
         n_directions: int = 20,
-        mu: float = 0.005,
-        step_size: float = 0.01,
+        mu: float = DEFAULT_MU,
+        step_size: float = DEFAULT_STEP_SIZE,
         l2_weight: float = 0.0,
         early_stop: bool = True,
         patience: int | None = None,

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from zodrive.attacks.victim import Victim, decision_only
-from zodrive.attacks.base import Attack
+from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack
 from zodrive.attacks.objectives import Objective, make_objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, make_attack
@@ -32,8 +32,8 @@ class AttackSpec:
     frozen: tuple[str, ...] = ("presence",)  # features the attacker may not touch
     steps: int = 100                      # T, iterations per environment step
     n_directions: int = 20                # q, random directions per iteration
-    mu: float = 0.005                     # smoothing radius of the finite differences
-    step_size: float = 0.02               # delta, per-iteration step
+    mu: float = DEFAULT_MU                # smoothing radius of the finite differences
+    step_size: float = DEFAULT_STEP_SIZE  # delta, per-iteration step
     l2_weight: float = 0.0                # weight of L2 = ||x' - x||^2 in the objective
     target: Any = "auto"                  # auto (paper: FASTER / [1, 0.5]) | action | none
     loss: str = "margin"                  # DQN L1: margin (C&W) | paper (literal Eq. 5)
