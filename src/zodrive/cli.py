@@ -181,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--out", type=Path, required=True)
     cmp_.add_argument("--no-progress", action="store_true")
 
-    demo = sub.add_parser("demo", help="attack the shipped DQN for a few episodes and print the result")
+    demo = sub.add_parser("demo", help="attack the shipped DQN driver for a few episodes and print the result")
     demo.add_argument("--episodes", type=_positive_int, default=3, help="episodes, clean and attacked")
     demo.add_argument("--model", default=None, help="model folder or zip; None = the DQN shipped inside the package")
     demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
@@ -442,7 +442,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     model = args.model or str(demo_model())
     preset = resolve_model_preset(model, None, [])
-    ref, name = policy_ref(model), ("the shipped DQN" if args.model is None else policy_label(model))
+    ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
     spec = load_attack("zo-signsgd")
     results = {}
     for label, attack in (("clean", None), ("attacked", spec)):
