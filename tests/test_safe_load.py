@@ -97,3 +97,16 @@ def test_full_loading_needs_trust(tmp_path: Path) -> None:
         load_model(copy)
     assert load_model(copy, trust=True) is not None
     assert load_model(ROOT / "models" / "dqn") is not None  # shipped and its SHA-256 matches
+
+
+def test_a_model_is_loaded_once_per_process_until_the_file_changes(tmp_path: Path) -> None:
+    import shutil
+
+    from zodrive.agents.loading import load_network
+
+    copy = tmp_path / "model.zip"
+    shutil.copy("models/dqn/model.zip", copy)
+    first = load_network(copy)
+    assert load_network(copy) is first  # validation and episodes share one load
+    shutil.copy("models/dqn-driver/model.zip", copy)  # a swapped file is read again
+    assert load_network(copy) is not first

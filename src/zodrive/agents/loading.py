@@ -9,6 +9,8 @@ needed (adversarial training continues training one).
 
 from __future__ import annotations
 
+import functools
+
 import warnings
 from pathlib import Path
 from typing import Any
@@ -52,12 +54,22 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
 
 
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
-    """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it."""
+    """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it.
+
+    Loaded once per process and file version (path, size, modification time): validating a
+    command and running its episodes share one load."""
     file = model_file(path)
-    data, weights = read_plain(file)  # the zip is read once
+    stat = file.stat()
+    info, network = _load_network(str(file.resolve()), stat.st_size, stat.st_mtime_ns)
     if preset is not None:
-        check_fits(describe(data, weights, file), preset, file)
-    return network_from(data, weights, file)
+        check_fits(info, preset, file)
+    return network
+
+
+@functools.lru_cache(maxsize=8)
+def _load_network(file: str, size: int, mtime_ns: int) -> tuple[dict[str, Any], PolicyNetwork]:
+    data, weights = read_plain(Path(file))  # the zip is read once
+    return describe(data, weights, Path(file)), network_from(data, weights, Path(file))
 
 
 def is_shipped(file: Path) -> bool:
