@@ -27,7 +27,7 @@ def _result_line(summary: dict[str, Any]) -> str:
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
             f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
             + (f"{summary['lane_changes_per_episode']:.1f} lane changes per episode, "
-               f"{summary['mean_distance']:.0f} m travelled, " if "lane_changes_per_episode" in summary else "")
+               f"{summary['mean_distance']:.0f} m travelled, " if summary.get("lane_changes_per_episode") is not None else "")
             + f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
@@ -45,7 +45,7 @@ def seed_table(folders: list[Path]) -> list[str]:
     for seed, folder, s in sorted(rows, key=lambda r: r[0]):
         lines.append(f"| {seed} | `{folder.name}` | {s['mean_return']:.2f} ({s['ci95'][0]:.2f}–{s['ci95'][1]:.2f}) | "
                      f"{s['collision_rate']:.0%} | {s.get('offroad_rate', 0):.0%} | {s['mean_speed']:.1f} | "
-                     f"{s.get('lane_changes_per_episode', float('nan')):.1f} |")
+                     f"{s.get('lane_changes_per_episode') or float('nan'):.1f} |")
     lines.append("")
     for key, label, fmt in (("mean_return", "Mean return", "{:.2f}"), ("collision_rate", "Collisions", "{:.0%}"),
                             ("mean_speed", "Speed (m/s)", "{:.1f}"),

@@ -177,6 +177,10 @@ def evaluate(
     return summary
 
 
+def _mean_of(records: list[dict[str, Any]], key: str) -> float | None:
+    return float(np.mean([r[key] for r in records])) if all(key in r for r in records) else None
+
+
 def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
     """Refuse to mix episodes of two different evaluations, saying what differs."""
     if on_disk == wanted:
@@ -230,8 +234,9 @@ def summarize(
         "mean_length": float(np.mean([r["length"] for r in records])),
         "mean_speed": float(np.mean([r["mean_speed"] for r in records])),
         "right_lane_share": float(np.mean([r["right_lane_share"] for r in records])),
-        "lane_changes_per_episode": float(np.mean([r.get("lane_changes", 0) for r in records])),
-        "mean_distance": float(np.mean([r.get("distance", 0.0) for r in records])),
+        # None where episodes were recorded before the metric existed (not 0: it was not measured)
+        "lane_changes_per_episode": _mean_of(records, "lane_changes"),
+        "mean_distance": _mean_of(records, "distance"),
         "attack": None,
         "defense": job.defense,
     }

@@ -15,7 +15,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         + f"({summary['pct_of_max']:.2f}% of max)",
         f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
         f"mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
-        f"{summary.get('lane_changes_per_episode', float('nan')):.2f}  distance: {summary.get('mean_distance', float('nan')):.0f} m  "
+        f"{_num(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {_num(summary.get('mean_distance'), '{:.0f}')} m  "
         f"right lane: {summary['right_lane_share']:.1%}",
     ]
     if summary.get("defense"):
@@ -32,3 +32,7 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
         )
     return "\n".join(lines)
+
+
+def _num(value: float | None, pattern: str) -> str:
+    return "–" if value is None else pattern.format(value)
