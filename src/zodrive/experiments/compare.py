@@ -125,6 +125,11 @@ def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
             ax_r.axhline(r["mean_return"], ls="--", lw=1, color="grey")
     ax_r.set(xscale="log", xlabel="queries per step (mean)", ylabel="mean return", title="return (dashed: clean)")
     ax_s.set(xscale="log", xlabel="queries per step (mean)", ylabel="steps won (%)", title="attack success")
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    for ax in (ax_r, ax_s):  # plain numbers on the log axis, no overlapping minor labels
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
     ax_s.legend(fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
