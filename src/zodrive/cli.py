@@ -256,15 +256,9 @@ def attack_spec_from_args(args: argparse.Namespace):
         if given:
             raise ZodriveError(f"{', '.join(given)} set an attack's options, but no --attack was given")
         return None
-    spec = load_attack(args.attack)
-    return spec.with_overrides(
-        eps=args.eps, norm=args.norm, mode=args.mode, steps=args.steps,
-        n_directions=args.n_directions, mu=args.mu, step_size=args.step_size,
-        l2_weight=args.l2_weight, target=args.target, loss=args.loss,
-        query_budget=args.query_budget, early_stop=args.early_stop, seed=args.attack_seed,
-        patience=args.patience, warm_start=args.warm_start, on_failure=args.on_failure, restarts=args.restarts,
-        timing=args.timing, episode_query_budget=args.episode_query_budget, access=args.access,
-    )
+    # flags are named after AttackSpec fields; --attack-seed sets the spec's `seed`
+    return load_attack(args.attack).with_overrides(
+        **{("seed" if dest == "attack_seed" else dest): getattr(args, dest) for dest in ATTACK_FLAGS.values()})
 
 
 def cmd_env(args: argparse.Namespace) -> int:

@@ -81,9 +81,10 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def reset(self, **kwargs: Any):  # type: ignore[override]
         """Reset; a seeded reset also restarts the attack's random stream from that seed, so an
         episode's perturbations depend only on (attack seed, episode seed)."""
-        if kwargs.get("seed") is not None:
+        if kwargs.get("seed") is not None:  # (reseeding also begins the attack's episode)
             self.attack.reseed(episode_seed(self.attack.seed, kwargs["seed"]))
-        self.attack.begin_episode()  # no warm start across episodes
+        else:
+            self.attack.begin_episode()  # no warm start across episodes
         self.oracle.begin_episode()
         self._episode_hits = self._episode_applicable = 0
         obs, info = super().reset(**kwargs)

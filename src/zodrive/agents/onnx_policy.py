@@ -67,30 +67,41 @@ def export_onnx(model: str, out: Path) -> Path:
     return out
 
 
-def onnx_metadata(path: Path) -> dict[str, Any]:
-    """The contract stored in a zodrive ONNX file (kind, obs_shape, n_outputs, algo)."""
+def _session(path: Path) -> Any:
+    """An onnxruntime session on CPU, graph optimizations off so that the arithmetic stays that
+    of the exported network, one thread (small MLPs)."""
     ort = _require("onnxruntime")
+    options = ort.SessionOptions()
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
+    options.intra_op_num_threads = 1
     try:
-        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 - onnxruntime raises many types for a bad file
         raise ZodriveError(f"{path} is not a readable ONNX model: {exc}") from None
+
+
+def _contract(session: Any, path: Path) -> dict[str, Any]:
     meta = session.get_modelmeta().custom_metadata_map
     if "zodrive_kind" not in meta:
         raise ZodriveError(f"{path} has no zodrive contract in its metadata (export it with `zodrive export`)")
     return {"kind": meta["zodrive_kind"], "algo": meta["zodrive_algo"],
-            "obs_shape": tuple(json.loads(meta["zodrive_obs_shape"])), "n_actions": int(meta["zodrive_n_outputs"]),
-            "session": session}
+            "obs_shape": tuple(json.loads(meta["zodrive_obs_shape"])), "n_actions": int(meta["zodrive_n_outputs"])}
 
 
-def onnx_victim(path: Path) -> Victim:
-    """An ONNX file as a black-box victim (onnxruntime on CPU, graph optimizations off so that
-    the arithmetic stays that of the exported network)."""
-    ort = _require("onnxruntime")
-    meta = onnx_metadata(path)
-    options = ort.SessionOptions()
-    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
-    options.intra_op_num_threads = 1
-    session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+def onnx_metadata(path: Path) -> dict[str, Any]:
+    """The contract stored in a zodrive ONNX file (kind, obs_shape, n_actions, algo)."""
+    return _contract(_session(path), path)
+
+
+def onnx_victim(path: Path, preset: dict[str, Any] | None = None) -> Victim:
+    """An ONNX file as a black-box victim (one onnxruntime session); with `preset`, checked
+    to fit it."""
+    session = _session(path)
+    meta = _contract(session, path)
+    if preset is not None:
+        from zodrive.agents.loading import check_fits
+
+        check_fits(meta, preset, path)
 
     def query(batch: np.ndarray) -> np.ndarray:
         obs = np.ascontiguousarray(batch, dtype=np.float32).reshape(-1, *meta["obs_shape"])

@@ -81,8 +81,7 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
     from zodrive.agents.victims import network_victim
 
     if is_onnx(model):
-        check_policy(model, preset)
-        return onnx_victim(Path(model))
+        return onnx_victim(Path(model), preset)
     network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
     return network_victim(network.net, kind, network.obs_shape)
 

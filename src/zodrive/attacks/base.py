@@ -146,8 +146,9 @@ class Attack(abc.ABC):
 
     # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
-    def queries_per_run(self) -> int:
-        """Upper bound on victim queries of one run of T iterations (the docstring's formula)."""
+    def queries_per_run(self, steps: int | None = None) -> int:
+        """Upper bound on victim queries of one run of `steps` (default T) iterations (the
+        docstring's formula)."""
 
     def queries_per_step(self) -> int:
         """Upper bound on victim queries per environment step: every restart is a new run."""
@@ -155,11 +156,7 @@ class Attack(abc.ABC):
 
     def first_iteration_cost(self) -> int:
         """Queries of the clean observation and one iteration: the least a step can cost."""
-        saved, self.steps = self.steps, 1
-        try:
-            return self.queries_per_run()
-        finally:
-            self.steps = saved
+        return self.queries_per_run(1)
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
@@ -188,6 +185,8 @@ class Attack(abc.ABC):
 
         def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
             m = cand.shape[1]
+            if m == 0 or len(rows) == 0:  # an attack without probes (PGD, noise)
+                return cand
             inside = self.threat.project(cand.reshape(-1, *shape).astype(np.float32),
                                          np.repeat(flat0[rows], m, axis=0).reshape(-1, *shape))
             return inside.reshape(len(rows), m, dim)
@@ -203,7 +202,7 @@ class Attack(abc.ABC):
             return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
 
         everyone = np.arange(n)
-        if oracle.remaining(everyone).min() < self.first_iteration_cost():
+        if oracle.episode_query_budget is not None and oracle.remaining(everyone).min() < self.first_iteration_cost():
             return self._untouched(x0, oracle)  # the episode's budget cannot pay for one iteration: clean data
         if self.black_box:
             clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
@@ -219,6 +218,7 @@ class Attack(abc.ABC):
 
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
+        timed = np.ones(n, dtype=bool) if self.timing is None else preference(clean) >= self.timing
         for run in range(1 + self.restarts):
             x = self.init(flat0.copy(), mask).astype(np.float32)
             if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
@@ -227,16 +227,14 @@ class Attack(abc.ABC):
                 x = flat0 + self._carry  # consecutive observations differ little: start where the last step ended
             x = project(x[:, None], everyone)[:, 0]
             active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= oracle.remaining(everyone) > 0
-            if self.timing is not None:  # strategically timed: only where the policy cares which action
-                active &= preference(clean) >= self.timing
+            active &= (oracle.remaining(everyone) > 0) & timed  # timed: only where the policy cares which action
             stalled = np.zeros(n, dtype=np.int64)
             for k in range(self.steps):
                 rows = np.flatnonzero(active)
                 if rows.size == 0:
                     break
-                probes = self.propose(k, x[rows], rows, mask)
-                cand = project(np.concatenate([x[rows, None], probes.astype(np.float32)], axis=1), rows)
+                probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32), rows)
+                cand = np.concatenate([x[rows, None], probes], axis=1)  # the base point is already projected
                 need = np.ones(cand.shape[:2], dtype=bool)
                 need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
                 afford = oracle.remaining(rows) >= need.sum(axis=1)
@@ -266,11 +264,13 @@ class Attack(abc.ABC):
                 has_ok = ok.any(axis=1)
                 pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
                 ar = np.arange(a)
-                before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
-                best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-                improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
-                stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
-                if self.patience is not None:  # give up on a step that has stopped improving
+                if self.patience is None:
+                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+                else:  # give up on a step that has stopped improving
+                    before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
+                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+                    improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
+                    stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
                     active[rows[stalled[rows] >= self.patience]] = False
                 if trace:
                     rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
@@ -331,8 +331,8 @@ class GradientEstimateAttack(Attack):
     antithetic: ClassVar[bool] = False  # central differences f(x+mu u) - f(x-mu u)
     unit_directions: ClassVar[bool] = False  # E[u u^T] = I/d: scale the estimate by d
 
-    def queries_per_run(self) -> int:
-        return self.steps * (1 + self.n_directions * (2 if self.antithetic else 1))
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return (steps or self.steps) * (1 + self.n_directions * (2 if self.antithetic else 1))
 
     @abc.abstractmethod
     def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ class UniformNoise(Attack):
         kwargs["steps"] = 1  # one draw, queried once
         super().__init__(threat, **kwargs)
 
-    def queries_per_run(self) -> int:
+    def queries_per_run(self, steps: int | None = None) -> int:
         return 2
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:

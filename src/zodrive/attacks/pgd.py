@@ -27,8 +27,8 @@ class PGD(Attack):
     black_box = False
     reference = "Madry et al., ICLR 2018 (white-box)"
 
-    def queries_per_run(self) -> int:
-        return self.steps
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return steps or self.steps
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._x0, self._mask = x0, mask

@@ -24,8 +24,8 @@ class RandomSearch(Attack):
     reference = "Andriushchenko et al., Square Attack, ECCV 2020"
     p_init: float = 0.3  # initial fraction of coordinates re-drawn per proposal
 
-    def queries_per_run(self) -> int:
-        return 2 + self.steps * self.n_directions
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return 2 + (steps or self.steps) * self.n_directions
 
     def _fraction(self, k: int) -> float:
         return max(self.p_init * 0.5 ** int(np.log2(1 + 10 * k / self.steps)), 1.0 / 25)

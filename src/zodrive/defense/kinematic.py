@@ -65,7 +65,17 @@ class KinematicFilter:
         self.k = vel / pos * dt  # normalized position change per step per unit of normalized velocity
         self.tol = tol or Tolerances()
         self._width = np.array([0.0, self.tol.x, self.tol.y, self.tol.vx, self.tol.vy], dtype=np.float32)
-        self.state: np.ndarray | None = None
+        self._state: np.ndarray | None = None
+        self._pred: np.ndarray | None = None  # the state one step ahead; every peek of a step uses it
+
+    @property
+    def state(self) -> np.ndarray | None:
+        return self._state
+
+    @state.setter
+    def state(self, value: np.ndarray | None) -> None:
+        self._state = value
+        self._pred = None if value is None else self._predict(value)
 
     def reset(self, obs: np.ndarray) -> np.ndarray:
         self.state = np.array(obs, dtype=np.float32, copy=True)
@@ -79,8 +89,11 @@ class KinematicFilter:
 
     def predict(self) -> np.ndarray:
         """Every tracked row one step ahead under constant (relative) velocity."""
-        assert self.state is not None
-        pred = self.state.copy()
+        assert self._pred is not None
+        return self._pred
+
+    def _predict(self, state: np.ndarray) -> np.ndarray:
+        pred = state.copy()
         pred[1:, 1] += self.k * pred[1:, 3]  # other vehicles: relative x, y move with relative velocity
         pred[:, 2] += self.k * pred[:, 4]    # the ego's absolute x is clipped; its y moves with its vy
         return np.clip(pred, -1.0, 1.0)

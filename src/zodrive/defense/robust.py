@@ -15,7 +15,7 @@ from typing import Any
 from zodrive.agents.loading import model_algo, model_file
 from zodrive.attacks.spec import load_attack
 from zodrive.defense.adversarial import adversarial_train
-from zodrive.envs import attack_context
+from zodrive.envs import attack_context, observation_shape
 from zodrive.errors import ZodriveError
 
 METHODS = ("at", "sa")
@@ -38,7 +38,7 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, st
 
     context = attack_context(preset)
     low, high = context["bounds"]
-    mask = ThreatModel(eps=eps, features=context["features"]).mask(tuple(preset_obs_shape(preset)))
+    mask = ThreatModel(eps=eps, features=context["features"]).mask(observation_shape(preset))
 
     def configure(agent: SADQN) -> dict[str, Any]:
         agent.configure_robust(eps=eps, kappa=kappa, pgd_steps=pgd_steps, mask=mask, low=low, high=high,
@@ -48,8 +48,3 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, st
 
     return adversarial_train(model, preset, None, steps, out, algo_class=SADQN, setup=configure, **common)
 
-
-def preset_obs_shape(preset: dict[str, Any]) -> tuple[int, int]:
-    from zodrive.envs import observation_shape
-
-    return observation_shape(preset)
