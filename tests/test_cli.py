@@ -230,16 +230,35 @@ def test_select_picks_a_checkpoint_on_tuning_seeds(tmp_path: Path, capsys) -> No
     assert main(["select", str(tmp_path), "--episodes", "2"]) == 2
 
 
-def test_compare_over_query_budgets_draws_the_budget_curve(tmp_path: Path, capsys) -> None:
+def test_compare_over_query_budgets_draws_the_budget_curve(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "grid"
-    assert main(["compare", "baseline:slower", "--attacks", "zo-signsgd", "--query-budgets", "21", "42",
+    assert main(["compare", str(tiny_dqn), "--attacks", "zo-signsgd", "--query-budgets", "21", "42",
                  "--episodes", "1", "--out", str(out), "--no-progress", "--plot", str(out / "budget.png")]) == 0
     rows = json.loads((out / "table.json").read_text())
     assert [r["query_budget"] for r in rows] == [None, 21, 42]
     assert rows[1]["queries_per_step"] <= 21 < rows[2]["queries_per_step"] <= 42
-    assert (out / "cells" / "baseline-slower-zo-signsgd-eps0.2-qb21" / "summary.json").is_file()
+    assert (out / "cells" / f"{tiny_dqn.name}-zo-signsgd-eps0.2-qb21" / "summary.json").is_file()
     assert (out / "budget.png").stat().st_size > 0
     assert "Budget/step" in capsys.readouterr().out
+
+
+def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn: Path, tmp_path: Path) -> None:
+    out = tmp_path / "curve"
+    assert main(["compare", str(tiny_dqn), "baseline:slower", "--attacks", "uniform-noise", "fgsm", "--eps", "0.05",
+                 "0.2", "--defense", "none", "kinematic", "--episodes", "2", "--out", str(out), "--no-progress",
+                 "--env-set", "max_episode_steps=40",
+                 "--plot", str(out / "robustness.png")]) == 0
+    rows = json.loads((out / "table.json").read_text())
+    model = [r for r in rows if r["model"] == tiny_dqn.name]
+    assert len(model) == 2 * (1 + 2 * 2)  # defenses x (clean + attacks x eps)
+    assert [r for r in rows if r["model"] == "baseline:slower"] == [
+        r for r in rows if r["model"] == "baseline:slower" and r["attack"] == "none" and r["defense"] == "none"]
+    assert (out / "cells" / f"{tiny_dqn.name}+kinematic-fgsm-eps0.2" / "summary.json").is_file()
+    text = (out / "robustness.md").read_text()
+    assert f"| {tiny_dqn.name} + kinematic |" in text and "(ignores its input)" in text
+    worst = min(r["mean_return"] for r in model if r["defense"] == "none" and r["eps"] == 0.2)
+    assert f"{worst:.1f} (" in text.split(f"| {tiny_dqn.name} |")[1].splitlines()[0]
+    assert (out / "robustness.png").stat().st_size > 0
 
 
 def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
@@ -252,9 +271,9 @@ def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
 
 
 @pytest.mark.slow
-def test_compare_on_ray_gives_the_local_numbers(tmp_path: Path) -> None:
+def test_compare_on_ray_gives_the_local_numbers(tiny_dqn: Path, tmp_path: Path) -> None:
     pytest.importorskip("ray")
-    args = ["compare", "baseline:slower", "baseline:faster", "--attacks", "zo-signsgd", "--query-budgets", "21",
+    args = ["compare", "baseline:slower", str(tiny_dqn), "--attacks", "zo-signsgd", "--query-budgets", "21",
             "--episodes", "2", "--no-progress"]
     assert main(args + ["--out", str(tmp_path / "local")]) == 0
     assert main(args + ["--out", str(tmp_path / "ray"), "--backend", "ray", "--workers", "2"]) == 0

@@ -274,3 +274,34 @@ def test_decision_only_access_hides_the_scores() -> None:
     np.testing.assert_array_equal(victim.query(result.x_adv).argmax(axis=1)[result.success], 3)
     with pytest.raises(ZodriveError, match="decision-only"):
         AttackSpec(attack="pgd", access="decision").build(victim, **CONTEXT)
+
+
+@pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd", "uniform-noise"])
+def test_max_change_keeps_every_fed_perturbation_within_reach_of_the_last(name: str) -> None:
+    victim = linear_victim(seed=2)
+    attack, objective, oracle = AttackSpec(attack=name, eps=0.3, max_change=0.02, steps=10,
+                                           n_directions=4).build(victim, **CONTEXT)
+    rng = np.random.default_rng(0)
+    x0 = observations(8, seed=5)
+    last = None
+    for _ in range(6):  # a drifting scene: each clean observation moves a little
+        x0 = np.clip(x0 + rng.uniform(-0.01, 0.01, x0.shape).astype(np.float32), -1, 1)
+        x0[:, :, 0] = 1.0
+        result = attack.perturb(x0, oracle, objective)
+        delta = result.x_adv - x0
+        assert np.abs(delta).max() <= 0.3 + 1e-6
+        if last is not None:  # the previous perturbation, carried to the new observation, moved by <= 0.02
+            assert np.abs(delta - last).max() <= 0.02 + 1e-6
+        assert result.queries.max() <= attack.queries_per_step() + 1
+        np.testing.assert_allclose(result.adv_outputs, victim.query(result.x_adv), atol=1e-5)
+        last = delta
+    assert np.abs(last).max() > 0.05  # it builds up beyond one step's change
+    attack.begin_episode()  # a new episode: the first step is free again
+    assert np.abs(attack.perturb(x0, oracle, objective).x_adv - x0).max() > 0.02 or name == "uniform-noise"
+
+
+def test_max_change_is_an_linf_idea() -> None:
+    with pytest.raises(ZodriveError, match="max_change"):
+        AttackSpec(norm="l2", max_change=0.01).build(linear_victim(), **CONTEXT)
+    with pytest.raises(ZodriveError, match="max_change"):
+        AttackSpec(max_change=0.0).check()

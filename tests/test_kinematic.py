@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from toys import linear_victim
+from toys import context, linear_victim
 from zodrive.attacks import AttackSpec
 from zodrive.defense.kinematic import FilterWrapper, KinematicFilter, defended_victim, make_defense
 from zodrive.envs import load_preset, make_env
@@ -81,3 +81,23 @@ def test_unknown_defense_and_unsupported_observation_are_errors() -> None:
         make_defense("magic", PRESET)
     with pytest.raises(ZodriveError, match="relative, normalized"):
         KinematicFilter(load_preset("discrete", ["highway.observation.absolute=true"]))
+
+
+def test_white_box_pgd_reaches_through_the_filter_by_bpda() -> None:
+    victim = linear_victim(seed=2)
+    filt = KinematicFilter(PRESET)
+    steps = _clean_steps(6)
+    filt.reset(steps[0])
+    for obs in steps[1:5]:
+        filt.update(obs)
+    defended = defended_victim(victim, filt)
+    x = np.stack([steps[5], steps[5] + 0.05]).astype(np.float32)
+    import torch
+
+    t = torch.tensor(x, requires_grad=True)
+    out = defended.differentiable(t)
+    np.testing.assert_allclose(out.detach().numpy(), victim.query(filt.peek(x)), atol=1e-5)  # forward: filter, net
+    out.sum().backward()
+    assert t.grad is not None and np.abs(t.grad.numpy()).sum() > 0  # backward: not the clamp's zeros
+    attack, objective, oracle = AttackSpec(attack="pgd", eps=0.2).build(defended, **context())
+    assert attack.perturb(x[:1], oracle, objective).queries[0] >= 1

@@ -174,7 +174,13 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
-    cmp_.add_argument("--plot", type=Path, default=None, help="PNG: return and success against queries per step")
+    cmp_.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE",
+                      help="preset override, applied to every model's preset")
+    cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", "kinematic"],
+                      help="defenses in front of each model, one set of cells each (none = undefended)")
+    cmp_.add_argument("--plot", type=Path, default=None,
+                      help="PNG: with --query-budgets, return and success against queries per step; "
+                           "otherwise return against eps under the strongest attack")
     _backend_flags(cmp_)
     cmp_.add_argument("--episodes", type=_positive_int, default=20)
     cmp_.add_argument("--workers", type=_positive_int, default=1)
@@ -233,6 +239,8 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--timing", type=float,
                        help="strategically timed attack: only steps where the policy's action preference >= this (0-1)")
     group.add_argument("--episode-query-budget", type=_positive_int, help="max queries per episode")
+    group.add_argument("--max-change", type=float,
+                       help="defense-aware attacker: the perturbation changes by at most this (L-inf) between steps")
     group.add_argument("--access", choices=["score", "decision"],
                        help="what the attacker's queries return: scores (Q-values/action) or only the decision")
     group.add_argument("--attack-seed", type=_seed)
@@ -244,6 +252,7 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
                 "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure", "--restarts": "restarts",
                 "--timing": "timing", "--episode-query-budget": "episode_query_budget", "--access": "access",
+                "--max-change": "max_change",
                 "--attack-seed": "attack_seed"}
 
 
@@ -415,14 +424,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from zodrive.attacks.registry import ATTACKS
-    from zodrive.experiments.compare import compare, markdown, plot_budget_curves
+    from zodrive.experiments.compare import compare, markdown, plot_budget_curves, plot_robustness
 
+    defenses = [None if d == "none" else d for d in args.defense or ["none"]]
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
-                   backend=args.backend, address=args.address)
+                   backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set)
     print(markdown(rows), end="")
     if args.plot:
-        plot_budget_curves(rows, args.plot)
+        (plot_budget_curves if args.query_budgets else plot_robustness)(rows, args.plot)
         print(f"plot: {args.plot}")
     return 0
 

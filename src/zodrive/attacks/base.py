@@ -99,6 +99,7 @@ class Attack(abc.ABC):
         on_failure: str = "best",
         restarts: int = 0,
         timing: float | None = None,
+        max_change: float | None = None,
         seed: int = 0,
     ) -> None:
         if not isinstance(steps, (int, np.integer)) or steps < 1:
@@ -117,6 +118,10 @@ class Attack(abc.ABC):
             raise ZodriveError(f"restarts must be an integer >= 0, not {restarts}")
         if timing is not None and not 0.0 <= timing < 1.0:
             raise ZodriveError(f"timing (a preference threshold in [0, 1)) must be in [0, 1) or none, not {timing}")
+        if max_change is not None and not (np.isfinite(max_change) and max_change > 0):
+            raise ZodriveError(f"max_change must be > 0 or none, not {max_change}")
+        if max_change is not None and threat.norm != "linf":
+            raise ZodriveError("max_change bounds the L-inf change of the perturbation between steps: use norm linf")
         if on_failure not in ON_FAILURE:
             raise ZodriveError(f"on_failure must be one of {', '.join(ON_FAILURE)}, not {on_failure!r}")
         self.threat = threat
@@ -131,9 +136,11 @@ class Attack(abc.ABC):
         self.on_failure = on_failure
         self.restarts = int(restarts)
         self.timing = timing
+        self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
-        self._carry: np.ndarray | None = None  # the last step's perturbation (warm start)
+        self._carry: np.ndarray | None = None  # the last step's best perturbation (warm start)
+        self._fed: np.ndarray | None = None    # the last step's fed perturbation (max_change)
 
     def reseed(self, seed: int) -> None:
         """Restart the attack's random stream (e.g. per episode, for reproducible episodes)."""
@@ -142,7 +149,7 @@ class Attack(abc.ABC):
 
     def begin_episode(self) -> None:
         """Forget the previous step's perturbation: a new episode starts from scratch."""
-        self._carry = None
+        self._carry = self._fed = None
 
     # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
@@ -155,8 +162,20 @@ class Attack(abc.ABC):
         return (1 + self.restarts) * self.queries_per_run()
 
     def first_iteration_cost(self) -> int:
-        """Queries of the clean observation and one iteration: the least a step can cost."""
-        return self.queries_per_run(1)
+        """Queries of the clean observation and one iteration (and, with `max_change`, of
+        the admissible point nearest the clean one): the least a step can cost."""
+        return self.queries_per_run(1) + (self.max_change is not None)
+
+    def smooth_box(self, flat0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """With `max_change`, the box every fed point of this step must lie in: within
+        max_change (L-inf) of the previous step's perturbation carried to the new clean
+        observation (re-projected into the threat model, so the box meets it). None on an
+        episode's first step or without `max_change`."""
+        if self.max_change is None or self._fed is None or self._fed.shape != flat0.shape:
+            return None
+        shape = (len(flat0), *self._obs_shape)
+        center = self.threat.project((flat0 + self._fed).reshape(shape), flat0.reshape(shape)).reshape(flat0.shape)
+        return center - self.max_change, center + self.max_change
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
@@ -182,6 +201,8 @@ class Attack(abc.ABC):
         mask = self.threat.mask(shape).reshape(-1)
         flat0 = np.asarray(x0, dtype=np.float32).reshape(n, dim)
         oracle.begin_step(rows=n)
+        self._obs_shape = shape
+        box = self.smooth_box(flat0)
 
         def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
             m = cand.shape[1]
@@ -189,7 +210,13 @@ class Attack(abc.ABC):
                 return cand
             inside = self.threat.project(cand.reshape(-1, *shape).astype(np.float32),
                                          np.repeat(flat0[rows], m, axis=0).reshape(-1, *shape))
-            return inside.reshape(len(rows), m, dim)
+            inside = inside.reshape(len(rows), m, dim)
+            if box is not None:  # both are boxes containing the carried point: clipping stays in both
+                inside = np.clip(inside, box[0][rows, None], box[1][rows, None])
+                # a point already inside up to rounding keeps its exact value (projection is then
+                # idempotent, so a step onto a queried point is recognised and not queried again)
+                inside = np.where(np.abs(inside - cand) <= 1e-6, cand, inside)
+            return inside
 
         def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
             out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean[rows])
@@ -203,18 +230,30 @@ class Attack(abc.ABC):
 
         everyone = np.arange(n)
         if oracle.episode_query_budget is not None and oracle.remaining(everyone).min() < self.first_iteration_cost():
-            return self._untouched(x0, oracle)  # the episode's budget cannot pay for one iteration: clean data
+            return self._untouched(x0, oracle, box)  # the episode's budget cannot pay for one iteration
         if self.black_box:
             clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
         else:
             clean, grad0 = oracle.gradient(flat0.reshape(n, *shape), white_box_loss(None), everyone)
         clean = clean.astype(np.float32)
         already = objective.already(torch.from_numpy(clean)).numpy()
-        _, _, f0, _ = values(flat0[:, None], clean[:, None], everyone)
-        best = Best(flat0, clean, f0[:, 0], already)
+        # the fallback: the clean observation, or with max_change the admissible point nearest it
+        start, start_out, start_grad = flat0, clean, grad0
+        if box is not None:
+            start = project(flat0[:, None], everyone)[:, 0]
+            moved = np.flatnonzero(np.any(start != flat0, axis=1))
+            start_out = clean.copy()
+            if moved.size and self.black_box:
+                start_out[moved] = oracle(start[moved].reshape(-1, *shape), moved)
+            elif moved.size:
+                start_grad = grad0.copy()
+                start_out[moved], start_grad[moved] = oracle.gradient(
+                    start[moved].reshape(-1, *shape), white_box_loss(moved), moved)
+        _, _, f0, ok0 = values(start[:, None], start_out[:, None], everyone)
+        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0])
         # the last evaluated base point of each row, so that it is never queried twice
-        known_x, known_out = flat0.copy(), clean.copy()
-        known_grad = None if grad0 is None else grad0.reshape(n, dim).astype(np.float32)
+        known_x, known_out = start.copy(), start_out.copy()
+        known_grad = None if start_grad is None else start_grad.reshape(n, dim).astype(np.float32)
 
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
@@ -290,7 +329,8 @@ class Attack(abc.ABC):
         fed, fed_out = best.x, best.out
         if self.on_failure == "clean":
             failed = ~best.ok
-            fed, fed_out = np.where(failed[:, None], flat0, best.x), np.where(failed[:, None], clean, best.out)
+            fed, fed_out = np.where(failed[:, None], start, best.x), np.where(failed[:, None], start_out, best.out)
+        self._fed = fed - flat0
         x_adv = fed.reshape(n, *shape).astype(x0.dtype)
         linf, l2n = distortion(x_adv, x0)
         return AttackResult(
@@ -300,14 +340,21 @@ class Attack(abc.ABC):
         )
 
 
-    def _untouched(self, x0: np.ndarray, oracle: QueryOracle) -> AttackResult:
-        """A step the attacker cannot afford to look at: nothing queried, nothing changed."""
+    def _untouched(self, x0: np.ndarray, oracle: QueryOracle,
+                   box: tuple[np.ndarray, np.ndarray] | None = None) -> AttackResult:
+        """A step the attacker cannot afford to look at: nothing queried; the clean
+        observation is fed (with max_change, the admissible point nearest it)."""
         n = len(x0)
+        flat0 = x0.reshape(n, -1)
+        fed = flat0 if box is None else np.clip(flat0, box[0], box[1])
+        self._fed = fed - flat0
+        x_adv = fed.reshape(x0.shape).astype(x0.dtype)
+        linf, l2n = distortion(x_adv, x0)
         nothing = np.zeros(n, dtype=bool)
         empty = np.full((n, 0), np.nan, dtype=np.float32)
-        return AttackResult(x_adv=x0.copy(), success=nothing, already=nothing.copy(),
+        return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
                             iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
-                            linf=np.zeros(n), l2=np.zeros(n), adv_outputs=empty, clean_outputs=empty)
+                            linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
 
 
 def preference(outputs: np.ndarray) -> np.ndarray:

@@ -47,6 +47,7 @@ class AttackSpec:
     restarts: int = 0                     # further runs from random points of the budget set
     timing: float | None = None           # strategically timed: attack only where preference >= this (discrete)
     episode_query_budget: int | None = None  # max queries per episode (None: no cap)
+    max_change: float | None = None       # defense-aware: max L-inf change of the perturbation between steps
     access: str = "score"                 # what a query returns: score (Q-values / action) | decision (action only)
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
@@ -88,7 +89,7 @@ class AttackSpec:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
-                           restarts=self.restarts, timing=self.timing,
+                           restarts=self.restarts, timing=self.timing, max_change=self.max_change,
                            seed=self.seed)
 
     def check(self) -> None:

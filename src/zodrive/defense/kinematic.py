@@ -132,9 +132,22 @@ class KinematicFilter:
 
 
 def defended_victim(victim: Victim, filt: KinematicFilter) -> Victim:
-    """The defended system as the attacker sees it: filter (state frozen) then policy."""
+    """The defended system as the attacker sees it: filter (state frozen) then policy.
+
+    White-box access, when the policy offers it, goes through the filter by BPDA (Athalye,
+    Carlini & Wagner, "Obfuscated Gradients Give a False Sense of Security", ICML 2018): the
+    forward pass is filter then network, the backward pass takes the clamp as the identity,
+    so PGD sees the network's gradient at the filtered point instead of the clamp's zeros."""
+    differentiable = None
+    if victim.differentiable is not None:
+        net = victim.differentiable
+
+        def differentiable(x: Any) -> Any:
+            filtered = x.new_tensor(filt.peek(x.detach().cpu().numpy()))
+            return net(x + (filtered - x).detach())  # value: filtered; gradient: identity
+
     return Victim(query=lambda batch: victim.query(filt.peek(batch)), kind=victim.kind,
-                  obs_shape=victim.obs_shape, reads=victim.reads)
+                  obs_shape=victim.obs_shape, differentiable=differentiable, reads=victim.reads)
 
 
 class FilterWrapper(gym.ObservationWrapper):

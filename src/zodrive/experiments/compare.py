@@ -1,7 +1,9 @@
 """`zodrive compare`: every attack (and a range of eps) on every model, one table.
 
-Each cell is an ordinary resumable evaluation in OUT/cells/<model>-<attack>-eps<eps>/;
-the table is rebuilt from their summaries, so an interrupted comparison resumes.
+Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/;
+the table is rebuilt from their summaries, so an interrupted comparison resumes. With several
+eps, `robustness.md` gives each model (and defense) its strongest attack per eps: a defense is
+judged by the attack that hurts it most, not by the one that flatters it.
 """
 
 from __future__ import annotations
@@ -23,9 +25,16 @@ from zodrive.runinfo import write_atomic, write_json
 def compare(models: list[str], attacks: list[str], eps_values: list[float], episodes: int, out: Path, *,
             workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
             query_budgets: list[int | None] | None = None, backend: str = "local",
-            address: str | None = None) -> list[dict[str, Any]]:
-    """Every model x attack x eps x per-step query budget; one resumable evaluation per cell."""
+            address: str | None = None, defenses: list[str | None] | None = None,
+            env_set: list[str] | None = None) -> list[dict[str, Any]]:
+    """Every model (x defense) x attack x eps x per-step query budget; one resumable
+    evaluation per cell. Policies that do not read the observation (constant and
+    simulator-reading baselines) get their clean row only: no observation attack or filter
+    can change what they do."""
+    from zodrive.defense.kinematic import make_defense
+
     budgets = query_budgets or [None]
+    defenses = defenses or [None]
     for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
         for budget in budgets:
             for eps in eps_values:
@@ -33,19 +42,26 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     grid: list[dict[str, Any]] = []
     cells: list[Cell] = []
     for model in models:
-        preset = load_preset(policy_kind(model))
+        preset = load_preset(policy_kind(model), env_set)
         check_policy(model, preset)
         ref, name = policy_ref(model), policy_label(model)
-        attackable = not (is_baseline(model) and get_baseline(model).reads == "simulator")
-        for attack in ["none", *attacks] if attackable else ["none"]:
-            points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
-            for eps, budget in points:
-                spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps, query_budget=budget)
-                folder = out / "cells" / (name.replace(":", "-") + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
-                                          + ("" if budget is None else f"-qb{budget}"))
-                job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed)
-                grid.append({"model": name, "attack": _label(attack), "eps": eps, "query_budget": budget})
-                cells.append(Cell(job, episodes, folder))
+        reads = get_baseline(model).reads if is_baseline(model) else "observation"
+        reads_obs = reads == "observation"
+        for defense in defenses if reads_obs else [None]:
+            if defense is not None:
+                make_defense(defense, preset)  # the preset must be one the defense understands
+            for attack in ["none", *attacks] if reads_obs else ["none"]:
+                points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
+                for eps, budget in points:
+                    spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps, query_budget=budget)
+                    folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
+                                              + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
+                                              + ("" if budget is None else f"-qb{budget}"))
+                    job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed,
+                                  defense=defense)
+                    grid.append({"model": name, "defense": defense or "none", "reads": reads,
+                                 "attack": _label(attack), "eps": eps, "query_budget": budget})
+                    cells.append(Cell(job, episodes, folder))
     rows: list[dict[str, Any] | None] = [None] * len(cells)
 
     def done(i: int, s: dict[str, Any]) -> None:
@@ -87,7 +103,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
         budget = f"{_cell(r.get('query_budget'), '{:d}')} | " if budgets else ""
-        lines.append(f"| {r['model']} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
+        lines.append(f"| {_system(r)} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
                      f"{_cell(r.get('offroad_rate'), '{:.0%}')} | {_cell(r.get('mean_speed'), '{:.1f}')} | "
                      f"{_cell(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
@@ -103,6 +119,67 @@ def write_tables(rows: list[dict[str, Any]], out: Path) -> None:
     writer.writerows(rows)
     write_atomic(out / "table.csv", buf.getvalue())
     write_atomic(out / "table.md", markdown(rows))
+    if len({r["eps"] for r in rows if r["eps"] is not None}) > 1:
+        write_atomic(out / "robustness.md", robustness_markdown(rows))
+
+
+def _system(row: dict[str, Any]) -> str:
+    """The policy as attacked: the model, and the defense in front of it if any."""
+    defense = row.get("defense", "none")
+    return row["model"] if defense in (None, "none") else f"{row['model']} + {defense}"
+
+
+def strongest(rows: list[dict[str, Any]]) -> dict[str, dict[float, dict[str, Any]]]:
+    """Per system (model + defense): its clean row at eps 0 and, per eps, the attacked row
+    with the lowest mean return (over attacks and query budgets)."""
+    table: dict[str, dict[float, dict[str, Any]]] = {}
+    for r in rows:
+        eps = 0.0 if r["eps"] is None else float(r["eps"])
+        cells = table.setdefault(_system(r), {})
+        if eps not in cells or r["mean_return"] < cells[eps]["mean_return"]:
+            cells[eps] = r
+    return table
+
+
+def robustness_markdown(rows: list[dict[str, Any]]) -> str:
+    """Return under the strongest attack per eps (which attack, in brackets); policies that
+    do not read the observation have one value, whatever the eps."""
+    table = strongest(rows)
+    eps_values = sorted({e for cells in table.values() for e in cells if e > 0})
+    lines = ["| Policy | Clean | " + " | ".join(f"ε {e:g}" for e in eps_values) + " |",
+             "|---|---|" + "---|" * len(eps_values)]
+    for system, cells in table.items():
+        clean = cells[0.0]
+        values = [f"{cells[e]['mean_return']:.1f} ({cells[e]['attack']}, {cells[e]['mean_speed']:.1f} m/s)"
+                  if e in cells else f"{clean['mean_return']:.1f} (ignores its input)" for e in eps_values]
+        lines.append(f"| {system} | {clean['mean_return']:.1f} ({clean['mean_speed']:.1f} m/s) | " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
+    """Mean return (95% CI band) against eps, each system under its strongest attack; a
+    policy that ignores its input is a horizontal dashed line (the floor a defense must beat)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for system, cells in strongest(rows).items():
+        if cells[0.0].get("reads", "observation") != "observation":
+            ax.axhline(cells[0.0]["mean_return"], ls="--", lw=1, color="grey")
+            ax.annotate(system, (0, cells[0.0]["mean_return"]), fontsize=7, color="grey",
+                        xytext=(2, 2), textcoords="offset points")
+            continue
+        eps = sorted(cells)
+        ax.plot(eps, [cells[e]["mean_return"] for e in eps], marker="o", label=system)
+        ax.fill_between(eps, [cells[e]["ci95_low"] for e in eps], [cells[e]["ci95_high"] for e in eps], alpha=0.15)
+    ax.set(xlabel="ε (L∞, normalized units)", ylabel="mean return", title="return under the strongest attack")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
