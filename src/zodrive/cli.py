@@ -176,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="per-step query budgets, one cell each (default: no cap)")
     cmp_.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE",
                       help="preset override, applied to every model's preset")
+    cmp_.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
+                      help="attack option for every attack of the grid, e.g. patience=10")
     cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", "kinematic"],
                       help="defenses in front of each model, one set of cells each (none = undefended)")
     cmp_.add_argument("--plot", type=Path, default=None,
@@ -429,7 +431,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     defenses = [None if d == "none" else d for d in args.defense or ["none"]]
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
-                   backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set)
+                   backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
+                   attack_set=args.attack_set)
     print(markdown(rows), end="")
     if args.plot:
         (plot_budget_curves if args.query_budgets else plot_robustness)(rows, args.plot)

@@ -24,7 +24,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     if summary.get("attack"):
         lines.append(
             f"attack: {summary['attack']} ({summary['norm']}, eps={summary['eps']}, {summary['mode']}, "
-            f"target={summary['target']})"
+            f"target={summary['target']})" + _options(summary.get("attack_config") or {})
         )
         lines.append(
             f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
@@ -32,6 +32,16 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
         )
     return "\n".join(lines)
+
+
+def _options(config: dict) -> str:
+    """The attack's options that differ from AttackSpec's defaults (e.g. max_change=0.01)."""
+    from zodrive.attacks.spec import AttackSpec
+
+    shown = {"attack", "eps", "norm", "mode", "target", "seed", "frozen"}
+    default = AttackSpec().to_dict()
+    changed = [f"{k}={v}" for k, v in config.items() if k not in shown and k in default and v != default[k]]
+    return f" {', '.join(changed)}" if changed else ""
 
 
 def _num(value: float | None, pattern: str) -> str:

@@ -26,7 +26,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
             query_budgets: list[int | None] | None = None, backend: str = "local",
             address: str | None = None, defenses: list[str | None] | None = None,
-            env_set: list[str] | None = None) -> list[dict[str, Any]]:
+            env_set: list[str] | None = None, attack_set: list[str] | None = None) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
@@ -38,7 +38,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
         for budget in budgets:
             for eps in eps_values:
-                load_attack(attack).with_overrides(eps=eps, query_budget=budget).check()
+                load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget).check()
     grid: list[dict[str, Any]] = []
     cells: list[Cell] = []
     for model in models:
@@ -53,7 +53,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             for attack in ["none", *attacks] if reads_obs else ["none"]:
                 points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
                 for eps, budget in points:
-                    spec = None if attack == "none" else load_attack(attack).with_overrides(eps=eps, query_budget=budget)
+                    spec = None if attack == "none" else \
+                        load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
                                               + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
                                               + ("" if budget is None else f"-qb{budget}"))
