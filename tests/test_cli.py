@@ -280,3 +280,15 @@ def test_compare_on_ray_gives_the_local_numbers(tiny_dqn: Path, tmp_path: Path) 
     assert main(args + ["--out", str(tmp_path / "ray"), "--backend", "ray", "--workers", "2"]) == 0
     local, ray = (json.loads((tmp_path / name / "table.json").read_text()) for name in ("local", "ray"))
     assert local == ray  # same cells, same order, same numbers
+
+
+def test_a_td3_row_trains_and_is_read_like_a_ddpg(tmp_path: Path) -> None:
+    out = tmp_path / "td3"
+    assert main(["train", "--algo", "td3", "--steps", "200", "--set", "hyperparameters.learning_starts=50",
+                 "--out", str(out), "--no-progress"]) == 0
+    from zodrive.agents.policies import policy_kind
+    from zodrive.agents.safe_load import load_policy_network
+
+    assert policy_kind(str(out)) == "continuous"
+    assert load_policy_network(out / "model.zip").n_outputs == 2  # the actor, rebuilt without unpickling
+    assert json.loads((out / "train.json").read_text())["algo"] == "td3"

@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("baselines", help="list the built-in baseline policies (baseline:NAME)")
 
     train = sub.add_parser("train", help="train a DQN or DDPG agent")
-    train.add_argument("--algo", choices=["dqn", "ddpg"], required=True)
+    train.add_argument("--algo", choices=["dqn", "ddpg", "td3"], required=True)
     train.add_argument("--recipe", help="recipe name or YAML (default: the tuned recipe of --algo)")
     train.add_argument("--seed", type=_seed, help="training seed (default: the recipe's)")
     train.add_argument("--steps", type=_positive_int, help="total timesteps (default: the recipe's budget)")

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import yaml
-from stable_baselines3 import DDPG, DQN
+from stable_baselines3 import DDPG, DQN, TD3
 from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -27,8 +27,9 @@ from zodrive.runinfo import command_line, write_atomic, write_json, write_run_in
 
 log = logging.getLogger(__name__)
 
-ALGOS = {"dqn": DQN, "ddpg": DDPG}
-KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous"}
+ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
+KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
+ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
                "double_q"}
 
@@ -173,7 +174,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
                             append=checkpoint is not None)
     if checkpoint is None:
         kwargs = dict(recipe.get("hyperparameters") or {})
-        if algo == "ddpg":
+        if algo in ACTOR_CRITIC:
             kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
         model = algorithm_class(recipe)(
             "MlpPolicy",
@@ -203,7 +204,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
             total_timesteps=total - done,
             callback=callback,
             progress_bar=progress_bar,
-            log_interval=1 if algo == "ddpg" else 4,
+            log_interval=1 if algo in ACTOR_CRITIC else 4,
             reset_num_timesteps=checkpoint is None,
         )
     wall = time.perf_counter() - start  # of this invocation: steps done-total
