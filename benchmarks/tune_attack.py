@@ -26,13 +26,13 @@ from zodrive.evaluation.rollout import act
 from zodrive.seeds import TUNING_SEED  # states come from seeds outside the evaluation range
 
 
-def collect(model: str, episodes: int, every: int) -> tuple[np.ndarray, object, dict]:
+def collect(model: str, episodes: int, every: int, seed: int = TUNING_SEED) -> tuple[np.ndarray, object, dict]:
     preset = resolve_model_preset(model, None, [])
     victim = sb3_victim(load_model(model, preset))
     env = make_env(preset)
     states = []
     for i in range(episodes):
-        obs, _ = env.reset(seed=TUNING_SEED + i)
+        obs, _ = env.reset(seed=seed + i)
         done, t = False, 0
         while not done:
             if t % every == 0:
@@ -48,14 +48,18 @@ def main() -> None:
     parser.add_argument("--attack", default="zo-signsgd")
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--every", type=int, default=5, help="keep every n-th state")
-    parser.add_argument("--grid", nargs="*", default=[], metavar="KEY=V1,V2")
+    parser.add_argument("--grid", nargs="*", default=[], metavar="KEY=V1,V2",
+                        help="attack options to cross, e.g. attack=random-search,pgd eps=0.05,0.1 restarts=0,4")
+    parser.add_argument("--seed", type=int, default=TUNING_SEED,
+                        help="first episode seed of the states (default: the tuning seeds; 100000 to check on evaluation seeds)")
     args = parser.parse_args()
-    states, victim, preset = collect(args.model, args.episodes, args.every)
+    states, victim, preset = collect(args.model, args.episodes, args.every, args.seed)
     keys = [g.split("=")[0] for g in args.grid]
     values = [[yaml.safe_load(v) for v in g.split("=")[1].split(",")] for g in args.grid]
-    print(f"{len(states)} states from {args.episodes} tuning episodes")
-    print("| " + " | ".join(keys + ["success", "already", "iterations", "queries/step", "mean Linf", "ms/state"]) + " |")
-    print("|" + "---|" * (len(keys) + 6))
+    print(f"{len(states)} states from {args.episodes} episodes (seeds {args.seed}+), attack {args.attack}")
+    print("| " + " | ".join(keys + ["success", "already", "iterations", "queries/step",
+                                    "median queries on success", "mean Linf", "ms/state"]) + " |")
+    print("|" + "---|" * (len(keys) + 7))
     for combo in itertools.product(*values):
         spec = load_attack(args.attack, [f"{k}={v}" for k, v in zip(keys, combo)])
         attack, objective, oracle = spec.build(victim, **attack_context(preset))
@@ -63,9 +67,11 @@ def main() -> None:
         r = attack.perturb(states, oracle, objective)
         wall = time.perf_counter() - start
         ok = r.success[~r.already].mean() if (~r.already).any() else float("nan")
+        won = r.queries[r.success]
+        median = f"{np.median(won):.0f}" if won.size else "–"
         print("| " + " | ".join(str(v) for v in combo) +
               f" | {ok:.1%} | {r.already.mean():.1%} | {r.iterations.mean():.1f} | {r.queries.mean():.0f}"
-              f" | {r.linf.mean():.3f} | {1000 * wall / len(states):.2f} |")
+              f" | {median} | {r.linf.mean():.3f} | {1000 * wall / len(states):.2f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -48,6 +48,33 @@ def test_idm_mobil_continuous_stays_on_the_road() -> None:
     assert record.distance > 150 * 20.0 / 15  # [m] at more than 20 m/s on average
 
 
+def test_observation_rules_drive_and_can_be_attacked_on_their_decisions() -> None:
+    """`baseline:rules` reads the observation: it speeds up on free road, brakes behind a close
+    car, and an attack that changes its observation changes what it does."""
+    from zodrive.agents.rules import FASTER, LANE_LEFT, SLOWER, ObservationRules
+    from zodrive.attacks import AttackSpec
+    from zodrive.envs import attack_context
+
+    preset = load_preset("discrete", ["max_episode_steps=150"])
+    rules = ObservationRules(preset)
+    free = np.zeros((1, 5, 5), np.float32)
+    free[0, 0] = [1, 1, 0.12, 1, 0]  # alone in the right lane (3) at >= 20 m/s
+    close = free.copy()
+    close[0, 1] = [1, 0.12, 0, -0.1, 0]  # a car 12 m ahead in the own lane, 2 m/s slower
+    blocked = close.copy()
+    blocked[0, 2] = [1, 0.02, -0.04, 0, 0]  # and one beside on the left
+    middle = free.copy()
+    middle[0, 0, 2] = 0.08  # alone in lane 2: keep right
+    assert rules.actions(np.concatenate([free, close, blocked, middle])).tolist() == [FASTER, LANE_LEFT, SLOWER, 2]
+    victim, env = make_policy_env("baseline:rules", preset)
+    assert victim.reads == "observation" and victim.differentiable is None
+    record = run_episode(env, victim, episode=0, seed=50_000, max_return=150.0)
+    assert record.mean_speed > 20.5 and not record.crashed
+    attack, objective, oracle = AttackSpec(attack="random-search", eps=0.2).build(victim, **attack_context(preset))
+    result = attack.perturb(close, oracle, objective)  # make it speed into the car ahead
+    assert result.success[0] and victim.actions(victim.query(result.x_adv))[0] == FASTER
+
+
 def test_driving_metrics_of_a_constant_policy() -> None:
     preset = load_preset("discrete", SHORT)
     victim, env = make_policy_env("baseline:slower", preset)

@@ -6,6 +6,8 @@ observation attack can touch them: they are the robustness floor. `baseline:idm-
 classical lane-changing driver (IDM for speed, MOBIL for lane changes, highway-env's own models
 and constants, target speed 30 m/s) that reads the **simulator**, not the observation: it is
 the reference a learned driver should beat, and an observation attack does not apply to it.
+`baseline:rules` is a hand-written driver that reads the same observation as the learned
+agents (`zodrive.agents.rules`): attackable like them, but it shows the attacker only its decision.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ SPEED_CHANGE_ACC = 0.5   # [m/s^2] |IDM acceleration| above which a meta-action 
 class Baseline:
     name: str
     kinds: tuple[str, ...]                    # presets it can drive: discrete and/or continuous
-    reads: Literal["nothing", "simulator"]    # what its decisions depend on
+    reads: Literal["nothing", "observation", "simulator"]    # what its decisions depend on
     description: str
     label: str                                # short name for tables
     action: Any = None                        # constant action (None: a driver)
@@ -46,6 +48,9 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
              "always [-1, 0] (full brake)", (-1.0, 0.0)),
     Baseline("accelerate", ("continuous",), "nothing", "always [1, 0.5]: the DDPG attack's target",
              "always [1, 0.5] (the attack's target)", (1.0, 0.5)),
+    Baseline("rules", ("discrete",), "observation",
+             "hand-written lane-changing rules on the observation (zodrive.agents.rules); attackable, decisions only",
+             "rules on the observation"),
     Baseline("idm-mobil", ("discrete", "continuous"), "simulator",
              "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
              "IDM + MOBIL driver (reads the simulator)"),

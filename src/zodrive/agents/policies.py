@@ -67,7 +67,7 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
 
 
 def load_victim(model: str, preset: dict[str, Any]) -> Victim:
-    """The black-box victim of an observation-reading policy (a model or a constant baseline)."""
+    """The black-box victim of an observation-reading policy (a model or an observation-reading or constant baseline)."""
     kind = action_kind(preset)
     if bl.is_baseline(model):
         baseline = bl.get_baseline(model)
@@ -75,6 +75,10 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
         if baseline.reads == "simulator":
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator; it needs its environment "
                                "(use make_policy_env)")
+        if baseline.reads == "observation":
+            from zodrive.agents.rules import rules_victim
+
+            return rules_victim(preset, observation_shape(preset), n_actions(preset))
         return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset))
     from zodrive.agents.loading import load_network
     from zodrive.agents.onnx_policy import is_onnx, onnx_victim
