@@ -27,3 +27,21 @@ def test_victim_acts_like_sb3_predict(algo, preset: str) -> None:
 
     np.testing.assert_allclose(victim.differentiable(torch.from_numpy(obs)).detach().numpy(),
                                victim.query(obs), atol=1e-6)
+
+
+def test_a_guided_dqn_collects_the_guides_actions_then_its_own() -> None:
+    from zodrive.agents.dqn_variants import GuidedDQN
+
+    env = make_env(load_preset("discrete", ["max_episode_steps=30"]))
+    model = GuidedDQN("MlpPolicy", env, learning_starts=10, buffer_size=500, seed=0, device="cpu")
+    calls: list[int] = []
+
+    def guide(obs: np.ndarray) -> np.ndarray:
+        calls.append(model.num_timesteps)
+        return np.full(len(obs), 2)
+
+    model.configure_guide(guide, start=1.0, steps=60)
+    model.learn(90)
+    early = model.replay_buffer.actions[:20, 0, 0]
+    assert np.mean(early == 2) > 0.6  # guide rate 1 -> 0.67 over these steps, uniform otherwise
+    assert calls and max(calls) < 60 and model.guide_rate() == 0.0  # gone once its rate reaches 0

@@ -113,3 +113,32 @@ class SADQN(LossHookDQN):
             x = th.max(th.min(x, x0.clamp(min=r["high"])), x0.clamp(max=r["low"]))  # box; clean values stay
         reg = th.clamp(margin(x.detach()), min=-r["hinge"]).mean()  # gradient flows into the network only
         return r["kappa"] * reg
+
+
+class GuidedDQN(LossHookDQN):
+    """DQN whose exploration is guided by a driver that reads the same observation.
+
+    With probability `rate(t)` the behaviour action is the guide's (`baseline:rules`),
+    decaying linearly from `start` to 0 over the first `fraction` of training; otherwise SB3's
+    epsilon-greedy (or, before `learning_starts`, uniform) action. The learner is unchanged:
+    off-policy Q-learning on the collected transitions (n-step returns then carry the guide's
+    good returns early on). The guide only decides which transitions get collected, as
+    demonstrations do in DQfD (Hester et al., AAAI 2018), without DQfD's imitation loss; the
+    saved zip is an ordinary SB3 DQN zip and the guide is not part of the policy.
+    """
+
+    guide: Any = None
+    guide_schedule: tuple[float, int] = (0.0, 1)
+
+    def configure_guide(self, guide: Any, start: float, steps: int) -> None:
+        self.guide, self.guide_schedule = guide, (float(start), max(int(steps), 1))
+
+    def guide_rate(self) -> float:
+        start, steps = self.guide_schedule
+        return start * max(0.0, 1.0 - self.num_timesteps / steps)
+
+    def _sample_action(self, learning_starts: int, action_noise: Any = None, n_envs: int = 1) -> Any:
+        if self.guide is not None and np.random.rand() < self.guide_rate():
+            action = np.asarray(self.guide(self._last_obs), dtype=np.int64).reshape(n_envs)
+            return action, action
+        return super()._sample_action(learning_starts, action_noise, n_envs)

@@ -31,17 +31,24 @@ ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
 KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
 ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
-               "double_q"}
+               "double_q", "guide"}
+GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
 
 
 def algorithm_class(recipe: dict[str, Any]):
     """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target) or DDPG."""
     if recipe.get("double_q"):
-        if recipe["algo"] != "dqn":
-            raise ZodriveError("double_q applies to dqn recipes only")
+        if recipe["algo"] != "dqn" or recipe.get("guide"):
+            raise ZodriveError("double_q applies to dqn recipes without a guide only")
         from zodrive.agents.dqn_variants import DoubleDQN
 
         return DoubleDQN
+    if recipe.get("guide"):
+        if recipe["algo"] != "dqn":
+            raise ZodriveError("guide applies to dqn recipes only")
+        from zodrive.agents.dqn_variants import GuidedDQN
+
+        return GuidedDQN
     return ALGOS[recipe["algo"]]
 
 
@@ -59,6 +66,20 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
     return recipe
+
+
+def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
+    """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F}`."""
+    spec = recipe["guide"]
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - {"name", "start", "fraction"}:
+        raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F}}, not {spec!r}")
+    start, fraction = float(spec.get("start", 0.5)), float(spec.get("fraction", 0.3))
+    if not (0 <= start <= 1 and 0 < fraction <= 1):
+        raise ZodriveError("recipe guide: start must be in [0, 1] and fraction in (0, 1]")
+    from zodrive.agents.rules import ObservationRules
+
+    rules = ObservationRules(preset)
+    model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])))
 
 
 def action_noise(spec: dict[str, Any] | None, n_actions: int):
@@ -193,6 +214,8 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         if buffer.is_file():
             model.load_replay_buffer(buffer)
         log.warning("resuming %s from step %d (%s)", out, done, path.name)
+    if recipe.get("guide"):
+        _configure_guide(model, recipe, preset)
     model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
     every = int(recipe.get("checkpoint_every", 0) or 0)
     callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
