@@ -271,6 +271,13 @@ def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
     assert "episode.mp4" in capsys.readouterr().out
 
 
+def test_render_through_the_filter(tiny_dqn: Path, tmp_path: Path) -> None:
+    out = tmp_path / "defended"
+    assert main(["render", str(tiny_dqn), "--out", str(out), "--env-set", "max_episode_steps=8", "--defense",
+                 "kinematic", "--attack", "uniform-noise"]) == 0
+    assert json.loads((out / "episode.json").read_text())["defense"] == "kinematic"
+
+
 @pytest.mark.slow
 def test_compare_on_ray_gives_the_local_numbers(tiny_dqn: Path, tmp_path: Path) -> None:
     pytest.importorskip("ray")

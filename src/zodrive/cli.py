@@ -106,6 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     render.add_argument("--out", type=Path, required=True)
+    render.add_argument("--defense", choices=["kinematic"],
+                        help="filter between the (attacked) sensor and the policy; 'perceived' is what passes it")
     render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
@@ -349,7 +351,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     spec = attack_spec_from_args(args)
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array")
+    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
         frames, info = record_episode(env, victim, seed)
@@ -357,13 +359,13 @@ def cmd_render(args: argparse.Namespace) -> int:
             break
     if float(np.asarray(frames[0].image).max()) == 0:
         raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
-    title = f"{spec.attack} eps={spec.eps} | " if spec else "clean | "
+    title = (f"{spec.attack} eps={spec.eps} | " if spec else "clean | ") + (f"+{args.defense} | " if args.defense else "")
     save_png(frames, args.out / "episode.png", title=title)
     save_gif(frames, args.out / "episode.gif", title=title)
     mp4 = save_mp4(frames, args.out / "episode.mp4", title=title)
     from zodrive.runinfo import write_json
 
-    write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None})
+    write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None, "defense": args.defense})
     print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
           f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
           f" -> {args.out}/episode.png, episode.gif" + (", episode.mp4" if mp4 else " (MP4: pip install 'zodrive[video]')"))
