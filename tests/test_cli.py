@@ -60,6 +60,21 @@ def test_evaluation_is_deterministic_and_resumes(tiny_dqn: Path, tmp_path: Path)
     assert len((tmp_path / "a" / "episodes.jsonl").read_text().splitlines()) == 3
 
 
+def test_a_folder_made_before_an_option_existed_still_resumes(tiny_dqn: Path, tmp_path: Path) -> None:
+    """A key without a later option (here max_change) was made with its default: it resumes;
+    a key whose recorded option differs is refused."""
+    args = ["evaluate", str(tiny_dqn), "--no-progress", "--attack", "uniform-noise", "--env-set", "max_episode_steps=10",
+            "--out", str(tmp_path / "old")]
+    assert main(args + ["--episodes", "1"]) == 0
+    key_path = tmp_path / "old" / "eval_key.json"
+    key = json.loads(key_path.read_text())
+    del key["attack"]["max_change"]
+    key_path.write_text(json.dumps(key))
+    assert main(args + ["--episodes", "2"]) == 0
+    assert len((tmp_path / "old" / "episodes.jsonl").read_text().splitlines()) == 2
+    assert main(args + ["--episodes", "3", "--max-change", "0.01"]) == 2
+
+
 def test_attacked_summary_has_attack_fields(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "att"
     assert main(["evaluate", str(tiny_dqn), "--episodes", "1", "--no-progress", "--attack", "zo-signsgd",

@@ -182,7 +182,13 @@ def _mean_of(records: list[dict[str, Any]], key: str) -> float | None:
 
 
 def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
-    """Refuse to mix episodes of two different evaluations, saying what differs."""
+    """Refuse to mix episodes of two different evaluations, saying what differs. An attack option
+    that a folder's key does not record was added to zodrive later: its default is the behaviour
+    the folder was made with, so it counts as set to the default."""
+    if isinstance(on_disk.get("attack"), dict):
+        from zodrive.attacks.spec import AttackSpec
+
+        on_disk = {**on_disk, "attack": {**AttackSpec().to_dict(), **on_disk["attack"]}}
     if on_disk == wanted:
         return
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]

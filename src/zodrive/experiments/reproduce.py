@@ -31,9 +31,10 @@ log = logging.getLogger(__name__)
 
 PRESET_OF = {"dqn": "discrete", "ddpg": "continuous"}
 # Policies that ignore their observation (or read the simulator), evaluated beside each agent:
-# a number one of these also reaches is not a result.
+# a number one of these also reaches is not a result; and a hand-written driver on the same
+# observation (baseline:rules), the bar a learned driver has to clear.
 BASELINE_ROWS = {
-    "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil"),
+    "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil", "baseline:rules"),
     "ddpg": ("baseline:brake", "baseline:accelerate", "baseline:idm-mobil"),
 }
 
