@@ -181,14 +181,24 @@ def _mean_of(records: list[dict[str, Any]], key: str) -> float | None:
     return float(np.mean([r[key] for r in records])) if all(key in r for r in records) else None
 
 
-def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
-    """Refuse to mix episodes of two different evaluations, saying what differs. An attack option
-    that a folder's key does not record was added to zodrive later: its default is the behaviour
-    the folder was made with, so it counts as set to the default."""
-    if isinstance(on_disk.get("attack"), dict):
+def _with_later_defaults(key: dict[str, Any]) -> dict[str, Any]:
+    """An attack option that a folder's key does not record was added to zodrive later: its
+    default is the behaviour the folder was made with, so it counts as set to the default."""
+    if isinstance(key.get("attack"), dict):
         from zodrive.attacks.spec import AttackSpec
 
-        on_disk = {**on_disk, "attack": {**AttackSpec().to_dict(), **on_disk["attack"]}}
+        key = {**key, "attack": {**AttackSpec().to_dict(), **key["attack"]}}
+    return key
+
+
+def same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any]) -> bool:
+    """Whether a folder's key (`eval_key.json`) describes the evaluation `wanted` (a job's key)."""
+    return _with_later_defaults(on_disk) == wanted
+
+
+def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: Path) -> None:
+    """Refuse to mix episodes of two different evaluations, saying what differs."""
+    on_disk = _with_later_defaults(on_disk)
     if on_disk == wanted:
         return
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]

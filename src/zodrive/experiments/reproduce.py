@@ -23,7 +23,7 @@ from zodrive.config import models_dir
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 from zodrive.experiments.cells import Cell, run_cells
-from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, same_evaluation
 from zodrive.experiments.paper import ADV_STEPS
 from zodrive.runinfo import write_json
 
@@ -105,7 +105,7 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
         summary_path = folder / "summary.json"
         if summary_path.is_file() and json.loads(summary_path.read_text()).get("episodes") == episodes \
                 and (folder / "eval_key.json").is_file() \
-                and json.loads((folder / "eval_key.json").read_text()) == json.loads(json.dumps(job.key())):
+                and same_evaluation(json.loads((folder / "eval_key.json").read_text()), json.loads(json.dumps(job.key()))):
             summaries[algo][row] = json.loads(summary_path.read_text())
             continue
         todo.append((algo, row, Cell(job, episodes, folder)))
