@@ -99,3 +99,36 @@ def test_robust_train_sa_runs_and_records_its_method(tmp_path: Path) -> None:
     assert train["kind"] == "sa-dqn" and train["method"]["eps"] == 0.05
     progress = (out / "progress.csv").read_text()
     assert "train/regularizer" in progress
+
+
+def test_robust_distillation_writes_a_model_every_command_reads(tmp_path: Path) -> None:
+    """The student is an ordinary DQN zip (read without unpickling); its robustness term makes
+    it harder to flip inside the ball than the teacher, on the teacher's own states."""
+    import numpy as np
+    import torch
+
+    from zodrive.agents.loading import load_network
+    from zodrive.defense.distill import _pgd, distill
+    from zodrive.envs import load_preset
+
+    preset = load_preset("discrete", ["max_episode_steps=60"])
+    out = distill("models/dqn-driver", preset, 0.05, 300, tmp_path / "d", epochs=5)
+    train = json.loads((tmp_path / "d" / "train.json").read_text())
+    assert train["method"]["name"] == "robust-distillation" and 0 <= train["clean_agreement"] <= 1
+    teacher = load_network("models/dqn-driver", preset)
+    student = load_network(out, preset)  # the safe loader rebuilds it: nothing in the zip is unpickled
+    assert student.n_outputs == 5 and not torch.equal(student.net[0].weight, teacher.net[0].weight)
+    from zodrive.envs import make_env
+    from zodrive.agents.victims import network_victim
+    from zodrive.evaluation.rollout import clean_states
+
+    x = torch.as_tensor(clean_states(make_env(preset), network_victim(teacher.net, "discrete", (5, 5)), 7, 60))
+    mask = torch.ones(5, 5)
+    mask[:, 0] = 0
+
+    def flips(net: torch.nn.Module) -> float:
+        y = net(x.reshape(len(x), -1)).argmax(dim=1)
+        adv = _pgd(net, x, y, 0.05, 10, mask, -1.0, 1.0)
+        return float((net(adv.reshape(len(x), -1)).argmax(dim=1) != y).float().mean())
+
+    assert flips(student.net) < flips(teacher.net)

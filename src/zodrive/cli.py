@@ -112,13 +112,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
 
-    rob = sub.add_parser("robust-train", help="continue a trained agent with a robustness method (sa: SA-DQN, at: Algorithm 2)")
+    rob = sub.add_parser("robust-train", help="make a trained agent robust (sa: SA-DQN, at: Algorithm 2, distill: robust distillation)")
     rob.add_argument("model")
-    rob.add_argument("--method", choices=["sa", "at"], required=True)
+    rob.add_argument("--method", choices=["sa", "at", "distill"], required=True,
+                     help="sa: SA-DQN regularizer; at: Algorithm 2; distill: robust distillation of its own decisions")
     rob.add_argument("--eps", type=float, required=True, help="L-inf radius the agent is trained to withstand")
     rob.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
     rob.add_argument("--out", type=Path, required=True)
-    rob.add_argument("--kappa", type=float, default=0.5, help="weight of the SA regularizer")
+    rob.add_argument("--kappa", type=float, default=0.5, help="weight of the robustness term (SA regularizer; distill: the adversarial CE)")
     rob.add_argument("--pgd-steps", type=_positive_int, default=5, help="PGD steps for the regularizer's inner max")
     rob.add_argument("--seed", type=_seed, default=1)
     rob.add_argument("--warmup", type=_nonnegative_int, default=1000)

@@ -4,6 +4,8 @@
   comparison.
 - `sa`: SA-DQN's state-adversarial regularizer (`agents.dqn_variants.SADQN`) on clean
   observations; DQN only for now.
+- `distill`: adversarially robust distillation of the model's own decisions on the states it
+  visits (`defense.distill`); `steps` is the number of states collected, DQN only.
 Both continue from the model's weights with the same warm-buffer start as Algorithm 2.
 """
 
@@ -18,7 +20,7 @@ from zodrive.defense.adversarial import adversarial_train
 from zodrive.envs import attack_context, observation_shape
 from zodrive.errors import ZodriveError
 
-METHODS = ("at", "sa")
+METHODS = ("at", "sa", "distill")
 
 
 def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, steps: int, out: Path, *,
@@ -28,6 +30,10 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, st
         raise ZodriveError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
     if not eps > 0:
         raise ZodriveError(f"eps must be > 0, not {eps}")
+    if method == "distill":  # supervised on the teacher's states: no SB3 training loop, nothing unpickled
+        from zodrive.defense.distill import distill
+
+        return distill(model, preset, eps, steps, out, seed=seed, kappa=kappa, pgd_steps=pgd_steps, force=force)
     common = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust, "force": force}
     if method == "at":
         return adversarial_train(model, preset, load_attack("zo-signsgd").with_overrides(eps=eps), steps, out, **common)

@@ -1,0 +1,127 @@
+"""`robust-train --method distill`: adversarially robust distillation of a DQN driver.
+
+Why: SA-DQN and Algorithm 2 continue TD learning, and under this reward TD learning drifts to
+the always-SLOWER fixed point (a constant decision is the cheapest robust one; measured in
+the README). Distillation keeps the driver's behaviour as the target instead: collect the
+states the teacher visits, then train a student (initialized as the teacher) to take the
+teacher's action at every state *and* everywhere in the eps-ball around it (Madry-style
+adversarial training on the supervised loss, the inner max by `pgd_steps` signed-gradient
+steps inside the threat model: box, frozen presence):
+
+    loss = CE(student(x), a*) + kappa * max_{x' in B(x, eps)} CE(student(x'), a*),  a* = argmax teacher(x)
+
+Cf. policy distillation (Rusu et al., ICLR 2016) and adversarial training (Madry et al., ICLR
+2018). The student is written as an ordinary SB3 DQN zip (the teacher's zip with the Q-network
+weights replaced), so every command reads it; its outputs are logits, not Q-values.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from zodrive.errors import ZodriveError
+
+
+def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, seed: int = 1,
+            kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False) -> Path:
+    """Collect `steps` teacher states (training seeds `seed`, `seed` + 1, ...), train the
+    robust student, write `out/model.zip` and `out/train.json`; returns the zip's path."""
+    from zodrive.agents.loading import load_network, model_file
+    from zodrive.agents.victims import network_victim
+    from zodrive.attacks.threat import ThreatModel
+    from zodrive.envs import attack_context, make_env
+    from zodrive.evaluation.rollout import clean_states
+    from zodrive.runinfo import write_json
+
+    if (out / "model.zip").exists() and not force:
+        raise ZodriveError(f"{out} already holds a model; use --force to overwrite it")
+    teacher = load_network(model, preset)
+    if teacher.algo != "dqn":
+        raise ZodriveError("--method distill is implemented for DQN models")
+    start = time.perf_counter()
+    torch.manual_seed(seed)
+    env = make_env(preset)
+    states = clean_states(env, network_victim(teacher.net, "discrete", teacher.obs_shape), seed, steps)
+    env.close()
+    context = attack_context(preset)
+    low, high = context["bounds"]
+    mask = torch.as_tensor(ThreatModel(eps=eps, features=context["features"]).mask(states.shape[1:]))
+    x_all = torch.as_tensor(states, dtype=torch.float32)
+    with torch.no_grad():
+        y_all = teacher.net(x_all.reshape(len(x_all), -1)).argmax(dim=1)
+    student = copy.deepcopy(teacher.net).train()
+    opt = torch.optim.Adam(student.parameters(), lr=3e-4)
+    gen = torch.Generator().manual_seed(seed)
+    history = []
+    for epoch in range(epochs):
+        order = torch.randperm(len(x_all), generator=gen)
+        total = 0.0
+        for batch in order.split(256):
+            x, y = x_all[batch], y_all[batch]
+            x_adv = _pgd(student, x, y, eps, pgd_steps, mask, low, high)
+            loss = F.cross_entropy(student(x.reshape(len(x), -1)), y) \
+                + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += loss.item() * len(batch)
+        history.append(round(total / len(x_all), 4))
+    student.eval()
+    with torch.no_grad():
+        agree = float((student(x_all.reshape(len(x_all), -1)).argmax(dim=1) == y_all).float().mean())
+    out.mkdir(parents=True, exist_ok=True)
+    _write_zip(model_file(model), student, out / "model.zip")
+    write_json(out / "train.json", {
+        "algo": "dqn", "kind": "distill", "source_model": str(model_file(model)),
+        "method": {"name": "robust-distillation", "eps": eps, "kappa": kappa, "pgd_steps": pgd_steps,
+                   "epochs": epochs, "states": steps, "reference": "Rusu et al. 2016; Madry et al. 2018"},
+        "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
+        "wall_time_s": round(time.perf_counter() - start, 1)})
+    return out / "model.zip"
+
+
+def _pgd(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, eps: float, n: int, mask: torch.Tensor,
+         low: float, high: float) -> torch.Tensor:
+    """The point of the eps-ball (box, frozen features) where the student's CE is highest."""
+    step = 2.5 * eps / max(n, 1)
+    lo, hi = torch.minimum(x - eps, torch.full_like(x, high)).clamp(min=low), torch.maximum(x + eps, torch.full_like(x, low)).clamp(max=high)
+    lo, hi = torch.minimum(lo, x), torch.maximum(hi, x)  # a clean value outside the box stays reachable
+    adv = (x + (torch.rand_like(x) * 2 - 1) * eps * mask).clamp(lo, hi)
+    for _ in range(n):
+        adv = adv.detach().requires_grad_(True)
+        grad, = torch.autograd.grad(F.cross_entropy(net(adv.reshape(len(adv), -1)), y), adv)
+        adv = torch.max(torch.min(adv.detach() + step * grad.sign() * mask, hi), lo)
+    return adv.detach()
+
+
+def _write_zip(source: Path, student: torch.nn.Sequential, target: Path) -> None:
+    """The teacher's SB3 zip with its Q-network (and target network) weights replaced."""
+    with zipfile.ZipFile(source) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    weights = torch.load(io.BytesIO(members["policy.pth"]), map_location="cpu", weights_only=True)
+    layers = [m for m in student if isinstance(m, torch.nn.Linear)]
+    for prefix in ("q_net.q_net", "q_net_target.q_net"):
+        indices = sorted({int(k.split(".")[2]) for k in weights if k.startswith(prefix + ".")})
+        if len(indices) != len(layers):
+            raise ZodriveError(f"{source}: unexpected Q-network layout")
+        for index, layer in zip(indices, layers):
+            weights[f"{prefix}.{index}.weight"] = layer.weight.detach().clone()
+            weights[f"{prefix}.{index}.bias"] = layer.bias.detach().clone()
+    buf = io.BytesIO()
+    torch.save(weights, buf)
+    members["policy.pth"] = buf.getvalue()
+    members.pop("policy.optimizer.pth", None)  # the teacher's optimizer state no longer fits
+    tmp = target.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    tmp.replace(target)
