@@ -45,3 +45,25 @@ def test_a_guided_dqn_collects_the_guides_actions_then_its_own() -> None:
     early = model.replay_buffer.actions[:20, 0, 0]
     assert np.mean(early == 2) > 0.6  # guide rate 1 -> 0.67 over these steps, uniform otherwise
     assert calls and max(calls) < 60 and model.guide_rate() == 0.0  # gone once its rate reaches 0
+
+
+def test_the_imitation_margin_pulls_the_greedy_action_to_the_guides() -> None:
+    import torch as th
+
+    from zodrive.agents.dqn_variants import GuidedDQN
+
+    env = make_env(load_preset("discrete", ["max_episode_steps=30"]))
+    model = GuidedDQN("MlpPolicy", env, seed=0, device="cpu")
+    guide = lambda obs: (np.abs(obs).reshape(len(obs), -1).sum(axis=1) * 10).astype(int) % 5  # noqa: E731
+    model.configure_guide(guide, start=0.0, steps=1, imitation=1.0, margin=0.8)
+    obs = th.as_tensor(np.random.default_rng(0).uniform(-1, 1, (64, 5, 5)), dtype=th.float32)
+    first = model.extra_loss(obs)
+    assert first is not None and float(first) >= 0
+    opt = th.optim.Adam(model.q_net.parameters(), lr=1e-2)
+    for _ in range(300):
+        loss = model.extra_loss(obs)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    taken = model.q_net(obs).argmax(dim=1).numpy()
+    assert np.mean(taken == guide(obs.numpy())) > 0.9 and float(model.extra_loss(obs)) < float(first)

@@ -124,14 +124,31 @@ class GuidedDQN(LossHookDQN):
     off-policy Q-learning on the collected transitions (n-step returns then carry the guide's
     good returns early on). The guide only decides which transitions get collected, as
     demonstrations do in DQfD (Hester et al., AAAI 2018), without DQfD's imitation loss; the
-    saved zip is an ordinary SB3 DQN zip and the guide is not part of the policy.
+    saved zip is an ordinary SB3 DQN zip and the guide is not part of the policy. With
+    `imitation` > 0, DQfD's large-margin loss on the guide's labels is added to the TD loss.
     """
 
     guide: Any = None
     guide_schedule: tuple[float, int] = (0.0, 1)
+    margin: tuple[float, float] = (0.0, 0.8)  # (weight, margin) of the large-margin imitation loss
 
-    def configure_guide(self, guide: Any, start: float, steps: int) -> None:
+    def configure_guide(self, guide: Any, start: float, steps: int, imitation: float = 0.0,
+                        margin: float = 0.8) -> None:
         self.guide, self.guide_schedule = guide, (float(start), max(int(steps), 1))
+        self.margin = (float(imitation), float(margin))
+
+    def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
+        """DQfD's large-margin loss (Hester et al. 2018), with the guide labelling every sampled
+        state: weight * mean(max_a [Q(s, a) + margin * (a != a_G)] - Q(s, a_G)), a_G = guide(s).
+        It keeps the guide's action ahead by the margin unless the TD loss shows a better one."""
+        weight, margin = self.margin
+        if weight <= 0 or self.guide is None:
+            return None
+        labels = th.as_tensor(np.asarray(self.guide(observations.detach().cpu().numpy())), dtype=th.long,
+                              device=observations.device)[:, None]
+        q = self.q_net(observations)
+        bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
+        return weight * ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
 
     def guide_rate(self) -> float:
         start, steps = self.guide_schedule

@@ -71,15 +71,19 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
 def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
     """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F}`."""
     spec = recipe["guide"]
-    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - {"name", "start", "fraction"}:
-        raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F}}, not {spec!r}")
+    keys = {"name", "start", "fraction", "imitation", "margin"}
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
+        raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
+                           f"imitation: W, margin: M}}, not {spec!r}")
     start, fraction = float(spec.get("start", 0.5)), float(spec.get("fraction", 0.3))
-    if not (0 <= start <= 1 and 0 < fraction <= 1):
-        raise ZodriveError("recipe guide: start must be in [0, 1] and fraction in (0, 1]")
+    imitation, margin = float(spec.get("imitation", 0.0)), float(spec.get("margin", 0.8))
+    if not (0 <= start <= 1 and 0 < fraction <= 1 and imitation >= 0 and margin >= 0):
+        raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation and margin >= 0")
     from zodrive.agents.rules import ObservationRules
 
     rules = ObservationRules(preset)
-    model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])))
+    model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])),
+                          imitation=imitation, margin=margin)
 
 
 def action_noise(spec: dict[str, Any] | None, n_actions: int):
