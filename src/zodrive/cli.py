@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from zodrive.config import MODELS_ENV
+from zodrive.defense import DEFENSES
 from zodrive.errors import ZodriveError
 
 log = logging.getLogger("zodrive")
@@ -95,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
     ev.add_argument("--workers", type=_positive_int, default=1)
-    ev.add_argument("--defense", choices=["kinematic"],
+    ev.add_argument("--defense", choices=DEFENSES,
                     help="filter between the (attacked) sensor and the policy; attacks query the defended system")
     _attack_flags(ev)
     ev.add_argument("--no-progress", action="store_true")
@@ -106,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     render.add_argument("--out", type=Path, required=True)
-    render.add_argument("--defense", choices=["kinematic"],
+    render.add_argument("--defense", choices=DEFENSES,
                         help="filter between the (attacked) sensor and the policy; 'perceived' is what passes it")
     render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
                         help="try up to N seeds until an episode ends in a collision")
@@ -181,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="preset override, applied to every model's preset")
     cmp_.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
                       help="attack option for every attack of the grid, e.g. patience=10")
-    cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", "kinematic"],
+    cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", *DEFENSES],
                       help="defenses in front of each model, one set of cells each (none = undefended)")
     cmp_.add_argument("--plot", type=Path, default=None,
                       help="PNG: with --query-budgets, return and success against queries per step; "

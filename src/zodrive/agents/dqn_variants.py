@@ -24,6 +24,8 @@ import torch as th
 from stable_baselines3 import DQN
 from torch.nn import functional as F
 
+from zodrive.attacks.threat import worst_in_ball
+
 
 class LossHookDQN(DQN):
     """SB3's DQN `train()` with two hooks: the TD target and an extra loss term."""
@@ -104,14 +106,8 @@ class SADQN(LossHookDQN):
             q = self.q_net(x)
             return q.masked_fill(~others, float("-inf")).amax(dim=1) - q.gather(1, best).squeeze(1)
 
-        step = 2.5 * eps / r["pgd_steps"]
-        x = (x0 + (th.rand_like(x0) * 2 - 1) * eps * mask).clamp(r["low"], r["high"])
-        for _ in range(r["pgd_steps"]):  # the worst case inside the ball: maximize the margin
-            x = x.detach().requires_grad_(True)
-            grad, = th.autograd.grad(margin(x).sum(), x)
-            x = x0 + (x.detach() + step * grad.sign() * mask - x0).clamp(-eps, eps)
-            x = th.max(th.min(x, x0.clamp(min=r["high"])), x0.clamp(max=r["low"]))  # box; clean values stay
-        reg = th.clamp(margin(x.detach()), min=-r["hinge"]).mean()  # gradient flows into the network only
+        x = worst_in_ball(margin, x0, eps, r["pgd_steps"], mask, r["low"], r["high"])  # maximize the margin
+        reg = th.clamp(margin(x), min=-r["hinge"]).mean()  # gradient flows into the network only
         return r["kappa"] * reg
 
 
@@ -122,10 +118,10 @@ class GuidedDQN(LossHookDQN):
     decaying linearly from `start` to 0 over the first `fraction` of training; otherwise SB3's
     epsilon-greedy (or, before `learning_starts`, uniform) action. The learner is unchanged:
     off-policy Q-learning on the collected transitions (n-step returns then carry the guide's
-    good returns early on). The guide only decides which transitions get collected, as
-    demonstrations do in DQfD (Hester et al., AAAI 2018), without DQfD's imitation loss; the
-    saved zip is an ordinary SB3 DQN zip and the guide is not part of the policy. With
-    `imitation` > 0, DQfD's large-margin loss on the guide's labels is added to the TD loss.
+    good returns early on). The guide decides which transitions get collected, as
+    demonstrations do in DQfD (Hester et al., AAAI 2018); with `imitation` > 0 DQfD's
+    large-margin loss on the guide's labels is added to the TD loss (`extra_loss`). The saved
+    zip is an ordinary SB3 DQN zip; the guide is not part of the policy.
     """
 
     guide: Any = None

@@ -63,7 +63,7 @@ class ObservationRules:
         lane = np.clip(np.rint(ego[:, 2] / LANE_WIDTH), 0, self.lanes - 1)
         centred = (np.abs(ego[:, 2] - lane * LANE_WIDTH) < 0.5) & (np.abs(ego[:, 4]) < 0.3)
 
-        def room(offset: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def room(offset: int) -> tuple[np.ndarray, np.ndarray]:
             """Gap ahead minus the safe gap, and whether a vehicle is beside, in lane `offset`."""
             inside = present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2)
             ahead = inside & (dx > 0)
@@ -73,11 +73,11 @@ class ObservationRules:
             safe = S0 + ASSUMED_SPEED * HEADWAY + ASSUMED_SPEED * closing / (2 * np.sqrt(A_MAX * B_COMF))
             beside = (inside & (np.abs(dx) < BESIDE)).any(axis=1)
             exists = (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
-            return np.where(exists, gap - safe, -np.inf), beside | ~exists, exists
+            return np.where(exists, gap - safe, -np.inf), beside | ~exists
 
-        own, _, _ = room(0)
-        left, left_blocked, _ = room(-1)
-        right, right_blocked, _ = room(+1)
+        own, _ = room(0)
+        left, left_blocked = room(-1)
+        right, right_blocked = room(+1)
         act = np.full(len(x), IDLE)
         act[own > MARGIN] = FASTER
         keep_right = centred & ~right_blocked & (right > MARGIN)

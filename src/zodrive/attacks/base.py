@@ -166,15 +166,15 @@ class Attack(abc.ABC):
         the admissible point nearest the clean one): the least a step can cost."""
         return self.queries_per_run(1) + (self.max_change is not None)
 
-    def smooth_box(self, flat0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """With `max_change`, the box every fed point of this step must lie in: within
-        max_change (L-inf) of the previous step's perturbation carried to the new clean
-        observation (re-projected into the threat model, so the box meets it). None on an
-        episode's first step or without `max_change`."""
+    def smooth_box(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """With `max_change`, the box (flattened, (N, dim) each) every fed point of this step
+        must lie in: within max_change (L-inf) of the previous step's perturbation carried to
+        the new clean observations `x0` (N, *obs) and re-projected into the threat model, so
+        the box meets it. None on an episode's first step or without `max_change`."""
+        flat0 = x0.reshape(len(x0), -1)
         if self.max_change is None or self._fed is None or self._fed.shape != flat0.shape:
             return None
-        shape = (len(flat0), *self._obs_shape)
-        center = self.threat.project((flat0 + self._fed).reshape(shape), flat0.reshape(shape)).reshape(flat0.shape)
+        center = self.threat.project((flat0 + self._fed).reshape(x0.shape), x0).reshape(flat0.shape)
         return center - self.max_change, center + self.max_change
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -201,8 +201,7 @@ class Attack(abc.ABC):
         mask = self.threat.mask(shape).reshape(-1)
         flat0 = np.asarray(x0, dtype=np.float32).reshape(n, dim)
         oracle.begin_step(rows=n)
-        self._obs_shape = shape
-        box = self.smooth_box(flat0)
+        box = self.smooth_box(flat0.reshape(n, *shape))
 
         def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
             m = cand.shape[1]
@@ -325,12 +324,14 @@ class Attack(abc.ABC):
                     hit = same.any(axis=1)
                     col = same.argmax(axis=1)[hit]
                     known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
-        self._carry = best.x - flat0
+        if self.warm_start:
+            self._carry = best.x - flat0
         fed, fed_out = best.x, best.out
         if self.on_failure == "clean":
             failed = ~best.ok
             fed, fed_out = np.where(failed[:, None], start, best.x), np.where(failed[:, None], start_out, best.out)
-        self._fed = fed - flat0
+        if self.max_change is not None:
+            self._fed = fed - flat0
         x_adv = fed.reshape(n, *shape).astype(x0.dtype)
         linf, l2n = distortion(x_adv, x0)
         return AttackResult(
@@ -347,7 +348,8 @@ class Attack(abc.ABC):
         n = len(x0)
         flat0 = x0.reshape(n, -1)
         fed = flat0 if box is None else np.clip(flat0, box[0], box[1])
-        self._fed = fed - flat0
+        if self.max_change is not None:
+            self._fed = fed - flat0
         x_adv = fed.reshape(x0.shape).astype(x0.dtype)
         linf, l2n = distortion(x_adv, x0)
         nothing = np.zeros(n, dtype=bool)

@@ -96,3 +96,22 @@ def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row L-inf and L2 size of `x - x0`."""
     flat = (x - x0).reshape(len(x), -1).astype(np.float64)
     return np.abs(flat).max(axis=1), np.linalg.norm(flat, axis=1)
+
+
+def worst_in_ball(objective, x0, eps: float, steps: int, mask, low: float, high: float):  # type: ignore[no-untyped-def]
+    """WHITE-BOX, for robust training: the point of the L-inf eps-ball around the torch batch
+    `x0` where `objective(x)` (per row, summed) is highest, by PGD (Madry et al., ICLR 2018):
+    a random start, then `steps` signed-gradient steps of 2.5 eps / steps. The same threat
+    model as the attacks: the box [low, high] (a clean value outside it stays reachable) and
+    `mask` (0 on frozen features, broadcast over the batch). Returns a detached tensor."""
+    import torch
+
+    lo = torch.minimum(torch.clamp(x0 - eps, min=low), x0)
+    hi = torch.maximum(torch.clamp(x0 + eps, max=high), x0)
+    x = torch.max(torch.min(x0 + (torch.rand_like(x0) * 2 - 1) * eps * mask, hi), lo)
+    step = 2.5 * eps / max(steps, 1)
+    for _ in range(steps):
+        x = x.detach().requires_grad_(True)
+        grad, = torch.autograd.grad(objective(x).sum(), x)
+        x = torch.max(torch.min(x.detach() + step * grad.sign() * mask, hi), lo)
+    return x.detach()

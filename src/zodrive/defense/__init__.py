@@ -1,0 +1,3 @@
+"""Defenses by name (`--defense NAME`): observation filters between the sensor and the policy."""
+
+DEFENSES = ("kinematic",)

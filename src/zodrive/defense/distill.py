@@ -37,7 +37,7 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
     robust student, write `out/model.zip` and `out/train.json`; returns the zip's path."""
     from zodrive.agents.loading import load_network, model_file
     from zodrive.agents.victims import network_victim
-    from zodrive.attacks.threat import ThreatModel
+    from zodrive.attacks.threat import ThreatModel, worst_in_ball
     from zodrive.envs import attack_context, make_env
     from zodrive.evaluation.rollout import clean_states
     from zodrive.runinfo import write_json
@@ -67,7 +67,8 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
         total = 0.0
         for batch in order.split(256):
             x, y = x_all[batch], y_all[batch]
-            x_adv = _pgd(student, x, y, eps, pgd_steps, mask, low, high)
+            x_adv = worst_in_ball(lambda z: F.cross_entropy(student(z.reshape(len(z), -1)), y, reduction="none"),
+                                  x, eps, pgd_steps, mask, low, high)
             loss = F.cross_entropy(student(x.reshape(len(x), -1)), y) \
                 + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
             opt.zero_grad()
@@ -87,20 +88,6 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
         "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
         "wall_time_s": round(time.perf_counter() - start, 1)})
     return out / "model.zip"
-
-
-def _pgd(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, eps: float, n: int, mask: torch.Tensor,
-         low: float, high: float) -> torch.Tensor:
-    """The point of the eps-ball (box, frozen features) where the student's CE is highest."""
-    step = 2.5 * eps / max(n, 1)
-    lo, hi = torch.minimum(x - eps, torch.full_like(x, high)).clamp(min=low), torch.maximum(x + eps, torch.full_like(x, low)).clamp(max=high)
-    lo, hi = torch.minimum(lo, x), torch.maximum(hi, x)  # a clean value outside the box stays reachable
-    adv = (x + (torch.rand_like(x) * 2 - 1) * eps * mask).clamp(lo, hi)
-    for _ in range(n):
-        adv = adv.detach().requires_grad_(True)
-        grad, = torch.autograd.grad(F.cross_entropy(net(adv.reshape(len(adv), -1)), y), adv)
-        adv = torch.max(torch.min(adv.detach() + step * grad.sign() * mask, hi), lo)
-    return adv.detach()
 
 
 def _write_zip(source: Path, student: torch.nn.Sequential, target: Path) -> None:

@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from zodrive.attacks.victim import Victim
+from zodrive.defense import DEFENSES
 from zodrive.errors import ZodriveError
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
@@ -168,9 +169,6 @@ class FilterWrapper(gym.ObservationWrapper):
             self._fresh = False
             return self.filt.reset(observation)
         return self.filt.update(observation)
-
-
-DEFENSES = ("kinematic",)
 
 
 def make_defense(name: str, preset: dict[str, Any]) -> KinematicFilter:

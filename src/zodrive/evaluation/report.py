@@ -15,7 +15,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         + f"({summary['pct_of_max']:.2f}% of max)",
         f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
         f"mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
-        f"{_num(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {_num(summary.get('mean_distance'), '{:.0f}')} m  "
+        f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {or_dash(summary.get('mean_distance'), '{:.0f}')} m  "
         f"right lane: {summary['right_lane_share']:.1%}",
     ]
     if summary.get("defense"):
@@ -44,5 +44,6 @@ def _options(config: dict) -> str:
     return f" {', '.join(changed)}" if changed else ""
 
 
-def _num(value: float | None, pattern: str) -> str:
+def or_dash(value: float | None, pattern: str) -> str:
+    """`value` formatted with `pattern`, or a dash where it was not measured (None)."""
     return "–" if value is None else pattern.format(value)

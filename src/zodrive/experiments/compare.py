@@ -18,6 +18,7 @@ from zodrive.agents.policies import check_policy, policy_kind, policy_label, pol
 from zodrive.attacks.spec import load_attack
 from zodrive.envs import load_preset
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+from zodrive.evaluation.report import or_dash
 from zodrive.experiments.cells import Cell, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
@@ -91,10 +92,6 @@ def _label(attack: str) -> str:
     return attack
 
 
-def _cell(value: Any, pattern: str) -> str:
-    return "–" if value is None else pattern.format(value)
-
-
 def markdown(rows: list[dict[str, Any]]) -> str:
     budgets = any(r.get("query_budget") is not None for r in rows)
     lines = ["| Model | Attack | ε (L∞) | " + ("Budget/step | " if budgets else "") + "Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
@@ -103,12 +100,12 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
-        budget = f"{_cell(r.get('query_budget'), '{:d}')} | " if budgets else ""
-        lines.append(f"| {_system(r)} | {r['attack']} | {_cell(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
+        budget = f"{or_dash(r.get('query_budget'), '{:d}')} | " if budgets else ""
+        lines.append(f"| {_system(r)} | {r['attack']} | {or_dash(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
-                     f"{_cell(r.get('offroad_rate'), '{:.0%}')} | {_cell(r.get('mean_speed'), '{:.1f}')} | "
-                     f"{_cell(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
-                     f"{_cell(r['queries_per_step'], '{:.0f}')} | {_cell(r['max_linf'], '{:.3f}')} |")
+                     f"{or_dash(r.get('offroad_rate'), '{:.0%}')} | {or_dash(r.get('mean_speed'), '{:.1f}')} | "
+                     f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
+                     f"{or_dash(r['queries_per_step'], '{:.0f}')} | {or_dash(r['max_linf'], '{:.3f}')} |")
     return "\n".join(lines) + "\n"
 
 
@@ -128,6 +125,11 @@ def _system(row: dict[str, Any]) -> str:
     """The policy as attacked: the model, and the defense in front of it if any."""
     defense = row.get("defense", "none")
     return row["model"] if defense in (None, "none") else f"{row['model']} + {defense}"
+
+
+def _ignores_input(row: dict[str, Any]) -> bool:
+    """A constant or simulator-reading policy: no observation attack changes what it does."""
+    return row.get("reads", "observation") != "observation"
 
 
 def strongest(rows: list[dict[str, Any]]) -> dict[str, dict[float, dict[str, Any]]]:
@@ -151,8 +153,9 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
              "|---|---|" + "---|" * len(eps_values)]
     for system, cells in table.items():
         clean = cells[0.0]
-        values = [f"{cells[e]['mean_return']:.1f} ({cells[e]['attack']}, {cells[e]['mean_speed']:.1f} m/s)"
-                  if e in cells else f"{clean['mean_return']:.1f} (ignores its input)" for e in eps_values]
+        values = [f"{clean['mean_return']:.1f} (ignores its input)" if _ignores_input(clean)
+                  else f"{cells[e]['mean_return']:.1f} ({cells[e]['attack']}, {cells[e]['mean_speed']:.1f} m/s)"
+                  if e in cells else "–" for e in eps_values]
         lines.append(f"| {system} | {clean['mean_return']:.1f} ({clean['mean_speed']:.1f} m/s) | " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 
@@ -167,7 +170,7 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for system, cells in strongest(rows).items():
-        if cells[0.0].get("reads", "observation") != "observation":
+        if _ignores_input(cells[0.0]):
             ax.axhline(cells[0.0]["mean_return"], ls="--", lw=1, color="grey")
             ax.annotate(system, (0, cells[0.0]["mean_return"]), fontsize=7, color="grey",
                         xytext=(2, 2), textcoords="offset points")
