@@ -10,6 +10,7 @@ import yaml
 
 from zodrive.agents.safe_load import sha256
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.report import or_dash
 from zodrive.runinfo import write_atomic
 
 PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
@@ -45,7 +46,7 @@ def seed_table(folders: list[Path]) -> list[str]:
     for seed, folder, s in sorted(rows, key=lambda r: r[0]):
         lines.append(f"| {seed} | `{folder.name}` | {s['mean_return']:.2f} ({s['ci95'][0]:.2f}–{s['ci95'][1]:.2f}) | "
                      f"{s['collision_rate']:.0%} | {s.get('offroad_rate', 0):.0%} | {s['mean_speed']:.1f} | "
-                     f"{s.get('lane_changes_per_episode') or float('nan'):.1f} |")
+                     f"{or_dash(s.get('lane_changes_per_episode'), '{:.1f}')} |")
     lines.append("")
     for key, label, fmt in (("mean_return", "Mean return", "{:.2f}"), ("collision_rate", "Collisions", "{:.0%}"),
                             ("mean_speed", "Speed (m/s)", "{:.1f}"),
