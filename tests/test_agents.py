@@ -67,3 +67,37 @@ def test_the_imitation_margin_pulls_the_greedy_action_to_the_guides() -> None:
         opt.step()
     taken = model.q_net(obs).argmax(dim=1).numpy()
     assert np.mean(taken == guide(obs.numpy())) > 0.9 and float(model.extra_loss(obs)) < float(first)
+
+
+def test_demonstrations_fill_the_buffer_and_pretraining_learns_them() -> None:
+    """DQfD's start: the guide's episodes go into the replay buffer as they were driven, and the
+    pre-training updates (TD + margin) move the greedy action towards the guide's on them."""
+    import torch as th
+
+    from zodrive.agents.dqn_variants import GuidedDQN
+    from zodrive.agents.rules import ObservationRules
+
+    preset = load_preset("discrete", ["max_episode_steps=40"])
+    model = GuidedDQN("MlpPolicy", make_env(preset), seed=0, device="cpu", batch_size=32, n_steps=5, learning_rate=1e-3,
+                      policy_kwargs={"net_arch": [64, 64]})
+    rules = ObservationRules(preset)
+    model.configure_guide(rules.actions, start=0.0, steps=1, imitation=1.0, margin=0.8)
+    stats = model.add_demonstrations(make_env(preset), 2, seed=20_000)
+    buffer = model.replay_buffer
+    assert stats["episodes"] == 2 and stats["transitions"] == buffer.size() == 80
+    stored = buffer.observations[:80, 0]
+    np.testing.assert_array_equal(buffer.actions[:80, 0, 0], rules.actions(stored))  # the guide's own actions
+    assert buffer.dones[39, 0] == 1 and buffer.dones[:39, 0].sum() == 0  # episode ends where it ended
+    x = th.as_tensor(stored, dtype=th.float32)
+
+    def agreement() -> float:
+        return float(np.mean(model.q_net(x).argmax(dim=1).numpy() == rules.actions(stored)))
+
+    from stable_baselines3.common.logger import configure
+
+    model.set_logger(configure(None, []))
+    before = agreement()
+    model.pretrain(600, 32, sync_every=200)
+    assert agreement() > max(before, 0.8)
+    for online, target in zip(model.q_net.parameters(), model.q_net_target.parameters()):
+        assert th.equal(online, target)  # the target network copied the pre-trained one

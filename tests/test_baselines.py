@@ -172,3 +172,42 @@ def test_perception_panel_shows_every_perceived_vehicle() -> None:
     for row in perceived[1:]:
         assert x_low < row[1] * X_RANGE < x_high and abs(row[2] * Y_RANGE) < y_half
     assert panel_extent(Frame(np.zeros((2, 2, 3)), clean, clean, 1))[1] == 14.0  # the lanes, as before
+
+
+def test_robust_rules_never_speed_up_where_the_truth_says_brake() -> None:
+    """`baseline:robust-rules@EPS` is pessimistic within the budget: on observations whose other
+    vehicles were moved by up to eps (what the guarantee covers), it accelerates only if the plain
+    rules on the true observation find the own lane free by their margin; at eps 0 it is the rules."""
+    from zodrive.agents.rules import FASTER, LANE_RIGHT, ObservationRules
+
+    preset = load_preset("discrete")
+    rng = np.random.default_rng(0)
+    n, eps = 20000, 0.05
+    truth = np.zeros((n, 5, 5), np.float32)
+    truth[:, 0] = [1, 0.5, 0, 1, 0]
+    truth[:, 0, 2] = rng.integers(0, 4, n) * 0.04                       # the ego at a lane centre
+    truth[:, 1:, 0] = rng.random((n, 4)) < 0.8
+    truth[:, 1:, 1] = rng.uniform(-0.1, 0.9, (n, 4))                    # -10 .. 90 m
+    truth[:, 1:, 2] = rng.integers(-2, 3, (n, 4)) * 0.04 + rng.uniform(-0.01, 0.01, (n, 4))
+    truth[:, 1:, 3] = rng.uniform(-0.3, 0.1, (n, 4))
+    seen = truth.copy()
+    seen[:, 1:, 1:] += rng.uniform(-eps, eps, (n, 4, 4)).astype(np.float32)
+    plain, robust = ObservationRules(preset), ObservationRules(preset, eps)
+    np.testing.assert_array_equal(ObservationRules(preset, 0.0).actions(seen), plain.actions(seen))
+    fast = robust.actions(seen) == FASTER
+    assert 50 < fast.sum() < n / 2                                      # not vacuous, not reckless
+    assert np.isin(plain.actions(truth)[fast], [FASTER, LANE_RIGHT]).all()
+    assert (plain.actions(seen) == FASTER).sum() > fast.sum()           # the plain rules dare more
+
+
+def test_robust_rules_are_a_named_budgeted_baseline() -> None:
+    from zodrive.agents.baselines import get_baseline
+    from zodrive.errors import ZodriveError
+
+    assert get_baseline("baseline:robust-rules").eps == 0.05
+    assert get_baseline("baseline:robust-rules@0.02").eps == 0.02
+    for bad in ("baseline:robust-rules@x", "baseline:rules@0.1", "baseline:robust-rules@2"):
+        with pytest.raises(ZodriveError, match="@EPS"):
+            get_baseline(bad)
+    victim = load_victim("baseline:robust-rules@0.02", load_preset("discrete"))
+    assert victim.reads == "observation" and victim.differentiable is None

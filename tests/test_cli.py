@@ -259,8 +259,8 @@ def test_compare_over_query_budgets_draws_the_budget_curve(tiny_dqn: Path, tmp_p
 
 def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "curve"
-    assert main(["compare", str(tiny_dqn), "baseline:slower", "--attacks", "uniform-noise", "pgd", "--eps", "0.05",
-                 "0.2", "--defense", "none", "kinematic", "--episodes", "2", "--out", str(out), "--no-progress",
+    assert main(["compare", str(tiny_dqn), "baseline:slower", "baseline:rules", "--attacks", "uniform-noise", "pgd",
+                 "--eps", "0.05", "0.2", "--defense", "none", "kinematic", "--episodes", "2", "--out", str(out), "--no-progress",
                  "--env-set", "max_episode_steps=40", "--attack-set", "steps=3",
                  "--plot", str(out / "robustness.png")]) == 0
     rows = json.loads((out / "table.json").read_text())
@@ -269,6 +269,8 @@ def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn:
     assert [r for r in rows if r["model"] == "baseline:slower"] == [
         r for r in rows if r["model"] == "baseline:slower" and r["attack"] == "none" and r["defense"] == "none"]
     assert (out / "cells" / f"{tiny_dqn.name}+kinematic-pgd-eps0.2" / "summary.json").is_file()
+    rules = [r for r in rows if r["model"] == "baseline:rules"]  # no gradients: no white-box cells
+    assert len(rules) == 2 * (1 + 2) and {r["attack"] for r in rules} == {"none", "uniform-noise"}
     assert max(r["queries_per_step"] for r in model if r["attack"] == "pgd (white-box)") <= 3  # --attack-set
     text = (out / "robustness.md").read_text()
     assert f"| {tiny_dqn.name} + kinematic |" in text and "(ignores its input)" in text

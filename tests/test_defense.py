@@ -134,3 +134,86 @@ def test_robust_distillation_writes_a_model_every_command_reads(tmp_path: Path) 
         return float((net(adv.reshape(len(x), -1)).argmax(dim=1) != y).float().mean())
 
     assert flips(student.net) < flips(teacher.net)
+
+
+def test_sa_ddpg_shrinks_the_worst_action_change_inside_the_ball() -> None:
+    """SA-DDPG's extra actor steps lower max ||pi(x') - pi(x)||^2 over the ball on replayed states;
+    the regular DDPG update is left as SB3 makes it."""
+    from stable_baselines3.common.logger import configure
+
+    from zodrive.agents.state_adversarial import SADDPG
+    from zodrive.attacks.threat import worst_in_ball
+    from zodrive.envs import load_preset
+
+    preset = load_preset("continuous", ["max_episode_steps=30"])
+    model = SADDPG("MlpPolicy", make_env(preset), seed=0, device="cpu", learning_starts=10**9,
+                   policy_kwargs={"net_arch": [32, 32]})
+    model.learn(60)  # fills the buffer, no updates
+    mask = np.ones((5, 5), dtype=np.float32)
+    mask[:, 0] = 0
+    model.configure_robust(eps=0.1, kappa=10.0, pgd_steps=5, mask=mask, eps_ramp=0.0)
+    model.set_logger(configure(None, []))
+    x0 = torch.as_tensor(model.replay_buffer.observations[:60, 0])
+    torch.manual_seed(0)
+
+    def worst() -> float:
+        with torch.no_grad():
+            a0 = model.actor(x0)
+        x = worst_in_ball(lambda z: ((model.actor(z) - a0) ** 2).sum(dim=1), x0, 0.1, 10,
+                          torch.as_tensor(mask), -1.0, 1.0)
+        with torch.no_grad():
+            return float(((model.actor(x) - a0) ** 2).sum(dim=1).mean())
+
+    before = worst()
+    model.learning_starts = 0
+    model.train(gradient_steps=50, batch_size=32)
+    assert worst() < 0.5 * before
+
+
+def test_robust_train_sa_ddpg_and_a_teacher_distillation_run_from_the_cli(tmp_path: Path) -> None:
+    from zodrive.agents.loading import load_network
+    from zodrive.cli import main
+    from zodrive.envs import load_preset
+
+    out = tmp_path / "sa-ddpg"
+    assert main(["robust-train", "models/ddpg-driver", "--method", "sa", "--eps", "0.05", "--steps", "60",
+                 "--warmup", "20", "--out", str(out), "--no-progress", "--env-set", "max_episode_steps=30"]) == 0
+    train = json.loads((out / "train.json").read_text())
+    assert train["kind"] == "sa-ddpg" and train["algo"] == "ddpg" and "hinge" not in train["method"]
+    assert load_network(out, load_preset("continuous")).algo == "ddpg"  # the safe loader reads it
+    student = tmp_path / "student"
+    assert main(["robust-train", "models/dqn-driver", "--method", "distill", "--teacher", "baseline:robust-rules@0.02",
+                 "--eps", "0.02", "--steps", "120", "--out", str(student), "--env-set", "max_episode_steps=60"]) == 0
+    method = json.loads((student / "train.json").read_text())["method"]
+    assert method["teacher"] == "baseline:robust-rules@0.02" and method["eps"] == 0.02
+    assert main(["robust-train", "models/dqn-driver", "--method", "sa", "--teacher", "baseline:rules",
+                 "--eps", "0.02", "--steps", "10", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_a_robust_models_card_states_its_method_and_attacked_numbers(tmp_path: Path) -> None:
+    from zodrive.agents.card import write_card
+
+    folder = tmp_path / "dqn-robust"
+    (folder / "eval").mkdir(parents=True)
+    (folder / "model.zip").write_bytes(b"zip")
+    (folder / "run.json").write_text(json.dumps({"command": "zodrive robust-train ...", "seed": 1,
+                                                 "versions": {"zodrive": "0"}}))
+    method = {"name": "robust-distillation", "teacher": "baseline:rules", "eps": 0.02, "kappa": 0.5,
+              "reference": "Rusu et al. 2016; Madry et al. 2018"}
+    (folder / "train.json").write_text(json.dumps({"algo": "dqn", "kind": "distill", "method": method, "seed": 1,
+                                                   "source_model": "models/dqn-driver/model.zip",
+                                                   "total_timesteps": 30000, "wall_time_s": 600, "steps_per_s": 50}))
+    (folder / "config.yaml").write_text("preset: {name: discrete}\nmethod: {eps: 0.02}\n")
+    summary = {"mean_return": 340.0, "ci95": [330.0, 350.0], "pct_of_max": 75.6, "collision_rate": 0.02,
+               "mean_speed": 23.0, "right_lane_share": 0.8, "episodes": 10, "seed": 100000, "command": "zodrive evaluate"}
+    (folder / "eval" / "summary.json").write_text(json.dumps(summary))
+    cell = tmp_path / "cell"
+    cell.mkdir()
+    (cell / "summary.json").write_text(json.dumps({**summary, "mean_return": 120.5, "attack": "random-search",
+                                                   "eps": 0.05, "attack_config": {"max_change": 0.01},
+                                                   "attack_success_rate": 0.4, "queries_per_step": 14.2}))
+    text = write_card(folder, attacked=[cell]).read_text()
+    assert text.startswith("# dqn-robust: robustly distilled DQN")
+    assert "Method: robust-distillation" in text and "teacher baseline:rules" in text and "ε 0.02" in text
+    assert "under **random-search** (ε 0.05, max_change 0.01" in text and "120.50" in text
+    assert "--attacked " + str(cell) in text and "## Robust training" in text

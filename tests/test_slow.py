@@ -18,8 +18,11 @@ def test_reproduce_quick_runs_and_resumes(tmp_path: Path) -> None:
     assert main(["reproduce", "--quick", "--out", str(out), "--no-progress"]) == 0
     for name in ("table1.csv", "table1.json", "table1.md", "report.md", "report.html",
                  "figures/fig2_loss.png", "figures/fig3_attacked_episode.png", "figures/fig3_attacked_episode.gif",
-                 "figures/fig4_ddpg_adversarial_training.png", "figures/fig5_dqn_adversarial_training.png"):
+                 "figures/fig4_ddpg_adversarial_training.png", "figures/fig5_dqn_adversarial_training.png",
+                 "robustness/robustness.md", "robustness/robustness.png"):
         assert (out / name).is_file(), name
+    report = (out / "report.md").read_text()
+    assert report.index("## Robustness") < report.index("## Figures") and "dqn-robust" in report
     rows = json.loads((out / "table1.json").read_text())
     assert len(rows) == 8 and all(r["episodes"] == 5 for r in rows)
     before = json.loads((out / "timings.json").read_text())

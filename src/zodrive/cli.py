@@ -113,10 +113,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
 
-    rob = sub.add_parser("robust-train", help="make a trained agent robust (sa: SA-DQN, at: Algorithm 2, distill: robust distillation)")
+    rob = sub.add_parser("robust-train", help="make a trained agent robust (sa: SA-DQN / SA-DDPG, at: Algorithm 2, distill: robust distillation)")
     rob.add_argument("model")
     rob.add_argument("--method", choices=["sa", "at", "distill"], required=True,
-                     help="sa: SA-DQN regularizer; at: Algorithm 2; distill: robust distillation of its own decisions")
+                     help="sa: SA-DQN / SA-DDPG regularizer; at: Algorithm 2; distill: robust distillation of its own (or --teacher's) decisions")
     rob.add_argument("--eps", type=float, required=True, help="L-inf radius the agent is trained to withstand")
     rob.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
     rob.add_argument("--out", type=Path, required=True)
@@ -128,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     rob.add_argument("--force", action="store_true")
     rob.add_argument("--trust-model", action="store_true")
+    rob.add_argument("--epochs", type=_positive_int, default=20, help="distill: passes over the collected states")
+    rob.add_argument("--teacher", metavar="baseline:NAME",
+                     help="distill: an observation-reading baseline that drives and labels (default: the model itself)")
     rob.add_argument("--no-progress", action="store_true")
 
     exp = sub.add_parser("export", help="write a model's acting network as ONNX (a victim format with no pickle)")
@@ -169,6 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--workers", type=_positive_int, default=2)
     rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes)")
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
+    rep.add_argument("--robustness-episodes", type=_nonnegative_int, default=10,
+                     help="episodes per cell of the robustness section (0: leave it out)")
     rep.add_argument("--no-progress", action="store_true")
     _backend_flags(rep)
 
@@ -210,6 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     card.add_argument("--note", action="append", default=[], help="a line for the card's Notes section")
     card.add_argument("--seeds", nargs="+", type=Path, default=None, metavar="RUN",
                       help="run folders of every training seed (each with eval/): median and range in the card")
+    card.add_argument("--attacked", nargs="+", type=Path, default=None, metavar="EVAL",
+                      help="evaluation folders of the model under attack, listed in the card")
     return parser
 
 
@@ -395,7 +402,8 @@ def cmd_robust_train(args: argparse.Namespace) -> int:
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     path = robust_train(args.model, preset, args.method, args.eps, args.steps, args.out, seed=args.seed,
                         warmup=args.warmup, kappa=args.kappa, pgd_steps=args.pgd_steps,
-                        progress_bar=not args.no_progress, trust=args.trust_model, force=args.force)
+                        progress_bar=not args.no_progress, trust=args.trust_model, force=args.force,
+                        teacher=args.teacher, epochs=args.epochs)
     print(f"saved {path}")
     return 0
 
@@ -422,6 +430,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from zodrive.experiments.reproduce import reproduce
 
     table = reproduce(args.out, episodes=args.episodes, workers=args.workers, quick=args.quick,
+                      robustness_episodes=args.robustness_episodes,
                       retrain=args.retrain, progress=not args.no_progress, backend=args.backend, address=args.address)
     print(table_markdown(table["rows"]), end="")
     print(f"report: {args.out}/report.html")
@@ -485,7 +494,8 @@ def cmd_curves(args: argparse.Namespace) -> int:
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
-    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note, seeds=args.seeds)
+    path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note, seeds=args.seeds,
+                      attacked=args.attacked)
     print(f"wrote {path}")
     return 0
 

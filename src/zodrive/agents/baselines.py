@@ -8,11 +8,14 @@ and constants, target speed 30 m/s) that reads the **simulator**, not the observ
 the reference a learned driver should beat, and an observation attack does not apply to it.
 `baseline:rules` is a hand-written driver that reads the same observation as the learned
 agents (`zodrive.agents.rules`): attackable like them, but it shows the attacker only its decision.
+`baseline:robust-rules@EPS` is that driver made pessimistic for an attacker of budget EPS
+(default 0.05): it only ever sees gaps as small as they may truly be, so an attack can make it
+careful, not reckless (the robustness a defense should be measured against).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Literal
 
 import numpy as np
@@ -35,6 +38,7 @@ class Baseline:
     description: str
     label: str                                # short name for tables
     action: Any = None                        # constant action (None: a driver)
+    eps: float | None = None                  # budget a robust driver is built for (`NAME@EPS`)
 
 
 BASELINES: dict[str, Baseline] = {b.name: b for b in (
@@ -51,6 +55,9 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
     Baseline("rules", ("discrete",), "observation",
              "hand-written lane-changing rules on the observation (zodrive.agents.rules); attackable, decisions only",
              "rules on the observation"),
+    Baseline("robust-rules", ("discrete",), "observation",
+             "the rules made pessimistic for an attacker of L-inf budget eps (NAME@EPS, default 0.05): they see "
+             "every gap as small as it may truly be", "rules, pessimistic for the attack budget", eps=0.05),
     Baseline("idm-mobil", ("discrete", "continuous"), "simulator",
              "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
              "IDM + MOBIL driver (reads the simulator)"),
@@ -62,12 +69,24 @@ def is_baseline(model: str) -> bool:
 
 
 def get_baseline(model: str) -> Baseline:
-    """The baseline named `baseline:NAME`; a one-line error lists the known ones."""
-    name = str(model)[len(PREFIX):]
+    """The baseline named `baseline:NAME` (or `baseline:NAME@EPS` for one built for a budget);
+    a one-line error lists the known ones."""
+    name, _, eps = str(model)[len(PREFIX):].partition("@")
     if name not in BASELINES:
-        known = ", ".join(PREFIX + n for n in BASELINES)
+        known = ", ".join(PREFIX + n + ("[@EPS]" if BASELINES[n].eps is not None else "") for n in BASELINES)
         raise ZodriveError(f"unknown baseline {model!r}; known: {known}")
-    return BASELINES[name]
+    baseline = BASELINES[name]
+    if not eps:
+        return baseline
+    try:
+        value = float(eps)
+    except ValueError:
+        value = float("nan")
+    if baseline.eps is None or not 0 <= value < 1:
+        raise ZodriveError(f"{model!r}: only {', '.join(PREFIX + n for n, b in BASELINES.items() if b.eps is not None)}"
+                           " take @EPS, a budget in [0, 1)")
+    return replace(baseline, name=f"{name}@{eps}", eps=value,
+                   label=f"{baseline.label} (eps {eps})")
 
 
 def check_baseline_fits(baseline: Baseline, kind: str) -> None:

@@ -89,17 +89,39 @@ def _selection_lines(folder: Path) -> list[str]:
             f"({choice['criterion']}; never the evaluation seeds):", "", selection_markdown(choice)]
 
 
+ROBUST_KINDS = {"adversarial": "adversarially trained (Algorithm 2)", "sa-dqn": "SA-regularized (SA-DQN)",
+                "sa-ddpg": "SA-regularized (SA-DDPG)", "distill": "robustly distilled"}
+
+
+def _attacked_lines(folders: list[Path]) -> list[str]:
+    """One line per attacked evaluation: the attack, its eps and what the policy scored."""
+    lines = []
+    for folder in folders:
+        s = _load(folder / "summary.json")
+        config = s.get("attack_config") or {}
+        options = ", ".join(f"{k} {config[k]}" for k in ("max_change", "target") if config.get(k) not in (None, "auto"))
+        lines.append(f"- under **{s.get('attack')}** (ε {s.get('eps')}"
+                     + (f", through the {s['defense']} filter" if s.get("defense") else "")
+                     + (f", {options}" if options else "") + f"; `{folder}`): {_result_line(s)}; "
+                     f"attack success {or_dash(s.get('attack_success_rate'), '{:.0%}')}, "
+                     f"{or_dash(s.get('queries_per_step'), '{:.0f}')} queries per step")
+    return lines
+
+
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
-               notes: list[str] | None = None, seeds: list[Path] | None = None) -> Path:
+               notes: list[str] | None = None, seeds: list[Path] | None = None,
+               attacked: list[Path] | None = None) -> Path:
     """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
-    summary.json (default `folder/eval`)."""
+    summary.json (default `folder/eval`); `attacked`: evaluation folders of the model under
+    attack, listed with their attack and eps."""
     run, train = _load(folder / "run.json"), _load(folder / "train.json")
     config = _load(folder / "config.yaml")
     summary = _load((evaluation or folder / "eval") / "summary.json")
     algo = train["algo"]
-    adversarial = train.get("kind") == "adversarial"
-    recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "steps", "warmup") if k in config}
-    kind = "adversarially trained " if adversarial else ""
+    adversarial = train.get("kind") in ROBUST_KINDS
+    recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "method", "steps", "warmup")
+                                      if config.get(k) is not None}
+    kind = ROBUST_KINDS[train["kind"]] + " " if adversarial else ""
     lines = [
         f"# {folder.name}: {kind}{algo.upper()} on the `{config['preset']['name']}` preset",
         "",
@@ -112,7 +134,9 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
         + (f" --eval {evaluation}" if evaluation else "")
-        + (" --seeds " + " ".join(str(p) for p in seeds) if seeds else "") + "".join(f" --note {n!r}" for n in notes or []),
+        + (" --seeds " + " ".join(str(p) for p in seeds) if seeds else "")
+        + (" --attacked " + " ".join(str(p) for p in attacked) if attacked else "")
+        + "".join(f" --note {n!r}" for n in notes or []),
         "```",
         "",
         f"- training seed: {train['seed']}; steps: {train['total_timesteps']:,}; "
@@ -129,9 +153,16 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     ]
     if not adversarial:
         lines.append(f"Paper (Table 1, Initial Training): {PAPER_TARGETS.get(algo, float('nan')):.2f}.")
-    else:
+    elif train["kind"] == "adversarial":
         lines.append("Trained further on attacked observations (paper Algorithm 2); "
                      f"{train.get('attack_queries', 0):,} attack queries during training.")
+    else:
+        method = train.get("method") or {}
+        lines.append(f"Method: {method.get('name')} ({method.get('reference', '')}), ε {method.get('eps')}, "
+                     + ", ".join(f"{k} {v}" for k, v in method.items() if k not in ("name", "reference", "eps"))
+                     + f"; from `{train.get('source_model')}`.")
+    if attacked:
+        lines += ["", "Under attack (the same seeds):", ""] + _attacked_lines(attacked)
     if summary.get("action_share"):
         from zodrive.envs import ACTION_NAMES
 
@@ -152,7 +183,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     lines += [
         "",
-        "## Recipe" if not adversarial else "## Adversarial training",
+        "## Recipe" if not adversarial else "## Robust training",
         "",
         "```yaml",
         yaml.safe_dump(recipe, sort_keys=False).rstrip(),

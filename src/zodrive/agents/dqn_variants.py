@@ -24,6 +24,7 @@ import torch as th
 from stable_baselines3 import DQN
 from torch.nn import functional as F
 
+from zodrive.agents.state_adversarial import SAMixin
 from zodrive.attacks.threat import worst_in_ball
 
 
@@ -72,32 +73,16 @@ class DoubleDQN(LossHookDQN):
             return data.rewards + (1 - data.dones) * discounts * next_q
 
 
-class SADQN(LossHookDQN):
+class SADQN(SAMixin, LossHookDQN):
     """DQN + the SA-DQN regularizer; set `robust` (see `configure_robust`) before learning."""
-
-    robust: dict[str, Any] = {}
-
-    def configure_robust(self, *, eps: float, kappa: float = 0.5, pgd_steps: int = 5, hinge: float = 1.0,
-                         eps_ramp: float = 0.3, mask: np.ndarray | None = None, low: float = -1.0,
-                         high: float = 1.0, total_steps: int = 1) -> None:
-        self.robust = {"eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "hinge": hinge, "eps_ramp": eps_ramp,
-                       "mask": None if mask is None else th.as_tensor(mask, dtype=th.float32), "low": low,
-                       "high": high, "total_steps": max(total_steps, 1), "start": None}
-
-    def current_eps(self) -> float:
-        r = self.robust
-        if r["start"] is None:  # the ramp starts with the first update
-            r["start"] = self.num_timesteps
-        done = (self.num_timesteps - r["start"]) / r["total_steps"]
-        return r["eps"] * min(1.0, done / r["eps_ramp"]) if r["eps_ramp"] > 0 else r["eps"]
 
     def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
         r = self.robust
-        eps = self.current_eps() if r else 0.0
+        eps = self.current_eps()
         if eps <= 0:
             return None
         x0 = observations.detach()
-        mask = th.ones_like(x0[0]) if r["mask"] is None else r["mask"].reshape(x0.shape[1:])
+        mask = self.ball_mask(x0)
         with th.no_grad():
             best = self.q_net(x0).argmax(dim=1, keepdim=True)
         others = th.ones(x0.shape[0], self.action_space.n, dtype=th.bool).scatter_(1, best, False)
@@ -145,6 +130,34 @@ class GuidedDQN(LossHookDQN):
         q = self.q_net(observations)
         bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
         return weight * ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
+
+    def add_demonstrations(self, env: Any, episodes: int, seed: int) -> dict[str, float]:
+        """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the guide and put
+        every transition in the replay buffer, as DQfD's demonstration data (n-step returns are
+        computed from it like from any other transitions). Returns the demonstrations' mean return."""
+        returns = []
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done = 0.0, False
+            while not done:
+                action = int(np.asarray(self.guide(obs[None]))[0])
+                next_obs, reward, terminated, truncated, _ = env.step(action)
+                done = terminated or truncated
+                self.replay_buffer.add(obs[None], next_obs[None], np.array([[action]]), np.array([reward]),  # type: ignore[union-attr]
+                                       np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
+                obs, total = next_obs, total + float(reward)
+            returns.append(total)
+        return {"episodes": episodes, "transitions": int(self.replay_buffer.size()),  # type: ignore[union-attr]
+                "mean_return": float(np.mean(returns))}
+
+    def pretrain(self, gradient_steps: int, batch_size: int, sync_every: int = 2500) -> None:
+        """DQfD's pre-training phase: TD + large-margin updates on the buffer before the first
+        environment step; the target network copies the online one every `sync_every` updates."""
+        while gradient_steps > 0:
+            chunk = min(sync_every, gradient_steps)
+            self.train(chunk, batch_size)
+            self.q_net_target.load_state_dict(self.q_net.state_dict())
+            gradient_steps -= chunk
 
     def guide_rate(self) -> float:
         start, steps = self.guide_schedule

@@ -33,6 +33,15 @@ def policy_kind(model: str) -> str:
     return KIND_OF_ALGO[model_algo(model)]
 
 
+def has_gradients(model: str) -> bool:
+    """Whether white-box attacks can differentiate the policy (SB3 networks; not baselines or ONNX)."""
+    if bl.is_baseline(model):
+        return False
+    from zodrive.agents.onnx_policy import is_onnx
+
+    return not is_onnx(model)
+
+
 def policy_ref(model: str) -> str:
     """What identifies the policy in results: `baseline:NAME` or the model file's path."""
     if bl.is_baseline(model):
@@ -78,7 +87,7 @@ def load_victim(model: str, preset: dict[str, Any]) -> Victim:
         if baseline.reads == "observation":
             from zodrive.agents.rules import rules_victim
 
-            return rules_victim(preset, observation_shape(preset), n_actions(preset))
+            return rules_victim(preset, observation_shape(preset), n_actions(preset), baseline.eps or 0.0)
         return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset))
     from zodrive.agents.loading import load_network
     from zodrive.agents.onnx_policy import is_onnx, onnx_victim

@@ -18,6 +18,20 @@ The rules, per observation (lanes 4 m wide, cars 5 m long):
 Lane changes start only near a lane centre and with no lateral motion, so that one change is
 not asked for twice. Vehicles behind are not in the observation, so a lane change is blind to
 them, as it is for the learned agents.
+
+`baseline:robust-rules@EPS` (`eps` > 0) is the same driver made pessimistic for an attacker of
+L-inf budget `eps` (normalized units, i.e. eps times each feature's range: at 0.05 and this
+preset's ranges, 5 m in x and y and 1 m/s in vx and vy): every observed vehicle counts as
+possibly anywhere its true state may be, i.e. in every lane within `W/2 + eps y_range` of its
+observed offset, `eps x_range` closer, and closing `eps vx_range` faster, and each lane's room
+is the smallest over those vehicles. Since an observed value is within eps of the true one,
+the rules never see a gap larger or a closing speed smaller than the true ones: an attacker
+can only make them more careful (slower, fewer lane changes), never make them accelerate
+into, or change into, a gap the plain rules on the true observation would not accept. What
+this cannot cover: the ego row (an attacker can shift the ego's perceived lateral position
+and speed, hence its lane index and the "centred, not moving sideways" test, which can let a
+lane change be asked for during another), and vehicles the observation does not list (behind,
+or beyond the four nearest), which the plain rules do not see either.
 """
 
 from __future__ import annotations
@@ -42,7 +56,7 @@ BESIDE = 8.0           # [m] |dx| within which a vehicle beside the ego blocks a
 class ObservationRules:
     """Vectorized rules: `actions(obs)` maps observations (B, V, 5) to meta-actions (B,)."""
 
-    def __init__(self, preset: dict[str, Any]) -> None:
+    def __init__(self, preset: dict[str, Any], eps: float = 0.0) -> None:
         obs = preset["highway"]["observation"]
         if tuple(obs.get("features", ())) != ("presence", "x", "y", "vx", "vy") or obs.get("absolute", False) \
                 or not obs.get("normalize", True):
@@ -54,6 +68,8 @@ class ObservationRules:
         self.scale = np.array([1.0, ranges.get("x", [-100, 100])[1], ranges.get("y", [-100, 100])[1],
                                ranges.get("vx", [-20, 20])[1], ranges.get("vy", [-20, 20])[1]], dtype=np.float64)
         self.lanes = int(preset["highway"].get("lanes_count", 4))
+        self.eps = float(eps)
+        self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 
     def actions(self, batch: np.ndarray) -> np.ndarray:
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
@@ -63,17 +79,23 @@ class ObservationRules:
         lane = np.clip(np.rint(ego[:, 2] / LANE_WIDTH), 0, self.lanes - 1)
         centred = (np.abs(ego[:, 2] - lane * LANE_WIDTH) < 0.5) & (np.abs(ego[:, 4]) < 0.3)
 
+        _, sx, sy, svx, _ = self.slack
+
         def room(offset: int) -> tuple[np.ndarray, np.ndarray]:
-            """Gap ahead minus the safe gap, and whether a vehicle is beside, in lane `offset`."""
-            inside = present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2)
-            ahead = inside & (dx > 0)
-            gap = np.where(ahead, dx - CAR_LENGTH, np.inf).min(axis=1)
-            lead = np.where(ahead, dx, np.inf).argmin(axis=1)
-            closing = np.maximum(-dvx[np.arange(len(dx)), lead], 0.0)
+            """Gap ahead minus the safe gap, and whether a vehicle is beside, in lane `offset`
+            (pessimistic within the attacker's budget when eps > 0: see the module docstring)."""
+            inside = present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2 + sy)
+            ahead = inside & (dx + sx > 0)
+            closing = np.maximum(-dvx + svx, 0.0)
             safe = S0 + ASSUMED_SPEED * HEADWAY + ASSUMED_SPEED * closing / (2 * np.sqrt(A_MAX * B_COMF))
-            beside = (inside & (np.abs(dx) < BESIDE)).any(axis=1)
+            slack = np.where(ahead, dx - sx - CAR_LENGTH - safe, np.inf)
+            if self.eps > 0:  # every vehicle that may be ahead in the lane counts
+                value = slack.min(axis=1)
+            else:  # the nearest one, as tuned
+                value = slack[np.arange(len(dx)), np.where(ahead, dx, np.inf).argmin(axis=1)]
+            beside = (inside & (np.abs(dx) < BESIDE + sx)).any(axis=1)
             exists = (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
-            return np.where(exists, gap - safe, -np.inf), beside | ~exists
+            return np.where(exists, value, -np.inf), beside | ~exists
 
         own, _ = room(0)
         left, left_blocked = room(-1)
@@ -90,9 +112,10 @@ class ObservationRules:
         return act
 
 
-def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int) -> Victim:
-    """`baseline:rules` as a victim: decisions only (one-hot), no scores and no gradients."""
-    rules = ObservationRules(preset)
+def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0) -> Victim:
+    """`baseline:rules` (or, with `eps`, robust-rules) as a victim: decisions only (one-hot), no
+    scores and no gradients."""
+    rules = ObservationRules(preset, eps)
     eye = np.eye(n_actions, dtype=np.float32)
 
     def query(obs: np.ndarray) -> np.ndarray:

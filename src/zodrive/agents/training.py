@@ -33,6 +33,7 @@ ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
                "double_q", "guide"}
 GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
+DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -71,19 +72,38 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
 def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
     """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F}`."""
     spec = recipe["guide"]
-    keys = {"name", "start", "fraction", "imitation", "margin"}
+    keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
     if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
         raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
-                           f"imitation: W, margin: M}}, not {spec!r}")
+                           f"imitation: W, margin: M, demonstrations: EPISODES, pretrain_steps: N}}, not {spec!r}")
     start, fraction = float(spec.get("start", 0.5)), float(spec.get("fraction", 0.3))
     imitation, margin = float(spec.get("imitation", 0.0)), float(spec.get("margin", 0.8))
-    if not (0 <= start <= 1 and 0 < fraction <= 1 and imitation >= 0 and margin >= 0):
-        raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation and margin >= 0")
+    if not (0 <= start <= 1 and 0 < fraction <= 1 and imitation >= 0 and margin >= 0
+            and int(spec.get("demonstrations", 0)) >= 0 and int(spec.get("pretrain_steps", 0)) >= 0):
+        raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation, margin, demonstrations "
+                           "and pretrain_steps >= 0")
     from zodrive.agents.rules import ObservationRules
 
     rules = ObservationRules(preset)
     model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])),
                           imitation=imitation, margin=margin)
+
+
+def _pretrain_from_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
+    """DQfD's start (Hester et al. 2018): the guide's episodes into the replay buffer, then
+    `pretrain_steps` TD + margin updates on them before the agent's first step. Returns what was
+    done (episodes, transitions, the guide's mean return, minutes), or None if the recipe asks none."""
+    spec = recipe.get("guide") or {}
+    episodes, steps = int(spec.get("demonstrations", 0)), int(spec.get("pretrain_steps", 0))
+    if not episodes:
+        return None
+    start = time.perf_counter()
+    env = make_env(preset)
+    stats = model.add_demonstrations(env, episodes, DEMO_SEEDS + 1000 * seed)
+    env.close()
+    model.pretrain(steps, int(model.batch_size))
+    return {**stats, "pretrain_steps": steps, "seeds_from": DEMO_SEEDS + 1000 * seed,
+            "wall_time_s": round(time.perf_counter() - start, 1)}
 
 
 def action_noise(spec: dict[str, Any] | None, n_actions: int):
@@ -221,6 +241,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if recipe.get("guide"):
         _configure_guide(model, recipe, preset)
     model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
+    demonstrations = _pretrain_from_guide(model, recipe, preset, seed) if checkpoint is None else None
     every = int(recipe.get("checkpoint_every", 0) or 0)
     callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
                                   save_replay_buffer=True) if every else None
@@ -240,7 +261,8 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     write_json(
         out / "train.json",
         {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
-         "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1)},
+         "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1),
+         **({"demonstrations": demonstrations} if demonstrations else {})},
     )
     env.close()
     log.info("trained %s for %d steps in %.0f s", algo, recipe["total_timesteps"], wall)

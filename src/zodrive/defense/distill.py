@@ -13,6 +13,11 @@ steps inside the threat model: box, frozen presence):
 Cf. policy distillation (Rusu et al., ICLR 2016) and adversarial training (Madry et al., ICLR
 2018). The student is written as an ordinary SB3 DQN zip (the teacher's zip with the Q-network
 weights replaced), so every command reads it; its outputs are logits, not Q-values.
+
+With `teacher` set to an observation-reading baseline (`baseline:rules`,
+`baseline:robust-rules@EPS`), that driver drives and labels instead: a student of a better
+driver than the source model, made robust the same way (the student keeps the source model's
+network shape and zip).
 """
 
 from __future__ import annotations
@@ -32,33 +37,42 @@ from zodrive.errors import ZodriveError
 
 
 def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, seed: int = 1,
-            kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False) -> Path:
+            kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False,
+            teacher: str | None = None) -> Path:
     """Collect `steps` teacher states (training seeds `seed`, `seed` + 1, ...), train the
-    robust student, write `out/model.zip` and `out/train.json`; returns the zip's path."""
+    robust student (initialized as `model`; the teacher is `model` itself unless `teacher`
+    names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
+    returns the zip's path."""
     from zodrive.agents.loading import load_network, model_file
     from zodrive.agents.victims import network_victim
     from zodrive.attacks.threat import ThreatModel, worst_in_ball
     from zodrive.envs import attack_context, make_env
     from zodrive.evaluation.rollout import clean_states
-    from zodrive.runinfo import write_json
+    from zodrive.runinfo import write_json, write_run_info
+
+    from zodrive.agents.baselines import get_baseline, is_baseline
+    from zodrive.agents.policies import load_victim
 
     if (out / "model.zip").exists() and not force:
         raise ZodriveError(f"{out} already holds a model; use --force to overwrite it")
-    teacher = load_network(model, preset)
-    if teacher.algo != "dqn":
+    source = load_network(model, preset)
+    if source.algo != "dqn":
         raise ZodriveError("--method distill is implemented for DQN models")
+    if teacher is not None and not (is_baseline(teacher) and get_baseline(teacher).reads == "observation"):
+        raise ZodriveError(f"--teacher must be an observation-reading baseline (baseline:rules, "
+                           f"baseline:robust-rules@EPS), not {teacher!r}")
+    guide = load_victim(teacher, preset) if teacher else network_victim(source.net, "discrete", source.obs_shape)
     start = time.perf_counter()
     torch.manual_seed(seed)
     env = make_env(preset)
-    states = clean_states(env, network_victim(teacher.net, "discrete", teacher.obs_shape), seed, steps)
+    states = clean_states(env, guide, seed, steps)
     env.close()
     context = attack_context(preset)
     low, high = context["bounds"]
     mask = torch.as_tensor(ThreatModel(eps=eps, features=context["features"]).mask(states.shape[1:]))
     x_all = torch.as_tensor(states, dtype=torch.float32)
-    with torch.no_grad():
-        y_all = teacher.net(x_all.reshape(len(x_all), -1)).argmax(dim=1)
-    student = copy.deepcopy(teacher.net).train()
+    y_all = torch.as_tensor(guide.query(states).argmax(axis=1), dtype=torch.long)
+    student = copy.deepcopy(source.net).train()
     opt = torch.optim.Adam(student.parameters(), lr=3e-4)
     gen = torch.Generator().manual_seed(seed)
     history = []
@@ -79,14 +93,16 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
     student.eval()
     with torch.no_grad():
         agree = float((student(x_all.reshape(len(x_all), -1)).argmax(dim=1) == y_all).float().mean())
-    out.mkdir(parents=True, exist_ok=True)
+    method = {"name": "robust-distillation", "teacher": teacher or "the source model", "eps": eps, "kappa": kappa,
+              "pgd_steps": pgd_steps, "epochs": epochs, "states": steps,
+              "reference": "Rusu et al. 2016; Madry et al. 2018"}
+    write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
     _write_zip(model_file(model), student, out / "model.zip")
+    wall = time.perf_counter() - start
     write_json(out / "train.json", {
-        "algo": "dqn", "kind": "distill", "source_model": str(model_file(model)),
-        "method": {"name": "robust-distillation", "eps": eps, "kappa": kappa, "pgd_steps": pgd_steps,
-                   "epochs": epochs, "states": steps, "reference": "Rusu et al. 2016; Madry et al. 2018"},
-        "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
-        "wall_time_s": round(time.perf_counter() - start, 1)})
+        "algo": "dqn", "kind": "distill", "source_model": str(model_file(model)), "method": method,
+        "total_timesteps": steps, "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
+        "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1)})
     return out / "model.zip"
 
 

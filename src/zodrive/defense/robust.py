@@ -2,10 +2,11 @@
 
 - `at`: the paper's Algorithm 2 (adversarial training with ZO-SignSGD at `eps`), kept for
   comparison.
-- `sa`: SA-DQN's state-adversarial regularizer (`agents.dqn_variants.SADQN`) on clean
-  observations; DQN only for now.
-- `distill`: adversarially robust distillation of the model's own decisions on the states it
-  visits (`defense.distill`); `steps` is the number of states collected, DQN only.
+- `sa`: the state-adversarial regularizer on clean observations: SA-DQN
+  (`agents.dqn_variants.SADQN`) or SA-DDPG (`agents.state_adversarial.SADDPG`).
+- `distill`: adversarially robust distillation of the model's own decisions (or of a
+  `--teacher` baseline's) on the states the teacher visits (`defense.distill`); `steps` is the
+  number of states collected, DQN only.
 Both continue from the model's weights with the same warm-buffer start as Algorithm 2.
 """
 
@@ -25,7 +26,8 @@ METHODS = ("at", "sa", "distill")
 
 def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, steps: int, out: Path, *,
                  seed: int = 1, warmup: int = 1000, kappa: float = 0.5, pgd_steps: int = 5,
-                 progress_bar: bool = True, trust: bool = False, force: bool = False) -> Path:
+                 progress_bar: bool = True, trust: bool = False, force: bool = False,
+                 teacher: str | None = None, epochs: int = 20) -> Path:
     if method not in METHODS:
         raise ZodriveError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
     if not eps > 0:
@@ -33,24 +35,29 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, st
     if method == "distill":  # supervised on the teacher's states: no SB3 training loop, nothing unpickled
         from zodrive.defense.distill import distill
 
-        return distill(model, preset, eps, steps, out, seed=seed, kappa=kappa, pgd_steps=pgd_steps, force=force)
+        return distill(model, preset, eps, steps, out, seed=seed, kappa=kappa, pgd_steps=pgd_steps, force=force,
+                       teacher=teacher, epochs=epochs)
+    if teacher is not None:
+        raise ZodriveError("--teacher applies to --method distill")
     common = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust, "force": force}
     if method == "at":
         return adversarial_train(model, preset, load_attack("zo-signsgd").with_overrides(eps=eps), steps, out, **common)
-    if model_algo(model_file(model)) != "dqn":
-        raise ZodriveError("--method sa is implemented for DQN models (SA-DQN); use --method at for DDPG")
+    algo = model_algo(model_file(model))
+    if algo not in ("dqn", "ddpg"):
+        raise ZodriveError(f"--method sa is implemented for DQN (SA-DQN) and DDPG (SA-DDPG) models, not {algo}")
     from zodrive.agents.dqn_variants import SADQN
+    from zodrive.agents.state_adversarial import SADDPG
     from zodrive.attacks.threat import ThreatModel
 
     context = attack_context(preset)
     low, high = context["bounds"]
     mask = ThreatModel(eps=eps, features=context["features"]).mask(observation_shape(preset))
 
-    def configure(agent: SADQN) -> dict[str, Any]:
+    def configure(agent: SADQN | SADDPG) -> dict[str, Any]:
         agent.configure_robust(eps=eps, kappa=kappa, pgd_steps=pgd_steps, mask=mask, low=low, high=high,
                                total_steps=steps)
-        return {"name": "sa-dqn", "eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "hinge": 1.0,
-                "eps_ramp": 0.3, "reference": "Zhang et al., NeurIPS 2020"}
+        return {"name": f"sa-{algo}", "eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "eps_ramp": 0.3,
+                **({"hinge": 1.0} if algo == "dqn" else {}), "reference": "Zhang et al., NeurIPS 2020"}
 
-    return adversarial_train(model, preset, None, steps, out, algo_class=SADQN, setup=configure, **common)
-
+    return adversarial_train(model, preset, None, steps, out, algo_class=SADQN if algo == "dqn" else SADDPG,
+                             setup=configure, **common)

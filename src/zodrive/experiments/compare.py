@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.agents.baselines import get_baseline, is_baseline
-from zodrive.agents.policies import check_policy, policy_kind, policy_label, policy_ref
+from zodrive.agents.policies import check_policy, has_gradients, policy_kind, policy_label, policy_ref
 from zodrive.attacks.spec import load_attack
 from zodrive.envs import load_preset
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
@@ -31,7 +31,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
-    can change what they do."""
+    can change what they do; white-box attacks skip policies that offer no gradients."""
     from zodrive.defense.kinematic import make_defense
 
     budgets = query_budgets or [None]
@@ -51,7 +51,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         for defense in defenses if reads_obs else [None]:
             if defense is not None:
                 make_defense(defense, preset)  # the preset must be one the defense understands
-            for attack in ["none", *attacks] if reads_obs else ["none"]:
+            usable = [a for a in attacks if has_gradients(model) or _black_box(a, attack_set)] if reads_obs else []
+            for attack in ["none", *usable]:
                 points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
                 for eps, budget in points:
                     spec = None if attack == "none" else \
@@ -82,6 +83,12 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done)
     return rows  # type: ignore[return-value]
+
+
+def _black_box(attack: str, attack_set: list[str] | None) -> bool:
+    from zodrive.attacks.registry import ATTACKS
+
+    return ATTACKS[load_attack(attack, attack_set).attack].black_box
 
 
 def _label(attack: str) -> str:

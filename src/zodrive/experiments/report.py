@@ -106,10 +106,27 @@ FIGURES = [
 ]
 
 
+def robustness_section(out: Path, episodes: int) -> tuple[str, str, Path | None]:
+    """The robustness section's intro, its Markdown table and figure (from out/robustness)."""
+    folder = out / "robustness"
+    if not episodes or not (folder / "robustness.md").is_file():
+        return "", "", None
+    intro = (f"Return under the strongest attack per ε ({episodes} episodes per cell, seeds 100000–"
+             f"{100000 + episodes - 1}, the same in every cell): black-box random search, its defense-aware form that "
+             "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box PGD "
+             "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most, and the "
+             "speed. dqn-robust is the defended DQN (its card says how it was made); baseline:robust-rules@0.02 is the "
+             "observation rules made pessimistic for ε 0.02; the constant SLOWER ignores its input and is the floor a "
+             "defense must beat. Cells: robustness/table.md.")
+    figure = folder / "robustness.png"
+    return intro, (folder / "robustness.md").read_text(), figure if figure.is_file() else None
+
+
 def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timings: dict[str, float], *,
-                 episodes: int, retrain: bool, quick: bool) -> None:
+                 episodes: int, retrain: bool, quick: bool, robustness_episodes: int = 0) -> None:
     """report.md (figures linked) and report.html (figures embedded, one file)."""
     md_table = table_markdown(table["rows"])
+    rob_intro, rob_table, rob_figure = robustness_section(out, robustness_episodes)
     intro = (
         f"Reproduction of Table 1 with {episodes} episodes per cell (seeds 100000–{100000 + episodes - 1}, the same "
         f"in every cell), {'models retrained by this run' if retrain else 'the shipped models in models/'}"
@@ -119,15 +136,26 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
         "change them) or read the simulator (IDM + MOBIL): a number that one of them also reaches is not a result."
     )
     timing_lines = "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
-    md = ["# zodrive reproduction of Table 1", "", intro, "", md_table, "## Figures", ""]
+    md = ["# zodrive reproduction of Table 1", "", intro, "", md_table]
+    if rob_table:
+        md += ["## Robustness: return against ε under the strongest attack", "", rob_intro, "", rob_table]
+        if rob_figure is not None:
+            md += ["![Return against ε, each policy under its strongest attack](robustness/robustness.png)", ""]
+    md += ["## Figures", ""]
     for name, caption in FIGURES:
         if (out / "figures" / name).is_file():
             md += [f"![{caption}](figures/{name})", "", f"*{caption}*", ""]
     md += ["## Timings", "", timing_lines, ""]
     write_atomic(out / "report.md", "\n".join(md))
 
-    parts = [f"<h1>zodrive reproduction of Table 1</h1><p>{html.escape(intro)}</p>", _html_table(table["rows"]),
-             "<h2>Figures</h2>"]
+    parts = [f"<h1>zodrive reproduction of Table 1</h1><p>{html.escape(intro)}</p>", _html_table(table["rows"])]
+    if rob_table:
+        parts += ["<h2>Robustness: return against ε under the strongest attack</h2>", f"<p>{html.escape(rob_intro)}</p>",
+                  f"<pre>{html.escape(rob_table)}</pre>"]
+        if rob_figure is not None:
+            parts.append(f'<figure><img src="data:image/png;base64,{base64.b64encode(rob_figure.read_bytes()).decode()}" '
+                         'style="max-width:100%"></figure>')
+    parts.append("<h2>Figures</h2>")
     for name, caption in FIGURES:
         path = out / "figures" / name
         if path.is_file():

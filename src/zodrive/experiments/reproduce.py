@@ -4,7 +4,10 @@ Stages, each skipped when its output is already on disk (so an interrupted run r
   1. models    shipped ones from models/, or (--retrain) train + adversarially train anew
   2. cells     8 evaluations = {DQN, DDPG} x {Initial, Under Attack, Adversarial, After}
   3. figures   Fig. 2 loss trace, Fig. 3 attacked crash (PNG + GIF), Figs. 4/5 rewards
-  4. report    Table 1 (CSV, JSON, Markdown) beside the paper's numbers; report.md/.html
+  4. robustness  return against eps under the strongest attack, for the driver (with and
+               without the kinematic filter), the defended driver and the baselines (out/robustness)
+  5. report    Table 1 (CSV, JSON, Markdown) beside the paper's numbers, then the robustness
+               section; report.md/.html
 """
 
 from __future__ import annotations
@@ -37,6 +40,21 @@ BASELINE_ROWS = {
     "dqn": ("baseline:slower", "baseline:faster", "baseline:idm-mobil", "baseline:rules"),
     "ddpg": ("baseline:brake", "baseline:accelerate", "baseline:idm-mobil"),
 }
+
+
+# The robustness section (issue "Defenses that hold"): each system under its strongest attack
+# per eps (black-box, the defense-aware drift-limited one, and white-box PGD where there are
+# gradients), the same seeds in every cell. Shipped models are named by their folder in models/.
+ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...]], ...] = (
+    ("dqn-driver", (None, "kinematic")),
+    ("dqn-robust", (None,)),
+    ("baseline:robust-rules@0.02", (None,)),
+    ("baseline:rules", (None,)),
+    ("baseline:slower", (None,)),
+)
+ROBUSTNESS_ATTACKS = ("random-search", "random-search-smooth", "pgd")
+ROBUSTNESS_ATTACK_SET = ["patience=10"]  # a step stops after 10 iterations without progress
+ROBUSTNESS_EPS = (0.02, 0.05, 0.1, 0.2)
 
 
 def _done(path: Path) -> bool:
@@ -83,8 +101,9 @@ def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str
 
 def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool = False,
               retrain: bool = False, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
-              backend: str = "local", address: str | None = None) -> dict[str, Any]:
-    """Run (or resume) the whole reproduction into `out`; returns the Table 1 data."""
+              backend: str = "local", address: str | None = None, robustness_episodes: int = 10) -> dict[str, Any]:
+    """Run (or resume) the whole reproduction into `out`; returns the Table 1 data.
+    `robustness_episodes` episodes per robustness cell (0: no robustness section)."""
     from zodrive.experiments.report import build_table, write_report
 
     if episodes < 1:
@@ -123,12 +142,34 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
     run_cells([cell for _, _, cell in todo], backend=backend, workers=workers, progress=progress,
               address=address, on_done=done)
     figures = make_figures(out, models, spec, quick=quick)
+    curve = robustness(out / "robustness", episodes=min(robustness_episodes, 1) if quick else robustness_episodes,
+                       quick=quick, workers=workers, progress=progress, seed=seed, backend=backend, address=address)
     table = build_table(summaries, out)
     runs = sum(1 for key in timings if key.startswith("invocation "))
     timings[f"invocation {runs + 1} total"] = round(time.perf_counter() - start, 1)
     write_json(out / "timings.json", timings)
-    write_report(out, table, figures, timings, episodes=episodes, retrain=retrain, quick=quick)
+    write_report(out, table, figures, timings, episodes=episodes, retrain=retrain, quick=quick,
+                 robustness_episodes=curve)
     return table
+
+
+def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
+    """The robustness grid into `out` (resumable cells, robustness.md, robustness.png); returns
+    the episodes per cell (0: skipped). Quick mode: eps 0.2 and random search only."""
+    from zodrive.agents.baselines import is_baseline
+    from zodrive.experiments.compare import compare, plot_robustness, write_tables
+
+    if episodes < 1:
+        return 0
+    attacks, eps = (["random-search"], [0.2]) if quick else (list(ROBUSTNESS_ATTACKS), list(ROBUSTNESS_EPS))
+    rows: list[dict[str, Any]] = []
+    for name, defenses in ROBUSTNESS_SYSTEMS:
+        model = name if is_baseline(name) else str(models_dir() / name)
+        rows += compare([model], attacks, eps, episodes, out, defenses=list(defenses),
+                        attack_set=ROBUSTNESS_ATTACK_SET, **run)
+    write_tables(rows, out)  # each compare call wrote its own rows only
+    plot_robustness(rows, out / "robustness.png")
+    return episodes
 
 
 def _load_timings(out: Path) -> dict[str, float]:
