@@ -161,12 +161,12 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         lines.append(f"Method: {method.get('name')} ({method.get('reference', '')}), ε {method.get('eps')}, "
                      + ", ".join(f"{k} {v}" for k, v in method.items() if k not in ("name", "reference", "eps"))
                      + f"; from `{train.get('source_model')}`.")
-    if attacked:
-        lines += ["", "Under attack (the same seeds):", ""] + _attacked_lines(attacked)
     if summary.get("action_share"):
         from zodrive.envs import ACTION_NAMES
 
         lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(ACTION_NAMES, summary["action_share"])) + ".")
+    if attacked:
+        lines += ["", "Under attack (the first seeds of the same evaluation seeds):", ""] + _attacked_lines(attacked)
     if not adversarial and recipe.get("hyperparameters"):
         changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
         budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)

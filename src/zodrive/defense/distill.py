@@ -33,9 +33,11 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
+from zodrive.compute import one_torch_thread
 from zodrive.errors import ZodriveError
 
 
+@one_torch_thread  # small MLPs: one thread is fastest, and the result does not depend on the load
 def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, seed: int = 1,
             kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False,
             teacher: str | None = None) -> Path:

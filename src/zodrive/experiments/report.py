@@ -115,9 +115,9 @@ def robustness_section(out: Path, episodes: int) -> tuple[str, str, Path | None]
              f"{100000 + episodes - 1}, the same in every cell): black-box random search, its defense-aware form that "
              "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box PGD "
              "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most, and the "
-             "speed. dqn-robust is the defended DQN (its card says how it was made); baseline:robust-rules@0.02 is the "
-             "observation rules made pessimistic for ε 0.02; the constant SLOWER ignores its input and is the floor a "
-             "defense must beat. Cells: robustness/table.md.")
+             "speed. dqn-robust and ddpg-robust are the defended agents (their cards say how they were made); "
+             "baseline:robust-rules@0.02 is the observation rules made pessimistic for ε 0.02; the constant SLOWER "
+             "and the constant brake ignore their input and are the floor a defense must beat. Cells: robustness/table.md.")
     figure = folder / "robustness.png"
     return intro, (folder / "robustness.md").read_text(), figure if figure.is_file() else None
 

@@ -45,12 +45,15 @@ BASELINE_ROWS = {
 # The robustness section (issue "Defenses that hold"): each system under its strongest attack
 # per eps (black-box, the defense-aware drift-limited one, and white-box PGD where there are
 # gradients), the same seeds in every cell. Shipped models are named by their folder in models/.
-ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...]], ...] = (
-    ("dqn-driver", (None, "kinematic")),
-    ("dqn-robust", (None,)),
-    ("baseline:robust-rules@0.02", (None,)),
-    ("baseline:rules", (None,)),
-    ("baseline:slower", (None,)),
+ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], ...] = (  # (policy, defenses, extra attacks)
+    ("dqn-driver", (None, "kinematic"), ()),
+    ("dqn-robust", (None,), ()),
+    ("baseline:robust-rules@0.02", (None,), ("random-search-slower",)),  # it can only be made careful
+    ("baseline:rules", (None,), ()),
+    ("baseline:slower", (None,), ()),
+    ("ddpg-driver", (None, "kinematic"), ()),
+    ("ddpg-robust", (None,), ()),
+    ("baseline:brake", (None,), ()),
 )
 ROBUSTNESS_ATTACKS = ("random-search", "random-search-smooth", "pgd")
 ROBUSTNESS_ATTACK_SET = ["patience=10"]  # a step stops after 10 iterations without progress
@@ -163,9 +166,9 @@ def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
         return 0
     attacks, eps = (["random-search"], [0.2]) if quick else (list(ROBUSTNESS_ATTACKS), list(ROBUSTNESS_EPS))
     rows: list[dict[str, Any]] = []
-    for name, defenses in ROBUSTNESS_SYSTEMS:
+    for name, defenses, extra in ROBUSTNESS_SYSTEMS:
         model = name if is_baseline(name) else str(models_dir() / name)
-        rows += compare([model], attacks, eps, episodes, out, defenses=list(defenses),
+        rows += compare([model], attacks + ([] if quick else list(extra)), eps, episodes, out, defenses=list(defenses),
                         attack_set=ROBUSTNESS_ATTACK_SET, **run)
     write_tables(rows, out)  # each compare call wrote its own rows only
     plot_robustness(rows, out / "robustness.png")
