@@ -32,7 +32,7 @@ def test_reproduce_quick_runs_and_resumes(tmp_path: Path) -> None:
     assert json.loads((out / "table1.json").read_text()) == rows
 
 
-@pytest.mark.parametrize("name", ["dqn", "ddpg"])
+@pytest.mark.parametrize("name", ["dqn", "ddpg", "dqn-driver", "dqn-robust"])
 def test_shipped_model_reproduces_its_card(name: str, tmp_path: Path) -> None:
     card = json.loads((ROOT / "models" / name / "eval" / "summary.json").read_text())
     assert main(["evaluate", str(ROOT / "models" / name), "--episodes", str(card["episodes"]), "--workers", "2",

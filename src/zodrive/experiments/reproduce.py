@@ -49,7 +49,7 @@ ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], .
     ("dqn-driver", (None, "kinematic"), ()),
     ("dqn-robust", (None,), ()),
     ("baseline:robust-rules@0.02", (None,), ("random-search-slower",)),  # it can only be made careful
-    ("baseline:rules", (None,), ()),
+    ("baseline:rules", (None,), ("random-search-slower",)),
     ("baseline:slower", (None,), ()),
     ("ddpg-driver", (None, "kinematic"), ()),
     ("ddpg-robust", (None,), ()),
