@@ -176,11 +176,15 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    top = max(float(r["eps"]) for r in rows if r["eps"] is not None) if any(r["eps"] for r in rows) else 1.0
+    floors = 0
     for system, cells in strongest(rows).items():
         if _ignores_input(cells[0.0]):
             ax.axhline(cells[0.0]["mean_return"], ls="--", lw=1, color="grey")
-            ax.annotate(system, (0, cells[0.0]["mean_return"]), fontsize=7, color="grey",
-                        xytext=(2, 2), textcoords="offset points")
+            left = floors % 2 == 0  # floors often coincide: their labels alternate sides
+            ax.annotate(system, (0 if left else top, cells[0.0]["mean_return"]), fontsize=7, color="grey",
+                        xytext=(2 if left else -2, 2), textcoords="offset points", ha="left" if left else "right")
+            floors += 1
             continue
         eps = sorted(cells)
         ax.plot(eps, [cells[e]["mean_return"] for e in eps], marker="o", label=system)
