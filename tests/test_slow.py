@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from zodrive.cli import main
+from zodrive.experiments.reproduce import BASELINE_ROWS
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow
@@ -24,7 +25,7 @@ def test_reproduce_quick_runs_and_resumes(tmp_path: Path) -> None:
     report = (out / "report.md").read_text()
     assert report.index("## Robustness") < report.index("## Figures") and "dqn-robust" in report
     rows = json.loads((out / "table1.json").read_text())
-    assert len(rows) == 8 and all(r["episodes"] == 5 for r in rows)
+    assert len(rows) == 8 + sum(map(len, BASELINE_ROWS.values())) and all(r["episodes"] == 5 for r in rows)
     before = json.loads((out / "timings.json").read_text())
     assert main(["reproduce", "--quick", "--out", str(out), "--no-progress"]) == 0  # resumes: nothing redone
     after = json.loads((out / "timings.json").read_text())

@@ -28,7 +28,7 @@ from zodrive.errors import ZodriveError
 from zodrive.experiments.cells import Cell, run_cells
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, same_evaluation
 from zodrive.experiments.paper import ADV_STEPS
-from zodrive.runinfo import write_json
+from zodrive.runinfo import write_atomic, write_json
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,9 @@ BASELINE_ROWS = {
 
 # The robustness section (issue "Defenses that hold"): each system under its strongest attack
 # per eps (black-box, the defense-aware drift-limited one, and white-box PGD where there are
-# gradients), the same seeds in every cell. Shipped models are named by their folder in models/.
+# gradients), the same seeds in every cell. Shipped models are named by their folder in models/
+# (`--retrain` retrains Table 1's paper-budget models only; this section always uses the shipped
+# driver and defended models).
 ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], ...] = (  # (policy, defenses, extra attacks)
     ("dqn-driver", (None, "kinematic"), ()),
     ("dqn-robust", (None,), ()),
@@ -160,7 +162,7 @@ def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
     """The robustness grid into `out` (resumable cells, robustness.md, robustness.png); returns
     the episodes per cell (0: skipped). Quick mode: eps 0.2 and random search only."""
     from zodrive.agents.baselines import is_baseline
-    from zodrive.experiments.compare import compare, plot_robustness, write_tables
+    from zodrive.experiments.compare import compare, plot_robustness, robustness_markdown, write_tables
 
     if episodes < 1:
         return 0
@@ -171,6 +173,7 @@ def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
         rows += compare([model], attacks + ([] if quick else list(extra)), eps, episodes, out, defenses=list(defenses),
                         attack_set=ROBUSTNESS_ATTACK_SET, **run)
     write_tables(rows, out)  # each compare call wrote its own rows only
+    write_atomic(out / "robustness.md", robustness_markdown(rows))  # also with one eps (quick mode)
     plot_robustness(rows, out / "robustness.png")
     return episodes
 
