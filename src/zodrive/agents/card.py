@@ -166,7 +166,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
 
         lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(ACTION_NAMES, summary["action_share"])) + ".")
     if attacked:
-        lines += ["", "Under attack (the first seeds of the same evaluation seeds):", ""] + _attacked_lines(attacked)
+        lines += ["", "Under attack (the same evaluation seeds, from the first; each line gives its episodes):", ""] \
+            + _attacked_lines(attacked)
     if not adversarial and recipe.get("hyperparameters"):
         changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
         budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)
