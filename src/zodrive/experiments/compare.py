@@ -171,14 +171,18 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
     """Mean return (95% CI band) against eps, each system under its strongest attack; a
     policy that ignores its input is a horizontal dashed line (the floor a defense must beat)."""
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    fig, ax = plt.subplots(figsize=(8.5, 4.5))
+    table = strongest(rows)
+    ax.set_prop_cycle(color=plt.cm.tab20(np.linspace(0, 1, 20))[: max(len(table), 1)] if len(table) > 10
+                      else plt.cm.tab10(np.arange(10)))  # more policies than tab10 has colours: tab20
     top = max(float(r["eps"]) for r in rows if r["eps"] is not None) if any(r["eps"] for r in rows) else 1.0
     floors = 0
-    for system, cells in strongest(rows).items():
+    for system, cells in table.items():
         if _ignores_input(cells[0.0]):
             ax.axhline(cells[0.0]["mean_return"], ls="--", lw=1, color="grey")
             left = floors % 2 == 0  # floors often coincide: their labels alternate sides
@@ -190,7 +194,7 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
         ax.plot(eps, [cells[e]["mean_return"] for e in eps], marker="o", label=system)
         ax.fill_between(eps, [cells[e]["ci95_low"] for e in eps], [cells[e]["ci95_high"] for e in eps], alpha=0.15)
     ax.set(xlabel="ε (L∞, normalized units)", ylabel="mean return", title="return under the strongest attack")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)

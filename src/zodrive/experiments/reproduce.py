@@ -50,6 +50,8 @@ BASELINE_ROWS = {
 ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], ...] = (  # (policy, defenses, extra attacks)
     ("dqn-driver", (None, "kinematic"), ()),
     ("dqn-robust", (None,), ()),
+    ("dqn-sa", (None, "kinematic"), ()),   # SA-DQN, eps 0.05, kappa 0.5: comes out as always-SLOWER
+    ("dqn-at", (None,), ()),               # Algorithm 2, eps 0.2: likewise
     ("baseline:robust-rules@0.02", (None,), ("random-search-slower",)),  # it can only be made careful
     ("baseline:rules", (None,), ("random-search-slower",)),
     ("baseline:slower", (None,), ()),
