@@ -118,10 +118,10 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     config = _load(folder / "config.yaml")
     summary = _load((evaluation or folder / "eval") / "summary.json")
     algo = train["algo"]
-    adversarial = train.get("kind") in ROBUST_KINDS
+    robust = train.get("kind") in ROBUST_KINDS
     recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "method", "steps", "warmup")
                                       if config.get(k) is not None}
-    kind = ROBUST_KINDS[train["kind"]] + " " if adversarial else ""
+    kind = ROBUST_KINDS[train["kind"]] + " " if robust else ""
     lines = [
         f"# {folder.name}: {kind}{algo.upper()} on the `{config['preset']['name']}` preset",
         "",
@@ -151,7 +151,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         f"**Mean return {_result_line(summary)}.**",
         "",
     ]
-    if not adversarial:
+    if not robust:
         lines.append(f"Paper (Table 1, Initial Training): {PAPER_TARGETS.get(algo, float('nan')):.2f}.")
     elif train["kind"] == "adversarial":
         lines.append("Trained further on attacked observations (paper Algorithm 2); "
@@ -168,7 +168,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     if attacked:
         lines += ["", "Under attack (the same evaluation seeds, from the first; each line gives its episodes):", ""] \
             + _attacked_lines(attacked)
-    if not adversarial and recipe.get("hyperparameters"):
+    if not robust and recipe.get("hyperparameters"):
         changed = ", ".join(f"{k}={v}" for k, v in recipe["hyperparameters"].items())
         budget = ("the step budget is the paper's" if train["total_timesteps"] == PAPER_BUDGETS.get(algo)
                   else f"{train['total_timesteps']:,} steps; the paper's budget is {PAPER_BUDGETS.get(algo, 0):,}")
@@ -184,7 +184,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     lines += [
         "",
-        "## Recipe" if not adversarial else "## Robust training",
+        "## Recipe" if not robust else "## Robust training",
         "",
         "```yaml",
         yaml.safe_dump(recipe, sort_keys=False).rstrip(),

@@ -45,15 +45,14 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
     robust student (initialized as `model`; the teacher is `model` itself unless `teacher`
     names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
     returns the zip's path."""
+    from zodrive.agents.baselines import get_baseline, is_baseline
     from zodrive.agents.loading import load_network, model_file
+    from zodrive.agents.policies import load_victim
     from zodrive.agents.victims import network_victim
     from zodrive.attacks.threat import ThreatModel, worst_in_ball
     from zodrive.envs import attack_context, make_env
     from zodrive.evaluation.rollout import clean_states
     from zodrive.runinfo import write_json, write_run_info
-
-    from zodrive.agents.baselines import get_baseline, is_baseline
-    from zodrive.agents.policies import load_victim
 
     if (out / "model.zip").exists() and not force:
         raise ZodriveError(f"{out} already holds a model; use --force to overwrite it")

@@ -7,7 +7,8 @@
 - `distill`: adversarially robust distillation of the model's own decisions (or of a
   `--teacher` baseline's) on the states the teacher visits (`defense.distill`); `steps` is the
   number of states collected, DQN only.
-Both continue from the model's weights with the same warm-buffer start as Algorithm 2.
+`at` and `sa` continue from the model's weights with the same warm-buffer start as Algorithm 2;
+`distill` starts its student from them.
 """
 
 from __future__ import annotations

@@ -48,10 +48,11 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         ref, name = policy_ref(model), policy_label(model)
         reads = get_baseline(model).reads if is_baseline(model) else "observation"
         reads_obs = reads == "observation"
+        gradients = has_gradients(model)
+        usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
         for defense in defenses if reads_obs else [None]:
             if defense is not None:
                 make_defense(defense, preset)  # the preset must be one the defense understands
-            usable = [a for a in attacks if has_gradients(model) or _black_box(a, attack_set)] if reads_obs else []
             for attack in ["none", *usable]:
                 points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
                 for eps, budget in points:
@@ -171,16 +172,14 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
     """Mean return (95% CI band) against eps, each system under its strongest attack; a
     policy that ignores its input is a horizontal dashed line (the floor a defense must beat)."""
     import matplotlib
-    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8.5, 4.5))
     table = strongest(rows)
-    ax.set_prop_cycle(color=plt.cm.tab20(np.linspace(0, 1, 20))[: max(len(table), 1)] if len(table) > 10
-                      else plt.cm.tab10(np.arange(10)))  # more policies than tab10 has colours: tab20
-    top = max(float(r["eps"]) for r in rows if r["eps"] is not None) if any(r["eps"] for r in rows) else 1.0
+    ax.set_prop_cycle(color=plt.cm.tab20.colors if len(table) > 10 else plt.cm.tab10.colors)  # one colour each
+    top = max((float(r["eps"]) for r in rows if r["eps"] is not None), default=1.0)
     floors = 0
     for system, cells in table.items():
         if _ignores_input(cells[0.0]):
