@@ -107,7 +107,7 @@ def test_bad_model_files(tmp_path: Path, capsys) -> None:
 
 
 def test_model_that_does_not_fit_the_preset(tiny_dqn: Path, capsys) -> None:
-    assert "DQN model" in _error(capsys, ["evaluate", str(tiny_dqn), "--preset", "continuous"])
+    assert "DQN policy with discrete actions" in _error(capsys, ["evaluate", str(tiny_dqn), "--preset", "continuous"])
     err = _error(capsys, ["evaluate", str(tiny_dqn), "--env-set", "highway.observation.vehicles_count=7"])
     assert "shape" in err
 

@@ -39,6 +39,33 @@ _seed = _int_at_least(0, "a seed (an integer >= 0)")
 _nonnegative_int = _int_at_least(0, "an integer >= 0")
 
 
+def _bounds(text: str) -> tuple[float, float]:
+    """An argparse type: `LOW,HIGH` with LOW < HIGH."""
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
+    if not low < high:
+        raise argparse.ArgumentTypeError(f"expected LOW < HIGH, got {text!r}")
+    return low, high
+
+
+def _scenario_flags(parser: argparse.ArgumentParser, *, trust: bool = True) -> None:
+    """Where a policy drives: a preset or any gymnasium id; and how to read an SB3 zip."""
+    parser.add_argument("--preset", help="preset (`zodrive env list`; default: the paper's preset of the model's "
+                                         "action kind: discrete or continuous)")
+    parser.add_argument("--env-id", metavar="ID",
+                        help="any gymnasium environment with a Box observation, instead of --preset")
+    parser.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH",
+                        help="with --env-id: the range of a clean observation value, when the env does not "
+                             "declare one finite interval (the attack's box)")
+    parser.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    if trust:
+        parser.add_argument("--trust-model", action="store_true",
+                            help="read an SB3 zip with stable-baselines3's own loader, which unpickles it (can run "
+                                 "code from the file): for models zodrive cannot rebuild safely")
+
+
 def _check_out(path: Path | None) -> None:
     """An --out must be a folder (or not exist yet) that we can write to."""
     if path is None:
@@ -56,7 +83,8 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # one line, exit 2, like every other error
-        raise ZodriveError(f"{self.prog}: {message}")
+        command = self.prog.partition(" ")[2]  # "zodrive evaluate" -> "evaluate"; main adds "zodrive: error:"
+        raise ZodriveError(f"{command}: {message}" if command else message)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -71,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     show = env_sub.add_parser("show", help="print a preset's resolved config")
     show.add_argument("preset")
     show.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (deep merge)")
-    env_sub.add_parser("list", help="list presets")
+    env_sub.add_parser("list", help="list the presets, one line each")
 
     sub.add_parser("baselines", help="list the built-in baseline policies (baseline:NAME)")
 
@@ -89,9 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--no-progress", action="store_true")
 
     ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
-    ev.add_argument("model", help="SB3 zip, model folder or baseline:NAME (see `zodrive baselines`)")
-    ev.add_argument("--preset", help="preset (default: from the model's algorithm)")
-    ev.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    ev.add_argument("model", help="SB3 / sb3-contrib zip, model folder, ONNX file, FILE.py:NAME (runs that code) "
+                                  "or baseline:NAME (see `zodrive baselines`)")
+    _scenario_flags(ev)
     ev.add_argument("--episodes", type=_positive_int, default=100)
     ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
@@ -102,9 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--no-progress", action="store_true")
 
     render = sub.add_parser("render", help="render an episode (PNG + GIF), optionally attacked")
-    render.add_argument("model", help="SB3 zip, model folder or baseline:NAME")
-    render.add_argument("--preset")
-    render.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
+    render.add_argument("model", help="SB3 / sb3-contrib zip, model folder, ONNX file, FILE.py:NAME or baseline:NAME")
+    _scenario_flags(render)
     render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     render.add_argument("--out", type=Path, required=True)
     render.add_argument("--defense", choices=DEFENSES,
@@ -183,6 +210,9 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
+    cmp_.add_argument("--preset", help="preset of every model (default: the paper's preset of each model's action kind)")
+    cmp_.add_argument("--env-id", metavar="ID", help="any gymnasium environment with a Box observation, instead of --preset")
+    cmp_.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH", help="with --env-id: a clean observation's range")
     cmp_.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE",
                       help="preset override, applied to every model's preset")
     cmp_.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
@@ -287,7 +317,13 @@ def cmd_env(args: argparse.Namespace) -> int:
     from zodrive.envs import load_preset, preset_names
 
     if args.env_command == "list":
-        print("\n".join(preset_names()))
+        from zodrive.envs import preset_summary
+
+        names = preset_names()
+        width = max(map(len, names))
+        for name in names:
+            print(f"{name:{width}}  {preset_summary(name)}")
+        print("any other gymnasium environment with a Box observation: --env-id ID [--obs-bounds LOW,HIGH]")
         return 0
     print(yaml.safe_dump(load_preset(args.preset, args.set), sort_keys=False), end="")
     return 0
@@ -317,12 +353,26 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def resolve_model_preset(model: str, preset: str | None, env_set: list[str]) -> dict[str, Any]:
-    """The preset to evaluate `model` in: given, or the one its algorithm trains on."""
-    from zodrive.agents.policies import policy_kind
-    from zodrive.envs import load_preset
+def resolve_model_preset(model: str, preset: str | None, env_set: list[str], env_id: str | None = None,
+                         obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
+    from zodrive.agents.policies import resolve_preset
 
-    return load_preset(preset or policy_kind(model), env_set)
+    return resolve_preset(model, preset, env_set, env_id, obs_bounds)
+
+
+def _preset_of(args: argparse.Namespace) -> dict[str, Any]:
+    return resolve_model_preset(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
+                                getattr(args, "obs_bounds", None))
+
+
+def _check_trust(args: argparse.Namespace) -> None:
+    """--trust-model reads SB3 zips; for anything else it would be ignored: an error."""
+    if getattr(args, "trust_model", False):
+        from zodrive.agents.policies import is_factory
+
+        model = str(args.model)
+        if model.startswith("baseline:") or model.lower().endswith(".onnx") or is_factory(model):
+            raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -331,12 +381,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.evaluation.report import format_summary
 
     spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
-    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    preset = _preset_of(args)
+    _check_trust(args)
     check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
         from zodrive.envs import attack_context
 
-        spec.build(load_victim(args.model, preset), **attack_context(preset))
+        spec.build(load_victim(args.model, preset, trust=args.trust_model), **attack_context(preset))
     if args.defense is not None:
         from zodrive.defense.kinematic import make_defense
 
@@ -344,7 +395,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     job = EvalJob(
         model=policy_ref(args.model), preset=preset,
         attack=spec.to_dict() if spec else None,
-        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense,
+        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
     )
     summary = evaluate(job, args.episodes, args.out, workers=args.workers, progress=not args.no_progress)
     print(format_summary(summary))
@@ -359,8 +410,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
 
     spec = attack_spec_from_args(args)
-    preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense)
+    preset = _preset_of(args)
+    _check_trust(args)
+    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense,
+                                  trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
         frames, info = record_episode(env, victim, seed)
@@ -445,7 +498,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
                    backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
-                   attack_set=args.attack_set)
+                   attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds)
     print(markdown(rows), end="")
     if args.plot:
         (plot_budget_curves if args.query_budgets else plot_robustness)(rows, args.plot)
@@ -509,7 +562,13 @@ def _check_model_paths(args: argparse.Namespace) -> None:
     """A missing model file is reported at once, before torch and highway-env are imported."""
     named = getattr(args, "models", None) if args.command == "compare" else [getattr(args, "model", None)]
     for model in named or []:
-        if model is not None and not str(model).startswith("baseline:") and not Path(model).exists():
+        if model is None or str(model).startswith("baseline:"):
+            continue
+        from zodrive.agents.factory import is_factory, split_factory
+
+        if is_factory(str(model)):
+            split_factory(str(model))  # the file must exist
+        elif not Path(model).exists():
             raise ZodriveError(f"model file not found: {model}")
 
 

@@ -42,12 +42,12 @@ class Baseline:
 
 
 BASELINES: dict[str, Baseline] = {b.name: b for b in (
-    Baseline("slower", ("discrete",), "nothing", "always SLOWER (action 4): drives at 20 m/s",
-             "always SLOWER", 4),
-    Baseline("idle", ("discrete",), "nothing", "always IDLE (action 1): keeps its start speed and lane",
-             "always IDLE", 1),
-    Baseline("faster", ("discrete",), "nothing", "always FASTER (action 3): the DQN attack's target",
-             "always FASTER (the attack's target)", 3),
+    Baseline("slower", ("discrete",), "nothing", "always SLOWER: on the paper's preset, 20 m/s",
+             "always SLOWER", "SLOWER"),
+    Baseline("idle", ("discrete",), "nothing", "always IDLE: keeps its start speed and lane",
+             "always IDLE", "IDLE"),
+    Baseline("faster", ("discrete",), "nothing", "always FASTER: the DQN attack's target",
+             "always FASTER (the attack's target)", "FASTER"),
     Baseline("brake", ("continuous",), "nothing", "always [-1, 0]: full brake, straight",
              "always [-1, 0] (full brake)", (-1.0, 0.0)),
     Baseline("accelerate", ("continuous",), "nothing", "always [1, 0.5]: the DDPG attack's target",
@@ -89,16 +89,45 @@ def get_baseline(model: str) -> Baseline:
                    label=f"{baseline.label} (eps {eps})")
 
 
-def check_baseline_fits(baseline: Baseline, kind: str) -> None:
-    if kind not in baseline.kinds:
-        raise ZodriveError(f"{PREFIX}{baseline.name} drives {' or '.join(baseline.kinds)} presets, "
-                           f"not a {kind} one")
+META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+RULES_ENVS = ("zodrive/highway-v0", "zodrive/highway-fast-v0")  # straight multi-lane highways
+RULES_FEATURES = ("presence", "x", "y", "vx", "vy")
 
 
-def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int) -> Victim:
+def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
+    """Raise a one-line error where the baseline has no meaning: a constant action the scenario
+    does not have, the rules off a straight highway, IDM + MOBIL off a highway-env road."""
+    from zodrive.envs import scenario
+
+    env = scenario(preset)
+    name = f"{PREFIX}{baseline.name}"
+    if env.kind not in baseline.kinds:
+        raise ZodriveError(f"{name} drives {' or '.join(baseline.kinds)} presets, not a {env.kind} one")
+    if env.kind == "discrete" and isinstance(baseline.action, str) and baseline.action not in env.action_names:
+        raise ZodriveError(f"{name} always takes {baseline.action}, which preset {preset['name']!r} does not have "
+                           f"(its actions: {', '.join(env.action_names)})")
+    if env.kind == "continuous" and baseline.action is not None and env.action_names != CONTINUOUS_DIMS:
+        raise ZodriveError(f"{name} is an [acceleration, steering] action; preset {preset['name']!r} acts on "
+                           f"{', '.join(env.action_names)}")
+    if baseline.reads == "observation" and (preset.get("env_id") not in RULES_ENVS or env.features != RULES_FEATURES
+                                            or env.action_names != META_ACTIONS):
+        raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
+                           "issues its five meta-actions: presets discrete, highway, highway-fast")
+    if baseline.reads == "simulator" and (not env.road or (env.kind == "discrete" and env.action_names != META_ACTIONS)
+                                          or (env.kind == "continuous" and env.action_names != CONTINUOUS_DIMS)):
+        raise ZodriveError(f"{name} drives highway-env roads with the five meta-actions or [acceleration, steering]; "
+                           f"preset {preset['name']!r} has {', '.join(env.action_names)}")
+
+
+CONTINUOUS_DIMS = ("acceleration", "steering")
+
+
+def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int,
+                    action_names: tuple[str, ...] = META_ACTIONS) -> Victim:
     """A victim that outputs the same thing for every observation (one-hot scores or the action)."""
-    if isinstance(baseline.action, int):
-        out, kind = np.eye(n_actions, dtype=np.float32)[baseline.action], "discrete"
+    if isinstance(baseline.action, str):
+        index = action_names.index(baseline.action)
+        out, kind = np.eye(n_actions, dtype=np.float32)[index], "discrete"
     else:
         out, kind = np.asarray(baseline.action, dtype=np.float32), "continuous"
     const = torch.from_numpy(out)

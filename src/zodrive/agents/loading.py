@@ -18,8 +18,7 @@ from typing import Any
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.agents.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
-from zodrive.agents.training import ALGOS, KIND_OF_ALGO
-from zodrive.envs import action_kind, n_actions, observation_shape
+from zodrive.agents.training import ALGOS
 from zodrive.errors import ZodriveError
 
 
@@ -39,18 +38,25 @@ def inspect_model(path: Path) -> dict[str, Any]:
 
 
 def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None:
-    """Raise if the model's algorithm or spaces do not match the preset."""
-    kind = action_kind(preset)
-    if KIND_OF_ALGO[info["algo"]] != kind:
+    """Raise if the model's kind of action or its spaces do not match the preset's environment."""
+    from zodrive.envs import scenario
+
+    env = scenario(preset)
+    if info["kind"] != env.kind:
         raise ZodriveError(
-            f"{path} is a {info['algo'].upper()} model; preset {preset['name']!r} has "
-            f"{kind} actions (use a {'DQN' if kind == 'discrete' else 'DDPG'} model)"
+            f"{path} is a {info.get('sb3_class', info['algo'].upper())} policy with {info['kind']} actions; "
+            f"preset {preset['name']!r} has {env.kind} actions"
         )
-    want = observation_shape(preset)
-    if info["obs_shape"] != want:
-        raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset gives {want}")
-    if info["n_actions"] != n_actions(preset):
-        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {n_actions(preset)}")
+    if tuple(info["obs_shape"] or ()) != env.obs_shape:
+        raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset "
+                           f"{preset['name']!r} gives {env.obs_shape}")
+    if info["n_actions"] != env.n_actions:
+        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {env.n_actions}")
+    if env.kind == "continuous" and info.get("action_low") is not None:
+        if (list(map(float, info["action_low"])) != list(env.action_low)
+                or list(map(float, info["action_high"])) != list(env.action_high)):
+            raise ZodriveError(f"{path} acts in [{info['action_low']}, {info['action_high']}]; preset "
+                               f"{preset['name']!r} takes actions in [{list(env.action_low)}, {list(env.action_high)}]")
 
 
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
@@ -103,7 +109,7 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
     try:
         with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
             warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
-            algo = ALGOS[info["algo"]]
+            algo = ALGOS.get(info["algo"]) or sb3_class(info["sb3_class"])
             if cls is not None and not issubclass(cls, algo):
                 raise ZodriveError(f"{file} is a {info['algo'].upper()} model; {cls.__name__} cannot continue it")
             return (cls or algo).load(file, device="cpu")
@@ -113,6 +119,24 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
         raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
 
 
+def sb3_class(name: str) -> type[BaseAlgorithm]:
+    """An SB3 or sb3-contrib algorithm class by name (QRDQN and TQC need sb3-contrib)."""
+    import stable_baselines3
+
+    if hasattr(stable_baselines3, name):
+        return getattr(stable_baselines3, name)
+    try:
+        import sb3_contrib
+    except ImportError:
+        raise ZodriveError(f"loading a {name} with stable-baselines3 needs sb3-contrib: pip install sb3-contrib") from None
+    return getattr(sb3_contrib, name)
+
+
 def model_algo(path: str | Path) -> str:
-    """`dqn` or `ddpg` for a model file, read from its weights."""
+    """The model's family (dqn, qrdqn, ddpg, sac, ppo), read from its weights."""
     return inspect_model(model_file(path))["algo"]
+
+
+def model_kind(path: str | Path) -> str:
+    """`discrete` or `continuous`: the model's action space, read from its plain data."""
+    return inspect_model(model_file(path))["kind"]

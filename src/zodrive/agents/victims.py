@@ -1,23 +1,24 @@
 """Adapters that turn models into `Victim`s (query functions) for the attack library.
 
-Attacks only ever see a `zodrive.attacks.victim.Victim`; SB3 models and torch networks are
-wrapped here, any plain callable works the same way.
+Attacks only ever see a `zodrive.attacks.victim.Victim`; SB3 / sb3-contrib models, torch
+networks and plain callables are wrapped here. The outputs are what the policy acts on
+(see `zodrive.agents.safe_load`): scores of discrete actions, or the continuous action.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.torch_layers import FlattenExtractor
 
+from zodrive.agents.safe_load import unscale
 from zodrive.attacks.victim import Victim
 
 
 def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
-    """A torch network over flattened observations (Q-values or action) as a victim."""
+    """A torch network over flattened observations (scores or action) as a victim."""
     flat = int(np.prod(obs_shape))
     net.eval()
 
@@ -32,34 +33,81 @@ def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"]
     return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
 
 
-def sb3_victim(model: BaseAlgorithm) -> Victim:
-    """Wrap an SB3 DQN (Q-values) or DDPG (deterministic action) as a black-box victim."""
-    obs_shape = tuple(model.observation_space.shape)
-    policy = model.policy
-    policy.set_training_mode(False)
-    from stable_baselines3 import DQN, TD3  # DDPG is a TD3 subclass in SB3
-
-    name = type(model).__name__
-    if isinstance(model, DQN):
-        net, kind = policy.q_net, "discrete"
-        head = net.q_net  # the MLP after SB3's flatten feature extractor
-    elif isinstance(model, TD3):
-        net, kind = policy.actor, "continuous"
-        head = net.mu  # MLP ending in tanh; SB3 predicts this action (space is [-1, 1])
-    else:
-        raise TypeError(f"no victim adapter for {name}")
-    flat = int(np.prod(obs_shape))
-    if not isinstance(net.features_extractor, FlattenExtractor):
-        head = None  # unusual feature extractor: go through the whole network
-
-    def query(obs: np.ndarray) -> np.ndarray:
-        batch = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
-        with torch.inference_mode():
-            if head is not None:  # same arithmetic as net(batch), without its Python overhead
-                return head(batch.reshape(-1, flat)).numpy()
-            return net(batch.reshape(-1, *obs_shape)).numpy()
+def module_victim(module: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
+    """A user's torch module over observation batches (B, *obs_shape) as a victim (white-box
+    attacks may differentiate it)."""
+    module.eval()
 
     def forward(obs: torch.Tensor) -> torch.Tensor:
-        return net(obs.reshape(-1, *obs_shape).float())
+        return module(obs.reshape(-1, *obs_shape).float())
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            out = forward(torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)))
+        return np.asarray(out.detach().cpu().numpy(), dtype=np.float32).reshape(len(obs), -1)
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
+
+
+def callable_victim(fn: Callable[[np.ndarray], Any], kind: Literal["discrete", "continuous"],
+                    obs_shape: tuple[int, ...]) -> Victim:
+    """Any numpy callable (observation batch -> scores or actions) as a black-box victim."""
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        batch = np.ascontiguousarray(obs, dtype=np.float32).reshape(-1, *obs_shape)
+        return np.asarray(fn(batch), dtype=np.float32).reshape(len(batch), -1)
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape))
+
+
+def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torch.Tensor], str]:
+    """What the loaded SB3 policy acts on, as a torch function of an observation batch."""
+    from stable_baselines3 import DQN, TD3, SAC
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    policy = model.policy
+    space = model.action_space
+    if isinstance(model, DQN):
+        return policy.q_net, "discrete"
+    name = type(model).__name__
+    if name == "QRDQN":
+        net = policy.quantile_net
+        return (lambda x: net(x).mean(dim=1)), "discrete"  # (B, quantiles, actions) -> mean per action
+    low = torch.as_tensor(getattr(space, "low", np.zeros(0)), dtype=torch.float32)
+    high = torch.as_tensor(getattr(space, "high", np.zeros(0)), dtype=torch.float32)
+    identity = bool(low.numel()) and bool(torch.all(low == -1.0) and torch.all(high == 1.0))
+
+    def squashed(action: torch.Tensor) -> torch.Tensor:
+        return action if identity else unscale(action, low, high)
+
+    if isinstance(model, TD3):  # DDPG is a TD3 subclass
+        return (lambda x: squashed(policy.actor(x))), "continuous"
+    if isinstance(model, SAC) or name == "TQC":
+        return (lambda x: squashed(policy.actor(x, deterministic=True))), "continuous"
+    if isinstance(policy, ActorCriticPolicy):
+        def forward(x: torch.Tensor) -> torch.Tensor:
+            features = policy.extract_features(x, policy.pi_features_extractor)
+            out = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            if not hasattr(space, "n"):
+                out = squashed(torch.tanh(out)) if policy.squash_output else torch.clamp(out, low, high)
+            return out
+
+        return forward, "discrete" if hasattr(space, "n") else "continuous"
+    raise TypeError(f"no victim adapter for {name}")
+
+
+def sb3_victim(model: BaseAlgorithm) -> Victim:
+    """Wrap a loaded SB3 / sb3-contrib model as a black-box victim: a live view of its
+    networks (training them changes the victim)."""
+    obs_shape = tuple(model.observation_space.shape)
+    model.policy.set_training_mode(False)
+    forward_fn, kind = _acting_forward(model)
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return forward_fn(obs.reshape(-1, *obs_shape).float())
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            return forward(torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))).numpy()
 
     return Victim(query=query, kind=kind, obs_shape=obs_shape, differentiable=forward)

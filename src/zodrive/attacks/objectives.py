@@ -10,7 +10,7 @@ attack loop, which owns the observations.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import torch
 
@@ -154,13 +154,18 @@ def make_objective(
     kappa: float = 0.01,
     tol: float = 0.2,
     n_actions: int | None = None,
+    action_names: Sequence[str] | None = None,
+    action_bounds: tuple[Any, Any] | None = None,
 ) -> Objective:
     """Build the objective for a victim kind (`discrete`/`continuous`) and a target.
 
     `target=None` or `"none"` means untargeted; `"worst"` (discrete) the action the victim
     values least on the clean observation, per step. Discrete targets are an index or an
-    action name (FASTER); continuous targets a sequence like [1, 0.5].
+    action name (FASTER; `action_names` name the scenario's actions, highway-v0's meta-actions
+    by default); continuous targets a sequence like [1, 0.5] inside `action_bounds` (default
+    [-1, 1] per dimension).
     """
+    names = {str(n).upper(): i for i, n in enumerate(action_names)} if action_names else DISCRETE_TARGETS
     untargeted = target is None or (isinstance(target, str) and target.lower() in ("none", "untargeted"))
     worst = isinstance(target, str) and target.lower() == "worst"
     if kind == "discrete":
@@ -174,10 +179,10 @@ def make_objective(
             name = target.upper()
             if name.lstrip("-").isdigit():
                 index = int(name)
-            elif name in DISCRETE_TARGETS:
-                index = DISCRETE_TARGETS[name]
+            elif name in names:
+                index = names[name]
             else:
-                raise ZodriveError(f"unknown target {target!r} (known: {', '.join(DISCRETE_TARGETS)} or an index)")
+                raise ZodriveError(f"unknown target {target!r} (known: {', '.join(names)} or an index)")
         elif isinstance(target, (int,)) and not isinstance(target, bool):
             index = int(target)
         else:
@@ -200,6 +205,7 @@ def make_objective(
         raise ZodriveError(f"a continuous victim needs a target action like [1, 0.5], not {target!r}") from exc
     if n_actions is not None and len(values) != n_actions:
         raise ZodriveError(f"target {list(values)} has {len(values)} dims; the victim has {n_actions}")
-    if any(abs(v) > 1 for v in values):
-        raise ZodriveError(f"target {list(values)} is outside the action range [-1, 1]")
+    low, high = action_bounds if action_bounds is not None else ((-1.0,) * len(values), (1.0,) * len(values))
+    if any(not lo <= v <= hi for v, lo, hi in zip(values, low, high)):
+        raise ZodriveError(f"target {list(values)} is outside the action range [{list(low)}, {list(high)}]")
     return ContinuousTargeted(weight=weight, target=values, tol=tol)

@@ -19,6 +19,7 @@ from zodrive.errors import ZodriveError
 log = logging.getLogger(__name__)
 
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
+DEFAULT_FROZEN = ("presence",)
 
 
 @dataclass
@@ -29,7 +30,7 @@ class AttackSpec:
     eps: float = 0.2                      # [normalized units] budget radius
     norm: str = "linf"                    # linf | l2
     mode: str = "budgeted"                # budgeted (projected) | paper (unconstrained)
-    frozen: tuple[str, ...] = ("presence",)  # features the attacker may not touch
+    frozen: tuple[str, ...] = DEFAULT_FROZEN  # features the attacker may not touch
     steps: int = 100                      # T, iterations per environment step
     n_directions: int = 20                # q, random directions per iteration
     mu: float = DEFAULT_MU                # smoothing radius of the finite differences
@@ -78,11 +79,26 @@ class AttackSpec:
             data["target"] = list(data["target"])
         return data
 
-    def resolved_target(self, kind: str) -> Any:
-        return PAPER_TARGETS[kind] if self.target in ("auto", None) else self.target
+    def resolved_target(self, kind: str, action_names: tuple[str, ...] | None = None) -> Any:
+        """The target to aim at; `auto` is the paper's (FASTER, or [1, 0.5] = full throttle and
+        steer right), which exists only where the scenario has that action."""
+        if self.target not in ("auto", None):
+            return self.target
+        target = PAPER_TARGETS[kind]
+        if action_names is not None:
+            fits = target in action_names if kind == "discrete" else tuple(action_names) == ("acceleration", "steering")
+            if not fits:
+                raise ZodriveError(f"target auto is the paper's {target!r}, which this scenario's actions "
+                                   f"({', '.join(action_names)}) do not have: pass --target none, worst or an action")
+        return target
 
     def threat(self, features: tuple[str, ...], bounds: tuple[float, float]) -> ThreatModel:
-        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=self.frozen,  # type: ignore[arg-type]
+        """The threat model on these features; the default mask freezes `presence` where the
+        observation has such a feature (an unnamed observation has none to freeze)."""
+        frozen = self.frozen
+        if frozen == DEFAULT_FROZEN and "presence" not in features:
+            frozen = ()
+        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,  # type: ignore[arg-type]
                            features=features, low=float(bounds[0]), high=float(bounds[1]))
 
     def _make(self, threat: ThreatModel, steps: int) -> Attack:
@@ -105,12 +121,14 @@ class AttackSpec:
                                    f"({one} queries with these settings): the attack could do nothing")
 
     def build(
-        self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int
+        self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int,
+        action_names: tuple[str, ...] | None = None, action_bounds: tuple[Any, Any] | None = None,
     ) -> tuple[Attack, Objective, QueryOracle]:
         """The attack, its objective for this victim, and the oracle that counts queries.
 
         `features`, `bounds` (the observation box) and `n_actions` describe the preset
-        (`zodrive.envs.attack_context`)."""
+        (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
+        name) and `action_bounds` the continuous action box (targets inside it)."""
         if self.access not in ("score", "decision"):
             raise ZodriveError(f"access must be score or decision, not {self.access!r}")
         if self.access == "decision":
@@ -125,8 +143,9 @@ class AttackSpec:
         attack = self._make(threat, self.steps)
         self._check_budgets(attack)
         objective = make_objective(
-            victim.kind, self.resolved_target(victim.kind), loss=self.loss, weight=self.weight,
-            kappa=self.kappa, tol=self.tol, n_actions=n_actions,
+            victim.kind, self.resolved_target(victim.kind, action_names), loss=self.loss, weight=self.weight,
+            kappa=self.kappa, tol=self.tol, n_actions=n_actions, action_names=action_names,
+            action_bounds=action_bounds,
         )
         if self.timing is not None and victim.kind != "discrete":
             raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")

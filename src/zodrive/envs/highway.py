@@ -1,29 +1,72 @@
-"""`zodrive/highway-v0`: highway-env's `HighwayEnv` that also knows the `FastKinematics`
-observation type. The simulator is untouched; only the observation factory is extended."""
+"""highway-env scenarios that also know the `FastKinematics` observation type.
+
+`zodrive/<id>` is highway-env's `<id>` (same class, same defaults, same simulator) whose
+observation factory also accepts `type: FastKinematics`: the exact, pandas-free
+`KinematicObservation` of `fast_kinematics`. Only the observer is swapped.
+"""
 
 from __future__ import annotations
 
-from highway_env.envs.highway_env import HighwayEnv
+from highway_env.envs.common.abstract import AbstractEnv
+from highway_env.envs.highway_env import HighwayEnv, HighwayEnvFast
+from highway_env.envs.intersection_env import ConnectedLaneIntersectionEnv
+from highway_env.envs.merge_env import ConnectedLaneMergeEnv
+from highway_env.envs.racetrack_env import ConnectedLaneRacetrackEnv
+from highway_env.envs.roundabout_env import ConnectedLaneRoundaboutEnv
 
 from zodrive.envs.fast_kinematics import FastKinematicObservation
 
 FAST_TYPE = "FastKinematics"
 
 
-class ZodriveHighwayEnv(HighwayEnv):
-    """`highway-v0` with `observation.type: FastKinematics` available."""
+class FastObservationMixin:
+    """Build spaces as highway-env does, then swap a `FastKinematics` observer in."""
 
     def define_spaces(self) -> None:
-        obs_config = self.config["observation"]
+        env: AbstractEnv = self  # type: ignore[assignment]
+        obs_config = env.config["observation"]
         if obs_config.get("type") != FAST_TYPE:
-            super().define_spaces()
+            super().define_spaces()  # type: ignore[misc]
             return
-        # Let highway-env build everything from the stock type, then swap the observer.
-        self.config["observation"] = {**obs_config, "type": "Kinematics"}
+        env.config["observation"] = {**obs_config, "type": "Kinematics"}
         try:
-            super().define_spaces()
+            super().define_spaces()  # type: ignore[misc]
         finally:
-            self.config["observation"] = obs_config
+            env.config["observation"] = obs_config
         kwargs = {k: v for k, v in obs_config.items() if k != "type"}
-        self.observation_type = FastKinematicObservation(self, **kwargs)
-        self.observation_space = self.observation_type.space()
+        env.observation_type = FastKinematicObservation(env, **kwargs)
+        env.observation_space = env.observation_type.space()
+
+
+class ZodriveHighwayEnv(FastObservationMixin, HighwayEnv):
+    """`highway-v0` with `observation.type: FastKinematics` available."""
+
+
+class ZodriveHighwayFastEnv(FastObservationMixin, HighwayEnvFast):
+    """`highway-fast-v0` (3 lanes, 5 Hz simulation, 1 decision per second)."""
+
+
+class ZodriveMergeEnv(FastObservationMixin, ConnectedLaneMergeEnv):
+    """`merge-v1`: join the highway from an on-ramp."""
+
+
+class ZodriveRoundaboutEnv(FastObservationMixin, ConnectedLaneRoundaboutEnv):
+    """`roundabout-v1`: enter and leave a roundabout."""
+
+
+class ZodriveIntersectionEnv(FastObservationMixin, ConnectedLaneIntersectionEnv):
+    """`intersection-v2`: cross an unsignalized intersection (speed actions only)."""
+
+
+class ZodriveRacetrackEnv(FastObservationMixin, ConnectedLaneRacetrackEnv):
+    """`racetrack-v1`: follow a closed track by steering."""
+
+
+FAST_ENVS = {  # zodrive id -> (class name in this module, highway-env id it extends)
+    "zodrive/highway-v0": ("ZodriveHighwayEnv", "highway-v0"),
+    "zodrive/highway-fast-v0": ("ZodriveHighwayFastEnv", "highway-fast-v0"),
+    "zodrive/merge-v1": ("ZodriveMergeEnv", "merge-v1"),
+    "zodrive/roundabout-v1": ("ZodriveRoundaboutEnv", "roundabout-v1"),
+    "zodrive/intersection-v2": ("ZodriveIntersectionEnv", "intersection-v2"),
+    "zodrive/racetrack-v1": ("ZodriveRacetrackEnv", "racetrack-v1"),
+}

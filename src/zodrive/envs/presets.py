@@ -1,35 +1,85 @@
-"""Environment presets: resolve a preset config and build the gymnasium environment."""
+"""Environment presets: resolve a preset config, build its gymnasium environment, and read
+what attacks and policies need to know about it (`scenario`).
+
+A preset names a gymnasium id and, for highway-env scenarios, the config passed to it
+(`highway:`). `scenario(preset)` builds the environment once and reads its facts from the
+environment itself (spaces, observation features, meta-action names), so a preset that
+gives only part of highway-env's config is still described exactly. `gym_preset(ID)` makes a
+preset for any gymnasium environment with a Box observation.
+"""
 
 from __future__ import annotations
 
+import functools
+import json
+import math
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
-from zodrive.config import available, check_keys, load_config
+from zodrive.config import available, check_keys, config_root, load_config
 from zodrive.errors import ZodriveError
 
 ENV_ID = "zodrive/highway-v0"
-ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-v0's DiscreteMetaAction
+CONTINUOUS_NAMES = ("acceleration", "steering")
+
+PRESET_KEYS = {"env_id", "max_episode_steps", "highway", "name", "env_kwargs", "obs_bounds"}
+OBSERVATION_TYPES = ("Kinematics", "FastKinematics", "ExitObservation")
 
 
-PRESET_KEYS = {"env_id", "max_episode_steps", "highway", "name"}
+@dataclass(frozen=True)
+class Scenario:
+    """What a preset's environment is, as attacks, victims and reports see it."""
 
-
-def highway_keys() -> set[str]:
-    """The configuration keys highway-env's `highway-v0` knows."""
-    from highway_env.envs.highway_env import HighwayEnv
-
-    return set(HighwayEnv.default_config())
+    name: str
+    kind: str                          # discrete | continuous
+    obs_shape: tuple[int, ...]
+    features: tuple[str, ...]          # names along the observation's last axis (() if unnamed)
+    bounds: tuple[float, float]        # range of a clean observation value
+    n_actions: int                     # discrete actions, or action dimensions
+    action_names: tuple[str, ...]      # meta-action names by index, or the action's dimensions
+    action_low: tuple[float, ...]      # continuous: the action space's box (() for discrete)
+    action_high: tuple[float, ...]
+    road: bool                         # a highway-env road: driving metrics and the driver baselines
+    max_return: float | None           # the return of a perfect episode, where it is known
 
 
 def register() -> None:
-    """Register `zodrive/highway-v0` with gymnasium (idempotent)."""
+    """Register zodrive's highway-env scenarios with gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
         import highway_env  # noqa: F401  (registers highway-v0 and friends)
 
-        gym.register(id=ENV_ID, entry_point="zodrive.envs.highway:ZodriveHighwayEnv")
+        from zodrive.envs.highway import FAST_ENVS
+
+        for env_id, (cls, _) in FAST_ENVS.items():
+            gym.register(id=env_id, entry_point=f"zodrive.envs.highway:{cls}")
+
+
+def _env_class(env_id: str) -> type | None:
+    register()
+    try:
+        creator = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)
+    except Exception:  # noqa: BLE001 - an id gymnasium does not know is reported by make_env
+        return None
+    return creator if isinstance(creator, type) else None
+
+
+def is_highway(env_id: str) -> bool:
+    """Whether `env_id` is a highway-env scenario (configured through `highway:`)."""
+    from highway_env.envs.common.abstract import AbstractEnv
+
+    cls = _env_class(env_id)
+    return cls is not None and issubclass(cls, AbstractEnv)
+
+
+def highway_keys(env_id: str = ENV_ID) -> set[str]:
+    """The configuration keys the highway-env scenario `env_id` knows."""
+    cls = _env_class(env_id)
+    return set(cls.default_config()) if cls is not None and hasattr(cls, "default_config") else set()
 
 
 def load_preset(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
@@ -40,69 +90,176 @@ def load_preset(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     return config
 
 
+def gym_preset(env_id: str, overrides: list[str] | None = None, obs_bounds: tuple[float, float] | None = None
+               ) -> dict[str, Any]:
+    """A preset for any registered gymnasium environment (`--env-id`); highway-env ids get
+    their own default config, anything else its constructor's defaults (`env_kwargs`)."""
+    from zodrive.config import deep_merge, parse_override
+
+    register()
+    if env_id not in gym.registry:
+        import difflib
+
+        close = difflib.get_close_matches(env_id, list(gym.registry), n=1)
+        raise ZodriveError(f"unknown gymnasium environment {env_id!r}" + (f"; did you mean {close[0]!r}?" if close else ""))
+    config: dict[str, Any] = {"env_id": env_id, "max_episode_steps": gym.spec(env_id).max_episode_steps}
+    config["highway" if is_highway(env_id) else "env_kwargs"] = {}
+    if obs_bounds is not None:
+        config["obs_bounds"] = [float(obs_bounds[0]), float(obs_bounds[1])]
+    for text in overrides or []:
+        config = deep_merge(config, parse_override(text))
+    validate_preset(config, env_id)
+    config["name"] = env_id
+    return config
+
+
 def validate_preset(config: dict[str, Any], name: str) -> None:
     """Catch config mistakes up front, before highway-env turns them into tracebacks."""
-    hw = config.get("highway")
-    if not isinstance(hw, dict):
-        raise ZodriveError(f"preset {name!r} has no 'highway' mapping")
     check_keys(config, PRESET_KEYS, f"preset {name!r}")
-    check_keys(hw, highway_keys(), f"preset {name!r}", "highway.")
+    env_id = config.get("env_id", ENV_ID)
+    if not isinstance(env_id, str):
+        raise ZodriveError(f"preset {name!r}: env_id must be a gymnasium id")
     steps = config.get("max_episode_steps")
-    if not isinstance(steps, int) or steps < 1:
-        raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer")
+    if steps is not None and (not isinstance(steps, int) or isinstance(steps, bool) or steps < 1):
+        raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer (or null: the env's own end)")
+    bounds = config.get("obs_bounds")
+    if bounds is not None and not (isinstance(bounds, list) and len(bounds) == 2
+                                   and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)
+                                   and bounds[0] < bounds[1]):
+        raise ZodriveError(f"preset {name!r}: obs_bounds must be [low, high] with low < high")
+    hw = config.get("highway")
+    if hw is None:
+        if is_highway(env_id):
+            raise ZodriveError(f"preset {name!r}: {env_id} is a highway-env scenario and needs a 'highway' mapping")
+        if not isinstance(config.get("env_kwargs", {}), dict):
+            raise ZodriveError(f"preset {name!r}: env_kwargs must be a mapping")
+        return
+    if not isinstance(hw, dict):
+        raise ZodriveError(f"preset {name!r}: 'highway' must be a mapping")
+    if not is_highway(env_id):
+        raise ZodriveError(f"preset {name!r}: {env_id} is not a highway-env scenario; give its options as env_kwargs")
+    check_keys(hw, highway_keys(env_id), f"preset {name!r}", "highway.")
     obs = hw.get("observation", {})
-    if obs.get("type") not in ("Kinematics", "FastKinematics"):
-        raise ZodriveError(
-            f"preset {name!r}: observation.type must be Kinematics or FastKinematics"
-        )
+    if "type" in obs and obs["type"] not in OBSERVATION_TYPES:
+        raise ZodriveError(f"preset {name!r}: observation.type must be one of {', '.join(OBSERVATION_TYPES)} "
+                           f"(other observations: --env-id ID with --obs-bounds)")
     action = hw.get("action", {}).get("type")
-    if action not in ("DiscreteMetaAction", "ContinuousAction"):
-        raise ZodriveError(
-            f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction"
-        )
+    if action is not None and action not in ("DiscreteMetaAction", "ContinuousAction"):
+        raise ZodriveError(f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction")
     for key, least in (("vehicles_count", 0), ("lanes_count", 1), ("simulation_frequency", 1), ("policy_frequency", 1)):
         value = hw.get(key)
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < least):
             raise ZodriveError(f"preset {name!r}: highway.{key} must be an integer >= {least}")
 
 
+def _key(config: dict[str, Any]) -> str:
+    return json.dumps(config, sort_keys=True, default=str)
+
+
+def scenario(config: dict[str, Any]) -> Scenario:
+    """The facts of a preset's environment (built once per preset and process)."""
+    return _scenario(_key(config))
+
+
+@functools.lru_cache(maxsize=32)
+def _scenario(key: str) -> Scenario:
+    config = json.loads(key)
+    env = make_env(config)
+    try:
+        return _read_scenario(config, env)
+    finally:
+        env.close()
+
+
+def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
+    name = config.get("name", config.get("env_id", ENV_ID))
+    space, actions = env.observation_space, env.action_space
+    if not isinstance(space, gym.spaces.Box):
+        raise ZodriveError(f"{name}: zodrive attacks Box observations, not {type(space).__name__}")
+    core = env.unwrapped
+    road = hasattr(core, "road") and hasattr(core, "observation_type")
+    features: tuple[str, ...] = ()
+    bounds = (float("-inf"), float("inf"))
+    if road and hasattr(core.observation_type, "features") and hasattr(core.observation_type, "normalize"):
+        observer = core.observation_type
+        features = tuple(observer.features)
+        if observer.normalize and getattr(observer, "clip", False):
+            bounds = (-1.0, 1.0)  # highway-env declares (-inf, inf) for a normalized, clipped observation
+    else:
+        low, high = np.unique(space.low), np.unique(space.high)
+        if len(low) == 1 and len(high) == 1 and np.isfinite(low[0]) and np.isfinite(high[0]):
+            bounds = (float(low[0]), float(high[0]))
+    if config.get("obs_bounds") is not None:
+        bounds = (float(config["obs_bounds"][0]), float(config["obs_bounds"][1]))
+    if isinstance(actions, gym.spaces.Discrete):
+        kind, n = "discrete", int(actions.n)
+        names = tuple(core.action_type.actions[i] for i in range(n)) if road and hasattr(
+            getattr(core, "action_type", None), "actions") else tuple(str(i) for i in range(n))
+        low_a: tuple[float, ...] = ()
+        high_a: tuple[float, ...] = ()
+    elif isinstance(actions, gym.spaces.Box) and len(actions.shape) == 1:
+        kind, n = "continuous", int(actions.shape[0])
+        action_type = getattr(core, "action_type", None)
+        if road and hasattr(action_type, "longitudinal"):
+            names = tuple(d for d, on in zip(CONTINUOUS_NAMES, (action_type.longitudinal, action_type.lateral)) if on)
+        else:
+            names = tuple(f"a{i}" for i in range(n))
+        low_a, high_a = tuple(map(float, actions.low)), tuple(map(float, actions.high))
+    else:
+        raise ZodriveError(f"{name}: zodrive attacks policies with Discrete or 1-D Box actions, not {actions}")
+    return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
+                    n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
+                    max_return=_max_return(config, core))
+
+
+def _max_return(config: dict[str, Any], core: Any) -> float | None:
+    """Steps of a full episode when every step can earn at most 1 (normalized highway-env reward)."""
+    if config.get("max_episode_steps") and config.get("env_id", ENV_ID) == ENV_ID:
+        return float(config["max_episode_steps"])  # the paper's preset: 450 decisions
+    cfg = getattr(core, "config", None)
+    if not isinstance(cfg, dict) or not cfg.get("normalize_reward") or not cfg.get("duration"):
+        return None
+    steps = math.ceil(cfg["duration"] * cfg["policy_frequency"])
+    return float(min(steps, config["max_episode_steps"]) if config.get("max_episode_steps") else steps)
+
+
 def action_kind(config: dict[str, Any]) -> str:
-    """`discrete` or `continuous`, from the preset's action type."""
-    return "discrete" if config["highway"]["action"]["type"] == "DiscreteMetaAction" else "continuous"
+    """`discrete` or `continuous`, from the preset's environment."""
+    hw = config.get("highway")
+    if isinstance(hw, dict) and hw.get("action", {}).get("type"):  # no environment needed
+        return "discrete" if hw["action"]["type"] == "DiscreteMetaAction" else "continuous"
+    return scenario(config).kind
 
 
-def observation_shape(config: dict[str, Any]) -> tuple[int, int]:
-    """(vehicles, features) of the preset's observation."""
-    obs = config["highway"]["observation"]
-    return int(obs.get("vehicles_count", 5)), len(obs.get("features", ["presence", "x", "y", "vx", "vy"]))
+def observation_shape(config: dict[str, Any]) -> tuple[int, ...]:
+    return scenario(config).obs_shape
 
 
 def feature_names(config: dict[str, Any]) -> list[str]:
-    return list(config["highway"]["observation"].get("features", ["presence", "x", "y", "vx", "vy"]))
+    return list(scenario(config).features)
 
 
 def observation_bounds(config: dict[str, Any]) -> tuple[float, float]:
-    """The range of a clean observation value: [-1, 1] when the preset normalizes and clips
-    (highway-env's Kinematics), otherwise unbounded. highway-env declares its observation
-    space as (-inf, inf) either way, so the preset, not the space, is the source."""
-    obs = config["highway"]["observation"]
-    if obs.get("normalize", True) and obs.get("clip", True):
-        return -1.0, 1.0
-    return float("-inf"), float("inf")
+    """The range of a clean observation value: [-1, 1] when highway-env normalizes and clips,
+    the observation space's box when it is one interval, `obs_bounds` when the preset says so,
+    otherwise unbounded."""
+    return scenario(config).bounds
 
 
 def n_actions(config: dict[str, Any]) -> int:
-    """Outputs of a policy for the preset: 5 meta-actions, or [acceleration, steering]."""
-    action = config["highway"]["action"]
-    if action_kind(config) == "discrete":
-        return len(ACTION_NAMES)
-    return int(action.get("longitudinal", True)) + int(action.get("lateral", True))
+    return scenario(config).n_actions
+
+
+def action_names(config: dict[str, Any]) -> tuple[str, ...]:
+    return scenario(config).action_names
 
 
 def attack_context(config: dict[str, Any]) -> dict[str, Any]:
     """What an attack needs to know about the preset's observations and actions."""
-    return {"features": tuple(feature_names(config)), "bounds": observation_bounds(config),
-            "n_actions": n_actions(config)}
+    env = scenario(config)
+    return {"features": env.features, "bounds": env.bounds, "n_actions": env.n_actions,
+            "action_names": env.action_names,
+            "action_bounds": (env.action_low, env.action_high) if env.kind == "continuous" else None}
 
 
 def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
@@ -110,17 +267,29 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     register()
     if render_mode == "rgb_array" and os.environ.get("SDL_VIDEODRIVER") == "dummy":
         os.environ["SDL_VIDEODRIVER"] = "offscreen"  # "dummy" makes highway-env draw black frames
+    env_id = config.get("env_id", ENV_ID)
+    kwargs = {"config": config["highway"]} if config.get("highway") is not None else dict(config.get("env_kwargs") or {})
     try:
-        env = gym.make(
-            config.get("env_id", ENV_ID),
-            config=config["highway"],
-            render_mode=render_mode,
-            max_episode_steps=config["max_episode_steps"],
-        )
-    except (TypeError, ValueError, KeyError) as exc:
-        raise ZodriveError(f"preset {config.get('name', '?')!r} is not a valid highway-env config: {exc}") from exc
+        env = gym.make(env_id, render_mode=render_mode, max_episode_steps=config.get("max_episode_steps"), **kwargs)
+    except gym.error.Error as exc:
+        raise ZodriveError(f"preset {config.get('name', env_id)!r}: {exc}") from None
+    except (TypeError, ValueError, KeyError, AssertionError) as exc:
+        raise ZodriveError(f"preset {config.get('name', '?')!r} is not a valid config for {env_id}: "
+                           f"{type(exc).__name__}: {exc}") from exc
     return env
 
 
 def preset_names() -> list[str]:
     return available("presets")
+
+
+def preset_summary(name: str) -> str:
+    """The first sentence of a shipped preset file's leading comment: what it is, in one line."""
+    path = config_root() / "presets" / f"{name}.yaml"
+    lines = []
+    for line in path.read_text().splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.lstrip("# ").strip())
+    text = " ".join(lines)
+    return text.split(". ")[0].rstrip(".")

@@ -20,6 +20,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from zodrive.agents.baselines import is_baseline
+from zodrive.agents.factory import is_factory, split_factory
 from zodrive.agents.policies import check_policy, make_policy_env
 from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.spec import AttackSpec
@@ -45,17 +46,21 @@ class EvalJob:
     seed: int = DEFAULT_EVAL_SEED
     record_steps: bool = True
     defense: str | None = None  # e.g. "kinematic": a filter between the (attacked) sensor and the policy
+    trust: bool = False         # read an SB3 zip with SB3's loader (same outputs; not part of the key)
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
         not), the preset, the attack (with the version of the attack engine that ran it) and
         the first seed."""
+        from zodrive.agents.safe_load import sha256
+
         if is_baseline(self.model):
             model = self.model
+        elif is_factory(self.model):  # the file's code; whatever else it reads is the user's to pin
+            file, name = split_factory(self.model)
+            model = f"sha256:{sha256(file)}:{name}"
         else:
-            from zodrive.agents.safe_load import sha256
-
             model = "sha256:" + sha256(Path(self.model))
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
@@ -69,7 +74,7 @@ _WORKER: dict[str, Any] = {}
 
 def _setup(job: EvalJob) -> None:
     spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
-    victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense)
+    victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
     _WORKER.update(job=job, victim=victim, env=env)
 
 
@@ -88,10 +93,16 @@ def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     steps: list[dict[str, Any]] = []
     record = run_episode(
         env, _WORKER["victim"], episode=index, seed=seed,
-        max_return=float(job.preset["max_episode_steps"]),
+        max_return=_max_return(job.preset),
         on_step=steps.append if job.record_steps else None,
     )
     return record.to_dict(), steps
+
+
+def _max_return(preset: dict[str, Any]) -> float | None:
+    from zodrive.envs import scenario
+
+    return scenario(preset).max_return
 
 
 def _read_jsonl(path: Path) -> list[dict[str, Any]]:
@@ -233,7 +244,7 @@ def summarize(
     """The `summary.json` of an evaluation: return with CI, collision rate, attack stats."""
     returns = np.array([r["return"] for r in records])
     crashes = int(sum(r["crashed"] for r in records))
-    max_return = float(job.preset["max_episode_steps"])
+    max_return = _max_return(job.preset)
     low, high = mean_ci(returns, seed=job.seed)
     summary: dict[str, Any] = {
         "model": job.model,
@@ -243,7 +254,7 @@ def summarize(
         "mean_return": float(returns.mean()),
         "ci95": [low, high],
         "std_return": float(returns.std(ddof=1)) if len(returns) > 1 else 0.0,
-        "pct_of_max": float(100.0 * returns.mean() / max_return),
+        "pct_of_max": float(100.0 * returns.mean() / max_return) if max_return else None,
         "collision_rate": crashes / len(records),
         "collision_ci95": list(rate_ci(crashes, len(records))),
         "offroad_rate": sum(bool(r.get("offroad")) for r in records) / len(records),

@@ -12,12 +12,16 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"episodes: {summary['episodes']} (seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
         f"mean return: {summary['mean_return']:.2f}  "
         + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
-        + f"({summary['pct_of_max']:.2f}% of max)",
-        f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  mean length: {summary['mean_length']:.1f}  "
-        f"mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
-        f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {or_dash(summary.get('mean_distance'), '{:.0f}')} m  "
-        f"right lane: {summary['right_lane_share']:.1%}",
+        + (f"({summary['pct_of_max']:.2f}% of max)" if summary.get("pct_of_max") is not None else ""),
     ]
+    if summary.get("mean_speed") is not None and summary["mean_speed"] == summary["mean_speed"]:  # a road
+        lines.append(
+            f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  "
+            f"mean length: {summary['mean_length']:.1f}  mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
+            f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {or_dash(summary.get('mean_distance'), '{:.0f}')} m  "
+            f"right lane: {summary['right_lane_share']:.1%}")
+    else:  # not a highway-env road: no driving metrics
+        lines.append(f"mean length: {summary['mean_length']:.1f} steps")
     if summary.get("defense"):
         lines.append(f"defense: {summary['defense']} (between the sensor and the policy; the attacker queries the "
                      "defended system)")

@@ -38,11 +38,16 @@ class EpisodeRecord:
         return data
 
 
-def act(victim: Victim, obs: np.ndarray) -> Any:
-    """The victim's deterministic action on one observation (not an attack query)."""
+def act(victim: Victim, obs: np.ndarray, space: gym.Space | None = None) -> Any:
+    """The victim's deterministic action on one observation (not an attack query); a
+    continuous action is kept inside the action space's box (default [-1, 1])."""
     out = victim.query(obs[None])
     action = victim.actions(out)[0]
-    return int(action) if victim.kind == "discrete" else np.clip(action, -1.0, 1.0)
+    if victim.kind == "discrete":
+        return int(action)
+    if isinstance(space, gym.spaces.Box):
+        return np.clip(action, space.low, space.high)
+    return np.clip(action, -1.0, 1.0)
 
 
 def clean_states(env: gym.Env, victim: Victim, seed: int, count: int) -> np.ndarray:
@@ -52,7 +57,7 @@ def clean_states(env: gym.Env, victim: Victim, seed: int, count: int) -> np.ndar
     states = []
     for _ in range(count):
         states.append(obs)
-        obs, _, terminated, truncated, _ = env.step(act(victim, obs))
+        obs, _, terminated, truncated, _ = env.step(act(victim, obs, env.action_space))
         if terminated or truncated:
             obs, _ = env.reset(seed=seed + len(states))
     return np.stack(states)
@@ -64,7 +69,7 @@ def run_episode(
     *,
     episode: int,
     seed: int,
-    max_return: float,
+    max_return: float | None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
     policy: Victim | None = None,
 ) -> EpisodeRecord:
@@ -72,23 +77,27 @@ def run_episode(
 
     If `env` is wrapped in an `AttackWrapper`, the policy sees attacked observations and each
     step's attack stats go to `on_step`. `policy` (default: `victim`) chooses the actions.
+    Driving metrics (speed, lanes, distance) are read on highway-env roads only; elsewhere
+    they stay empty. `max_return` None: no percentage of the maximum.
     """
     policy = policy or victim
     wrapper = _find_attack(env)
     attacked = wrapper is not None
     obs, info = env.reset(seed=seed)
-    ego = env.unwrapped.vehicle  # read for the driving metrics only; the policy sees `obs`
-    start_x, lane = float(ego.position[0]), ego.lane_index[2]
+    road = hasattr(env.unwrapped, "vehicle") and hasattr(env.unwrapped, "road")
+    ego = env.unwrapped.vehicle if road else None  # read for the driving metrics only; the policy sees `obs`
+    start_x, lane = (float(ego.position[0]), ego.lane_index[2]) if road else (0.0, None)
     lane_changes = 0
     total, length, speeds, right = 0.0, 0, [], 0
     crashed = False
     queries = successes = applicable = 0
     max_linf = 0.0
-    counts = np.zeros(5, dtype=np.int64) if policy.kind == "discrete" else None
+    space = env.action_space
+    counts = np.zeros(int(space.n), dtype=np.int64) if policy.kind == "discrete" and hasattr(space, "n") else None
     pending = info.get("attack") if attacked else None
     done = False
     while not done:
-        action = act(policy, obs)
+        action = act(policy, obs, space)
         if counts is not None:
             counts[action] += 1
         if pending is not None:
@@ -105,16 +114,18 @@ def run_episode(
         speeds.append(float(info.get("speed", np.nan)))
         right += float(info.get("rewards", {}).get("right_lane_reward", 0.0)) >= 1.0
         crashed = bool(info.get("crashed", False))
-        ego = env.unwrapped.vehicle
-        lane_changes += ego.lane_index[2] != lane
-        lane = ego.lane_index[2]
+        if road:
+            ego = env.unwrapped.vehicle
+            lane_changes += ego.lane_index[2] != lane
+            lane = ego.lane_index[2]
         pending = info.get("attack") if attacked else None
         done = terminated or truncated
     return EpisodeRecord(
-        episode=episode, seed=seed, return_=total, pct_of_max=100.0 * total / max_return,
-        length=length, crashed=crashed, offroad=bool(terminated and not crashed), mean_speed=float(np.nanmean(speeds)) if speeds else 0.0,
+        episode=episode, seed=seed, return_=total,
+        pct_of_max=100.0 * total / max_return if max_return else float("nan"),
+        length=length, crashed=crashed, offroad=bool(terminated and not crashed), mean_speed=float(np.nanmean(speeds)) if road and speeds else float("nan"),
         right_lane_share=right / max(length, 1), lane_changes=int(lane_changes),
-        distance=float(env.unwrapped.vehicle.position[0]) - start_x, queries=queries,
+        distance=float(env.unwrapped.vehicle.position[0]) - start_x if road else 0.0, queries=queries,
         attacked_steps=length if attacked else 0, successes=int(successes),
         applicable=int(applicable), max_linf=max_linf,
         action_counts=counts.tolist() if counts is not None else None,

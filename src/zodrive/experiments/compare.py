@@ -14,9 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.agents.baselines import get_baseline, is_baseline
-from zodrive.agents.policies import check_policy, has_gradients, policy_kind, policy_label, policy_ref
+from zodrive.agents.policies import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
 from zodrive.attacks.spec import load_attack
-from zodrive.envs import load_preset
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import or_dash
 from zodrive.experiments.cells import Cell, run_cells
@@ -27,7 +26,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             workers: int = 1, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
             query_budgets: list[int | None] | None = None, backend: str = "local",
             address: str | None = None, defenses: list[str | None] | None = None,
-            env_set: list[str] | None = None, attack_set: list[str] | None = None) -> list[dict[str, Any]]:
+            env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
+            env_id: str | None = None, obs_bounds: tuple[float, float] | None = None) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
@@ -43,8 +43,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     grid: list[dict[str, Any]] = []
     cells: list[Cell] = []
     for model in models:
-        preset = load_preset(policy_kind(model), env_set)
-        check_policy(model, preset)
+        model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
+        check_policy(model, model_preset)
         ref, name = policy_ref(model), policy_label(model)
         reads = get_baseline(model).reads if is_baseline(model) else "observation"
         reads_obs = reads == "observation"
@@ -52,7 +52,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
         for defense in defenses if reads_obs else [None]:
             if defense is not None:
-                make_defense(defense, preset)  # the preset must be one the defense understands
+                make_defense(defense, model_preset)  # the preset must be one the defense understands
             for attack in ["none", *usable]:
                 points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
                 for eps, budget in points:
@@ -61,7 +61,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
                                               + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
                                               + ("" if budget is None else f"-qb{budget}"))
-                    job = EvalJob(model=ref, preset=preset, attack=spec.to_dict() if spec else None, seed=seed,
+                    job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
                                   defense=defense)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack), "eps": eps, "query_budget": budget})
