@@ -63,6 +63,9 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
                                                                         "verbose", "tensorboard_log", "action_noise"}
     check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
+    from zodrive.schema import validate_hyperparameters
+
+    validate_hyperparameters(recipe.get("hyperparameters") or {}, f"recipe {name!r}")
     steps = recipe.get("total_timesteps")
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")

@@ -54,23 +54,22 @@ class AttackSpec:
     seed: int = 0                         # the attack's random stream
 
     @classmethod
-    def from_mapping(cls, data: dict[str, Any]) -> "AttackSpec":
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names - {"name", "description"}
-        if unknown:
-            raise ZodriveError(f"unknown attack option(s): {', '.join(sorted(unknown))}")
-        values = {k: v for k, v in data.items() if k in names}
-        for field in dataclasses.fields(cls):
-            value = values.get(field.name)
-            numeric = field.type in ("float", "int", "int | None", "float | None")
-            if numeric and value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise ZodriveError(f"attack option {field.name} must be a number, not {value!r}")
-        if "frozen" in values:
-            values["frozen"] = tuple(values["frozen"] or ())
+    def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
+        """A spec from a mapping (YAML, overrides, a record), typed and range-checked by
+        `zodrive.schema` (a boolean must be a boolean, a number a number)."""
+        from zodrive.schema import validate_attack
+
+        values = validate_attack({k: v for k, v in data.items() if k not in ("name", "description")}, context)
+        if values["attack"] not in ATTACKS:
+            raise ZodriveError(f"unknown attack {values['attack']!r} (known: {', '.join(ATTACKS)})")
+        if isinstance(values["target"], list):
+            values["target"] = tuple(values["target"])
         return cls(**values)
 
     def with_overrides(self, **changes: Any) -> "AttackSpec":
-        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+        """The spec with `changes` (None: unchanged), validated as a whole."""
+        data = {**self.to_dict(), **{k: v for k, v in changes.items() if v is not None}}
+        return AttackSpec.from_mapping(data, "attack options")
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -166,4 +165,7 @@ def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
             data = deep_merge(data, parse_override(text))
     else:
         data = load_config(name, "attacks", overrides)
-    return AttackSpec.from_mapping(data)
+        if not data or "attack" not in data:
+            raise ZodriveError(f"attack config {name!r} names no attack (an empty or partial file would run the "
+                               "default attack): give `attack: NAME`")
+    return AttackSpec.from_mapping(data, f"attack config {name!r}")

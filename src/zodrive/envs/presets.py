@@ -138,18 +138,17 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
         raise ZodriveError(f"preset {name!r}: 'highway' must be a mapping")
     if not is_highway(env_id):
         raise ZodriveError(f"preset {name!r}: {env_id} is not a highway-env scenario; give its options as env_kwargs")
-    check_keys(hw, highway_keys(env_id), f"preset {name!r}", "highway.")
+    from zodrive.schema import validate_highway
+
+    cls = _env_class(env_id)
+    validate_highway(hw, cls.default_config() if cls is not None else {}, f"preset {name!r}")
     obs = hw.get("observation", {})
     if "type" in obs and obs["type"] not in OBSERVATION_TYPES:
         raise ZodriveError(f"preset {name!r}: observation.type must be one of {', '.join(OBSERVATION_TYPES)} "
                            f"(other observations: --env-id ID with --obs-bounds)")
-    action = hw.get("action", {}).get("type")
+    action = hw.get("action", {}).get("type") if isinstance(hw.get("action"), dict) else None
     if action is not None and action not in ("DiscreteMetaAction", "ContinuousAction"):
         raise ZodriveError(f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction")
-    for key, least in (("vehicles_count", 0), ("lanes_count", 1), ("simulation_frequency", 1), ("policy_frequency", 1)):
-        value = hw.get(key)
-        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < least):
-            raise ZodriveError(f"preset {name!r}: highway.{key} must be an integer >= {least}")
 
 
 def _key(config: dict[str, Any]) -> str:
@@ -267,6 +266,10 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     register()
     if render_mode == "rgb_array" and os.environ.get("SDL_VIDEODRIVER") == "dummy":
         os.environ["SDL_VIDEODRIVER"] = "offscreen"  # "dummy" makes highway-env draw black frames
+    if render_mode is not None and not os.path.isdir(os.environ.get("XDG_RUNTIME_DIR", "")):
+        import tempfile  # SDL prints an error line to stderr without a runtime folder
+
+        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="zodrive-xdg-")
     env_id = config.get("env_id", ENV_ID)
     kwargs = {"config": config["highway"]} if config.get("highway") is not None else dict(config.get("env_kwargs") or {})
     try:

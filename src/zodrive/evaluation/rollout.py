@@ -123,13 +123,20 @@ def run_episode(
     return EpisodeRecord(
         episode=episode, seed=seed, return_=total,
         pct_of_max=100.0 * total / max_return if max_return else float("nan"),
-        length=length, crashed=crashed, offroad=bool(terminated and not crashed), mean_speed=float(np.nanmean(speeds)) if road and speeds else float("nan"),
+        length=length, crashed=crashed, offroad=left_road(env, terminated, crashed), mean_speed=float(np.nanmean(speeds)) if road and speeds else float("nan"),
         right_lane_share=right / max(length, 1), lane_changes=int(lane_changes),
         distance=float(env.unwrapped.vehicle.position[0]) - start_x if road else 0.0, queries=queries,
         attacked_steps=length if attacked else 0, successes=int(successes),
         applicable=int(applicable), max_linf=max_linf,
         action_counts=counts.tolist() if counts is not None else None,
     )
+
+
+def left_road(env: gym.Env, terminated: bool, crashed: bool) -> bool:
+    """Whether the episode ended because the ego left the road (not a crash, not an arrival:
+    intersection, merge and exit end on success too)."""
+    ego = getattr(env.unwrapped, "vehicle", None)
+    return bool(terminated and not crashed and ego is not None and not ego.on_road)
 
 
 def _find_attack(env: gym.Env) -> AttackWrapper | None:

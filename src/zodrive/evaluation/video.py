@@ -14,8 +14,7 @@ from typing import Any
 import numpy as np
 
 from zodrive.attacks.victim import Victim
-from zodrive.envs import ACTION_NAMES
-from zodrive.evaluation.rollout import act
+from zodrive.evaluation.rollout import act, left_road
 
 X_RANGE, Y_RANGE = 100.0, 100.0  # [m] the presets' features_range for x and y
 
@@ -27,6 +26,8 @@ class Frame:
     perceived: np.ndarray      # (V, F) what the policy received
     action: Any
     stats: dict[str, Any] = field(default_factory=dict)
+    label: str = ""            # the action in words (the scenario's meta-action name, or the values)
+    panel: bool = True         # the observation is ego-relative (presence, x, y, ...) rows: draw it
 
 
 def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[str, Any]]:
@@ -36,32 +37,53 @@ def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[st
     done, total, crashed, terminated = False, 0.0, False, False
     while not done:
         clean = info.get("clean_obs")
-        action = act(victim, obs)
+        action = act(victim, obs, env.action_space)
         frames.append(Frame(env.render(), np.asarray(obs if clean is None else clean), np.asarray(obs),
-                            action, dict(info.get("attack", {}))))
+                            action, dict(info.get("attack", {})), _action_label(env, action), _relative(env)))
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         crashed = bool(info.get("crashed", False))
         done = terminated or truncated
     last = frames[-1]
-    frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}))
+    frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}, last.label, last.panel))
     return frames, {"seed": seed, "return": total, "length": len(frames) - 1, "crashed": crashed,
-                    "offroad": bool(terminated and not crashed)}
+                    "offroad": left_road(env, terminated, crashed)}
 
 
-def _action_label(action: Any) -> str:
+def _relative(env) -> bool:
+    """Whether observations are rows of (presence, x, y, ...) relative to the ego (drawable)."""
+    observer = getattr(env.unwrapped, "observation_type", None)
+    features = list(getattr(observer, "features", []))[:3]
+    return features == ["presence", "x", "y"] and not getattr(observer, "absolute", True)
+
+
+def _action_label(env, action: Any) -> str:
+    """The action in words: the scenario's meta-action name, or each continuous dimension."""
+    action_type = getattr(env.unwrapped, "action_type", None)
     if isinstance(action, (int, np.integer)):
-        return ACTION_NAMES[int(action)]
-    return "accel {:+.2f} steer {:+.2f}".format(*np.asarray(action, dtype=float))
+        names = getattr(action_type, "actions", None)
+        return str(names[int(action)]) if names else f"action {int(action)}"
+    values = np.asarray(action, dtype=float).ravel()
+    if action_type is not None and hasattr(action_type, "lateral"):
+        dims = [d for d, on in (("accel", action_type.longitudinal), ("steer", action_type.lateral)) if on]
+    else:
+        dims = [f"a{i}" for i in range(len(values))]
+    return " ".join(f"{d} {v:+.2f}" for d, v in zip(dims, values))
 
 
 def draw(frame: Frame, fig, step: int, title: str = "") -> None:
     """Draw one frame on `fig`: simulator left, perception right."""
     fig.clear()
+    if not frame.panel:  # no ego-relative vehicles to draw: the simulator's image alone
+        left = fig.subplots(1, 1)
+        left.imshow(frame.image)
+        left.set_axis_off()
+        left.set_title(f"{title}step {step}: {frame.label}", fontsize=9)
+        return
     left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [2.2, 1]})
     left.imshow(frame.image)
     left.set_axis_off()
-    left.set_title(f"{title}step {step}: {_action_label(frame.action)}", fontsize=9)
+    left.set_title(f"{title}step {step}: {frame.label}", fontsize=9)
     for obs, style, label in ((frame.clean, dict(facecolor="tab:green", alpha=0.5), "real"),
                               (frame.perceived, dict(facecolor="none", edgecolor="tab:red", lw=1.5, zorder=3), "perceived")):
         for i, row in enumerate(obs):
