@@ -102,14 +102,17 @@ def test_evaluate_a_baseline(tmp_path: Path, capsys) -> None:
     assert "lane changes/episode" in capsys.readouterr().out
 
 
-def test_attacking_a_constant_baseline_changes_nothing(tmp_path: Path) -> None:
-    args = ["evaluate", "baseline:slower", "--episodes", "1", "--no-progress", "--env-set", "max_episode_steps=20"]
-    assert main(args + ["--out", str(tmp_path / "clean")]) == 0
-    assert main(args + ["--out", str(tmp_path / "att"), "--attack", "random-search", "--steps", "3"]) == 0
-    clean = json.loads((tmp_path / "clean" / "summary.json").read_text())
-    attacked = json.loads((tmp_path / "att" / "summary.json").read_text())
-    assert attacked["mean_return"] == clean["mean_return"]
-    assert attacked["attack_success_rate"] == 0.0
+def test_attacking_a_constant_baseline_is_refused_since_it_changes_nothing(capsys) -> None:
+    from zodrive.agents.policies import load_victim
+    from zodrive.envs import load_preset
+
+    victim = load_victim("baseline:slower", load_preset("discrete"))
+    obs = np.random.default_rng(0).uniform(-1, 1, (64, 5, 5)).astype(np.float32)
+    assert (victim.query(obs) == victim.query(np.zeros_like(obs))).all()  # no observation moves it
+    args = ["evaluate", "baseline:slower", "--episodes", "1", "--attack", "random-search", "--steps", "3"]
+    assert main(args) == 2  # so spending queries on it is refused, in one line
+    err = capsys.readouterr().err
+    assert "constant action" in err and len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize(("args", "message"), [

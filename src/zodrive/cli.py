@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -35,6 +37,25 @@ def _int_at_least(least: int, what: str):
 
 
 _positive_int = _int_at_least(1, "a positive integer")
+
+
+def _float_above(least: float, strict: bool, what: str):
+    """An argparse type: a finite number above `least` (strictly if `strict`)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not math.isfinite(value) or value < least or (strict and value == least):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
+        return value
+
+    return parse
+
+
+_positive_float = _float_above(0.0, True, "a finite number > 0")
+_nonnegative_float = _float_above(0.0, False, "a finite number >= 0")
 _seed = _int_at_least(0, "a seed (an integer >= 0)")
 _nonnegative_int = _int_at_least(0, "an integer >= 0")
 
@@ -66,20 +87,72 @@ def _scenario_flags(parser: argparse.ArgumentParser, *, trust: bool = True) -> N
                                  "code from the file): for models zodrive cannot rebuild safely")
 
 
-def _check_out(path: Path | None) -> None:
-    """An --out must be a folder (or not exist yet) that we can write to."""
+def _writable_folder(path: Path, flag: str) -> None:
+    """Prove that `path` can be a folder we write into, before any work: create it (and its
+    parents) and a file in it, then remove what the probe made (no stub is left behind)."""
+    if path.exists() and not path.is_dir():
+        raise ZodriveError(f"{flag} {path} is a file, not a folder")
+    made = [p for p in [path, *path.parents] if not p.exists()]
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise ZodriveError(f"{flag} {path}: cannot write there ({exc.strerror or exc})") from None
+    finally:
+        for folder in made:  # innermost first
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+
+
+def _check_out(path: Path | None, *, is_file: bool = False) -> None:
+    """An --out must be a folder (or a file, for export) that we can create and write to."""
     if path is None:
         return
-    if path.exists() and not path.is_dir():
-        raise ZodriveError(f"--out {path} is a file, not a folder")
-    parent = path if path.exists() else next((p for p in path.parents if p.exists()), Path("."))
-    if not os.access(parent, os.W_OK):
-        raise ZodriveError(f"--out {path}: {parent} is not writable")
+    if is_file:
+        if path.is_dir():
+            raise ZodriveError(f"--out {path} is a folder; give the file to write")
+        _writable_folder(path.parent if str(path.parent) else Path("."), "--out")
+        return
+    _writable_folder(path, "--out")
+
+
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _check_plot(path: Path | None, flag: str = "--plot") -> None:
+    """A figure path: an image file (not a folder) in a place we can write, checked before any work."""
+    if path is None:
+        return
+    if path.is_dir() or path.suffix.lower() not in PLOT_SUFFIXES:
+        raise ZodriveError(f"{flag} {path}: give an image file ending in {', '.join(PLOT_SUFFIXES)}")
+    _writable_folder(path.parent if str(path.parent) else Path("."), flag)
+
+
+def _refuse_nonempty(path: Path, force: bool, what: str, elsewhere: str = ", or choose another --out") -> None:
+    """Nothing is overwritten without --force."""
+    if force:
+        return
+    if path.is_dir() and any(path.iterdir()) or path.is_file():
+        raise ZodriveError(f"{path} already holds {what}; use --force to overwrite it{elsewhere}")
+
+
+class _Help(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows a default once: not where the help already states one, nor for None or a flag."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default in (None, False, argparse.SUPPRESS) or action.default == [] or "default" in text \
+                or "[" in text:
+            return text
+        return super()._get_help_string(action) or text
 
 
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)  # --help shows defaults
+        kwargs.setdefault("formatter_class", _Help)  # --help shows defaults
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # one line, exit 2, like every other error
@@ -136,6 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", type=Path, required=True)
     render.add_argument("--defense", choices=DEFENSES,
                         help="filter between the (attacked) sensor and the policy; 'perceived' is what passes it")
+    render.add_argument("--force", action="store_true", help="overwrite a render already in --out")
     render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
                         help="try up to N seeds until an episode ends in a collision")
     _attack_flags(render)
@@ -144,18 +218,19 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("model")
     rob.add_argument("--method", choices=["sa", "at", "distill"], required=True,
                      help="sa: SA-DQN / SA-DDPG regularizer; at: Algorithm 2; distill: robust distillation of its own (or --teacher's) decisions")
-    rob.add_argument("--eps", type=float, required=True, help="L-inf radius the agent is trained to withstand")
+    rob.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius the agent is trained to withstand")
     rob.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
     rob.add_argument("--out", type=Path, required=True)
-    rob.add_argument("--kappa", type=float, default=0.5, help="weight of the robustness term (SA regularizer; distill: the adversarial CE)")
-    rob.add_argument("--pgd-steps", type=_positive_int, default=5, help="PGD steps for the regularizer's inner max")
+    rob.add_argument("--kappa", type=_nonnegative_float, help="sa, distill: weight of the robustness term "
+                                                              "(SA regularizer; distill: the adversarial CE) [0.5]")
+    rob.add_argument("--pgd-steps", type=_positive_int, help="sa, distill: PGD steps for the inner max [5]")
     rob.add_argument("--seed", type=_seed, default=1)
-    rob.add_argument("--warmup", type=_nonnegative_int, default=1000)
+    rob.add_argument("--warmup", type=_nonnegative_int, help="sa, at: steps acting before updates start [1000]")
     rob.add_argument("--preset")
     rob.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE")
     rob.add_argument("--force", action="store_true")
     rob.add_argument("--trust-model", action="store_true")
-    rob.add_argument("--epochs", type=_positive_int, default=20, help="distill: passes over the collected states")
+    rob.add_argument("--epochs", type=_positive_int, help="distill: passes over the collected states [20]")
     rob.add_argument("--teacher", metavar="baseline:NAME",
                      help="distill: an observation-reading baseline that drives and labels (default: the model itself)")
     rob.add_argument("--no-progress", action="store_true")
@@ -164,17 +239,19 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("model", help="SB3 zip or model folder")
     exp.add_argument("--format", choices=["onnx"], default="onnx")
     exp.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
+    exp.add_argument("--force", action="store_true", help="overwrite an existing --out file")
 
     sel = sub.add_parser("select", help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
     sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
     sel.add_argument("--episodes", type=_positive_int, default=20, help="tuning episodes per checkpoint")
     sel.add_argument("--from-step", type=_nonnegative_int, default=0, help="ignore checkpoints before this step")
     sel.add_argument("--workers", type=_positive_int, default=1)
+    sel.add_argument("--force", action="store_true", help="replace a selection already in RUN/selected.json")
     sel.add_argument("--no-progress", action="store_true")
 
     adv = sub.add_parser("adv-train", help="adversarial training (paper Algorithm 2)")
     adv.add_argument("model")
-    adv.add_argument("--attack", default="zo-signsgd", help="attack config name/YAML or registry name")
+    adv.add_argument("--attack", help="attack config name/YAML or registry name [zo-signsgd]")
     adv.add_argument("--no-attack", action="store_true",
                      help="the control run: the same continued training on clean observations")
     adv.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
@@ -195,9 +272,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
     rep.add_argument("--out", type=Path, required=True)
-    rep.add_argument("--episodes", type=_positive_int, default=100)
+    rep.add_argument("--episodes", type=_positive_int, help="episodes per cell [100]")
     rep.add_argument("--workers", type=_positive_int, default=2)
-    rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes)")
+    rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes); not with --episodes")
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--robustness-episodes", type=_nonnegative_int, default=10,
                      help="episodes per cell of the robustness section (0: leave it out)")
@@ -226,6 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--episodes", type=_positive_int, default=20)
     cmp_.add_argument("--workers", type=_positive_int, default=1)
     cmp_.add_argument("--out", type=Path, required=True)
+    cmp_.add_argument("--force", action="store_true", help="replace the tables of another comparison in --out")
     cmp_.add_argument("--no-progress", action="store_true")
 
     demo = sub.add_parser("demo", help="attack the shipped DQN driver for a few episodes and print the result")
@@ -237,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     curves.add_argument("runs", nargs="+", type=Path, help="run folders (with monitor.monitor.csv)")
     curves.add_argument("--bin", type=_positive_int, default=20000, help="steps per window")
     curves.add_argument("--plot", type=Path, help="also draw the curves to this PNG")
+    curves.add_argument("--force", action="store_true", help="overwrite an existing --plot file")
 
     card = sub.add_parser("card", help="write CARD.md for a trained model folder")
     card.add_argument("folder", type=Path, help="run folder (model.zip, run.json, train.json, eval/)")
@@ -247,6 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="run folders of every training seed (each with eval/): median and range in the card")
     card.add_argument("--attacked", nargs="+", type=Path, default=None, metavar="EVAL",
                       help="evaluation folders of the model under attack, listed in the card")
+    card.add_argument("--force", action="store_true",
+                      help="replace an existing CARD.md (hand-written sections in it are lost)")
     return parser
 
 
@@ -340,6 +421,8 @@ def cmd_baselines(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from zodrive.agents.training import load_recipe, train
 
+    if args.resume and args.force:
+        raise ZodriveError("--resume continues the run in --out, --force replaces it: give one of them")
     overrides = list(args.set)
     if args.steps:
         overrides.append(f"total_timesteps={args.steps}")
@@ -375,6 +458,19 @@ def _check_trust(args: argparse.Namespace) -> None:
             raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")
 
 
+def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> None:
+    """--loss chooses between the DQN objectives of a targeted attack; elsewhere it does nothing."""
+    if spec is None or getattr(args, "loss", None) is None:
+        return
+    from zodrive.envs import scenario
+
+    untargeted = str(spec.target).lower() in ("none", "untargeted", "worst")
+    if scenario(preset).kind != "discrete" or untargeted:
+        raise ZodriveError("--loss chooses the objective of a targeted attack on a discrete policy; "
+                           + ("this policy acts continuously (its objective is the paper's Eq. 6)"
+                              if scenario(preset).kind != "discrete" else f"target {spec.target} has no such choice"))
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.agents.policies import check_policy, load_victim, policy_ref
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
@@ -383,6 +479,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
     preset = _preset_of(args)
     _check_trust(args)
+    _check_loss(args, spec, preset)
     check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
         from zodrive.envs import attack_context
@@ -410,8 +507,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
 
     spec = attack_spec_from_args(args)
+    _refuse_nonempty(args.out, args.force, "a render")
     preset = _preset_of(args)
     _check_trust(args)
+    _check_loss(args, spec, preset)
     victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense,
                                   trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
@@ -439,9 +538,9 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     from zodrive.defense.adversarial import adversarial_train
 
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
-    if args.no_attack and args.attack_set:
-        raise ZodriveError("--attack-set has no effect with --no-attack")
-    spec = None if args.no_attack else load_attack(args.attack, args.attack_set)
+    if args.no_attack and (args.attack_set or args.attack):
+        raise ZodriveError(f"{'--attack-set' if args.attack_set else '--attack'} has no effect with --no-attack")
+    spec = None if args.no_attack else load_attack(args.attack or "zo-signsgd", args.attack_set)
     path = adversarial_train(args.model, preset, spec, args.steps, args.out, seed=args.seed,
                              warmup=args.warmup, progress_bar=not args.no_progress, trust=args.trust_model,
                              force=args.force)
@@ -452,11 +551,17 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
 def cmd_robust_train(args: argparse.Namespace) -> int:
     from zodrive.defense.robust import robust_train
 
+    uses = {"sa": {"kappa", "pgd_steps", "warmup", "trust_model"}, "at": {"warmup", "trust_model"},
+            "distill": {"kappa", "pgd_steps", "epochs", "teacher"}}[args.method]
+    for option in ("kappa", "pgd_steps", "warmup", "epochs", "teacher", "trust_model"):
+        if getattr(args, option) not in (None, False) and option not in uses:
+            raise ZodriveError(f"--{option.replace('_', '-')} has no effect with --method {args.method}")
     preset = resolve_model_preset(args.model, args.preset, args.env_set)
     path = robust_train(args.model, preset, args.method, args.eps, args.steps, args.out, seed=args.seed,
-                        warmup=args.warmup, kappa=args.kappa, pgd_steps=args.pgd_steps,
-                        progress_bar=not args.no_progress, trust=args.trust_model, force=args.force,
-                        teacher=args.teacher, epochs=args.epochs)
+                        warmup=1000 if args.warmup is None else args.warmup,
+                        kappa=0.5 if args.kappa is None else args.kappa,
+                        pgd_steps=args.pgd_steps or 5, progress_bar=not args.no_progress, trust=args.trust_model,
+                        force=args.force, teacher=args.teacher, epochs=args.epochs or 20)
     print(f"saved {path}")
     return 0
 
@@ -464,6 +569,7 @@ def cmd_robust_train(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from zodrive.agents.onnx_policy import export_onnx
 
+    _refuse_nonempty(args.out, args.force, "a file")
     print(f"wrote {export_onnx(args.model, args.out)}")
     return 0
 
@@ -471,6 +577,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_select(args: argparse.Namespace) -> int:
     from zodrive.experiments.select import select_checkpoint, selection_markdown
 
+    _refuse_nonempty(args.run / "selected.json", args.force, "a selection", "")
     choice = select_checkpoint(args.run, args.episodes, from_step=args.from_step, workers=args.workers,
                                progress=not args.no_progress)
     print(selection_markdown(choice), end="")
@@ -482,7 +589,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from zodrive.experiments.report import table_markdown
     from zodrive.experiments.reproduce import reproduce
 
-    table = reproduce(args.out, episodes=args.episodes, workers=args.workers, quick=args.quick,
+    if args.quick and args.episodes is not None:
+        raise ZodriveError("--quick runs 5 episodes per cell; --episodes would be ignored: give one of them")
+    table = reproduce(args.out, episodes=args.episodes or 100, workers=args.workers, quick=args.quick,
                       robustness_episodes=args.robustness_episodes,
                       retrain=args.retrain, progress=not args.no_progress, backend=args.backend, address=args.address)
     print(table_markdown(table["rows"]), end="")
@@ -498,7 +607,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
                    backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
-                   attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds)
+                   attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds,
+                   force=args.force)
     print(markdown(rows), end="")
     if args.plot:
         (plot_budget_curves if args.query_budgets else plot_robustness)(rows, args.plot)
@@ -510,7 +620,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.agents.policies import policy_label, policy_ref
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
-    from zodrive.evaluation.report import format_summary
+    from zodrive.evaluation.report import format_summary, plural
     from zodrive.config import demo_model
 
     model = args.model or str(demo_model())
@@ -520,7 +630,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     results = {}
     for label, attack in (("clean", None), ("attacked", spec)):
         job = EvalJob(model=ref, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
-        print(f"== {label}: {args.episodes} episodes of {name}" + (f" under {spec.attack}" if attack else ""))
+        print(f"== {label}: {plural(args.episodes, 'episode')} of {name}" + (f" under {spec.attack}" if attack else ""))
         results[label] = evaluate(job, args.episodes, args.out / label, progress=True)
         print(format_summary(results[label]))
     drop = 1 - results["attacked"]["mean_return"] / results["clean"]["mean_return"]
@@ -536,6 +646,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_curves(args: argparse.Namespace) -> int:
     from zodrive.experiments.curves import curves_markdown, plot_curves
 
+    if args.plot:
+        _refuse_nonempty(args.plot, args.force, "a figure", "")
     print("mean training return / episode length, per window of training steps (ε-greedy or noisy actions)")
     print(curves_markdown(args.runs, args.bin), end="")
     if args.plot:
@@ -547,6 +659,9 @@ def cmd_curves(args: argparse.Namespace) -> int:
 def cmd_card(args: argparse.Namespace) -> int:
     from zodrive.agents.card import write_card
 
+    if not args.folder.is_dir():
+        raise ZodriveError(f"{args.folder} is not a model folder")
+    _refuse_nonempty(args.folder / "CARD.md", args.force, "a card (hand-written notes would be lost)", "")
     path = write_card(args.folder, baseline=args.baseline, evaluation=args.eval, notes=args.note, seeds=args.seeds,
                       attacked=args.attacked)
     print(f"wrote {path}")
@@ -586,16 +701,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not args.models_dir.is_dir():
                 raise ZodriveError(f"--models {args.models_dir}: not a folder")
             os.environ[MODELS_ENV] = str(args.models_dir)
-        if args.command != "export":  # export's --out is a file
-            _check_out(getattr(args, "out", None))
+        _check_out(getattr(args, "out", None), is_file=args.command == "export")
+        _check_plot(getattr(args, "plot", None))
+        env_models = os.environ.get(MODELS_ENV)
+        if env_models and not Path(env_models).is_dir():
+            raise ZodriveError(f"${MODELS_ENV}={env_models}: not a folder")
         _check_model_paths(args)
         return COMMANDS[args.command](args)
     except ZodriveError as exc:
         print(f"zodrive: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("zodrive: interrupted; results written so far are kept (run again to resume)", file=sys.stderr)
+        command = argv[0] if argv else ""
+        hint = {"train": "run the same command with --resume to continue from the newest checkpoint",
+                "adv-train": "the run folder is incomplete: rerun with --force",
+                "robust-train": "the run folder is incomplete: rerun with --force"}.get(
+            command, "run the same command again to resume")
+        print(f"zodrive: interrupted; results written so far are kept ({hint})", file=sys.stderr)
         return 130
+    except OSError as exc:  # a path the checks above could not foresee (a full disk, a vanished folder)
+        print(f"zodrive: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -75,7 +75,9 @@ def check_keys(data: Mapping[str, Any], valid: set[str], context: str, prefix: s
     for key in data:
         if key not in valid:
             close = difflib.get_close_matches(str(key), sorted(valid), n=1)
-            hint = f"; did you mean '{prefix}{close[0]}'?" if close else f" (valid: {', '.join(sorted(v for v in valid if not v.startswith('_')))})"
+            names = sorted(v for v in valid if not v.startswith("_"))
+            listed = ", ".join(names[:12]) + (f", ... ({len(names) - 12} more)" if len(names) > 12 else "")
+            hint = f"; did you mean '{prefix}{close[0]}'?" if close else f" (valid: {listed})"
             raise ZodriveError(f"unknown key '{prefix}{key}' in {context}{hint}")
 
 

@@ -37,16 +37,15 @@ def export_onnx(model: str, out: Path) -> Path:
     """Write `model`'s acting network (safely rebuilt, nothing unpickled) to `out` (.onnx)."""
     import torch
 
-    onnx = _require("onnx")
     from zodrive.agents.loading import inspect_model, load_network, model_file
     from zodrive.agents.safe_load import sha256
-    from zodrive.agents.training import KIND_OF_ALGO
 
     if not str(out).endswith(SUFFIX):
         raise ZodriveError(f"--out must end in {SUFFIX}: {out}")
     file = model_file(model)
-    info = inspect_model(file)
+    info = inspect_model(file)  # a file that is no model is said so before any extra is asked for
     network = load_network(file)
+    onnx = _require("onnx")
     net = torch.nn.Sequential(torch.nn.Flatten(), network.net).eval()
     dummy = torch.zeros(1, *network.obs_shape)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -57,7 +56,7 @@ def export_onnx(model: str, out: Path) -> Path:
         torch.onnx.export(net, (dummy,), str(out), input_names=["obs"], output_names=["out"],
                           dynamic_axes={"obs": {0: "batch"}, "out": {0: "batch"}}, dynamo=False)
     proto = onnx.load(str(out))
-    meta = {"zodrive_kind": KIND_OF_ALGO[info["algo"]], "zodrive_algo": info["algo"],
+    meta = {"zodrive_kind": info["kind"], "zodrive_algo": info["algo"],
             "zodrive_obs_shape": json.dumps(list(network.obs_shape)), "zodrive_n_outputs": str(info["n_actions"]),
             "zodrive_source_sha256": sha256(file)}
     for key, value in meta.items():

@@ -102,6 +102,9 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
         if attacked and baseline.reads == "simulator":
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator, not the observation: "
                                "an observation attack cannot reach it")
+        if attacked and baseline.reads == "nothing":
+            raise ZodriveError(f"{bl.PREFIX}{baseline.name} takes one constant action whatever it observes: an "
+                               "observation attack cannot change it (evaluate it clean: it is the floor)")
         return
     if is_factory(model):
         load_victim(model, preset)  # builds the policy and checks its outputs against the scenario

@@ -157,12 +157,12 @@ def _without_budget(recipe: Any) -> Any:
     return {k: v for k, v in recipe.items() if k != "total_timesteps"} if isinstance(recipe, dict) else recipe
 
 
-def check_run_folder(out: Path, *, resume: bool, force: bool) -> None:
+def check_run_folder(out: Path, *, resume: bool, force: bool, resumable: bool = True) -> None:
     """Refuse to write a run into a folder that already holds one, unless told what to do."""
     if resume or force or not out.exists() or not any(out.iterdir()):
         return
-    raise ZodriveError(f"{out} already holds a run; use --resume to continue it, --force to overwrite it, "
-                       "or choose another --out")
+    how = "use --resume to continue it, --force to overwrite it" if resumable else "use --force to overwrite it"
+    raise ZodriveError(f"{out} already holds a run; {how}, or choose another --out")
 
 
 @one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
@@ -184,6 +184,8 @@ def train(
     environment restarts from a fresh episode, so a resumed run is not bit-identical to an
     uninterrupted one)."""
     check_run_folder(out, resume=resume, force=force)
+    if resume and not (out / "config.yaml").is_file():
+        raise ZodriveError(f"nothing to resume in {out}: it holds no run (drop --resume to start one)")
     previous = read_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
     if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
         raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "

@@ -56,11 +56,15 @@ def adversarial_train(
     what it returns is recorded in run.json and train.json."""
     if steps < 1:
         raise ZodriveError(f"steps must be >= 1, not {steps}")
-    check_run_folder(out, resume=False, force=force)
+    check_run_folder(out, resume=False, force=force, resumable=False)
     source = model_file(model_path)
     algo = model_algo(source)
     model = load_model(source, preset, trust=trust, cls=algo_class)  # an SB3 object to train further
     victim = sb3_victim(model)  # live view of the networks being trained
+    if spec is not None:  # the whole attack is checked before the run folder exists
+        from zodrive.envs import attack_context
+
+        spec.build(victim, **attack_context(preset))
     out.mkdir(parents=True, exist_ok=True)
     method = setup(model) if setup is not None else None
     write_run_info(out, {"source_model": str(source), "preset": preset, "attack": spec and spec.to_dict(),

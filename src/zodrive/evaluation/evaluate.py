@@ -26,6 +26,7 @@ from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
 from zodrive.runinfo import command_line, to_json, versions, write_json
@@ -160,7 +161,7 @@ def evaluate(
             check_same_evaluation(json.loads(key_path.read_text()), json.loads(json.dumps(job.key())), out)
             done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl")}
             if len(done) > episodes:
-                raise ZodriveError(f"{out} already holds {len(done)} episodes; ask for at least {len(done)} "
+                raise ZodriveError(f"{out} already holds {plural(len(done), 'episode')}; ask for at least {len(done)} "
                                    "(or use another --out): zodrive never drops recorded episodes")
             _rewrite_consistent(out, done)
         else:
@@ -215,8 +216,10 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
     what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
             "attack": "the attack settings or the attack engine's version", "seed": "the first seed"}
-    raise ZodriveError(f"{out} holds a different evaluation ({', '.join(what.get(k, k) for k in differs)} "
-                       "differ); choose another --out")
+    names = [what.get(k, k) for k in differs]
+    listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    raise ZodriveError(f"{out} holds a different evaluation ({listed} "
+                       f"{'differs' if len(names) == 1 else 'differ'}); choose another --out")
 
 
 def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
@@ -277,7 +280,8 @@ def summarize(
         successes = sum(r["successes"] for r in records)
         summary.update(
             attack=job.attack["attack"],
-            eps=job.attack["eps"],
+            # paper mode is unconstrained: eps sets no budget (it only sizes random starting points)
+            eps=job.attack["eps"] if job.attack["mode"] == "budgeted" else None,
             norm=job.attack["norm"],
             mode=job.attack["mode"],
             target=job.attack["target"],

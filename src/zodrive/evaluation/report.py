@@ -9,7 +9,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     """A few lines a person reads: return with CI, collisions, and the attack's numbers."""
     low, high = summary["ci95"]
     lines = [
-        f"episodes: {summary['episodes']} (seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
+        f"episodes: {summary['episodes']} (seed{'' if summary['episodes'] == 1 else 's'} {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
         f"mean return: {summary['mean_return']:.2f}  "
         + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
         + (f"({summary['pct_of_max']:.2f}% of max)" if summary.get("pct_of_max") is not None else ""),
@@ -27,8 +27,10 @@ def format_summary(summary: dict[str, Any]) -> str:
                      "defended system)")
     if summary.get("attack"):
         lines.append(
-            f"attack: {summary['attack']} ({summary['norm']}, eps={summary['eps']}, {summary['mode']}, "
-            f"target={summary['target']})" + _options(summary.get("attack_config") or {})
+            f"attack: {summary['attack']} ("
+            + (f"{summary['norm']}, eps={summary['eps']}, budgeted" if summary.get("eps") is not None
+               else "unconstrained: paper mode, no budget")
+            + f", target={summary['target']})" + _options(summary.get("attack_config") or {})
         )
         lines.append(
             f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
@@ -46,6 +48,11 @@ def _options(config: dict) -> str:
     default = AttackSpec().to_dict()
     changed = [f"{k}={v}" for k, v in config.items() if k not in shown and k in default and v != default[k]]
     return f" {', '.join(changed)}" if changed else ""
+
+
+def plural(count: int, word: str) -> str:
+    """'1 episode', '3 episodes'."""
+    return f"{count} {word}" + ("" if count == 1 else "s")
 
 
 def or_dash(value: float | None, pattern: str) -> str:

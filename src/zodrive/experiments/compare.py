@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from pathlib import Path
 from typing import Any
 
 from zodrive.agents.baselines import get_baseline, is_baseline
 from zodrive.agents.policies import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
 from zodrive.attacks.spec import load_attack
+from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import or_dash
 from zodrive.experiments.cells import Cell, run_cells
@@ -27,7 +29,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             query_budgets: list[int | None] | None = None, backend: str = "local",
             address: str | None = None, defenses: list[str | None] | None = None,
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
-            env_id: str | None = None, obs_bounds: tuple[float, float] | None = None) -> list[dict[str, Any]]:
+            env_id: str | None = None, obs_bounds: tuple[float, float] | None = None,
+            force: bool = False, claim: bool = True) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
@@ -66,6 +69,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack), "eps": eps, "query_budget": budget})
                     cells.append(Cell(job, episodes, folder))
+    if claim:  # `zodrive compare` owns its folder; `reproduce` composes several grids in one
+        _claim(out, grid, force)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
 
     def done(i: int, s: dict[str, Any]) -> None:
@@ -84,6 +89,17 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done)
     return rows  # type: ignore[return-value]
+
+
+def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:
+    """The folder's tables belong to one grid: the same grid resumes (more episodes too), a
+    different one is refused without --force (its tables would replace these)."""
+    path = out / "grid.json"
+    if path.is_file() and not force and json.loads(path.read_text()) != grid:
+        raise ZodriveError(f"{out} holds the tables of another comparison (models, attacks, eps, budgets or "
+                           "defenses differ); use --force to replace them, or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(path, grid)
 
 
 def _black_box(attack: str, attack_set: list[str] | None) -> bool:

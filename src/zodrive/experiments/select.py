@@ -35,7 +35,7 @@ def select_checkpoint(run: Path, episodes: int, *, from_step: int = 0, workers: 
     if final.is_file():
         done = max((s for s, _ in candidates), default=-1)
         total = int(config["recipe"].get("total_timesteps", done + 1))
-        if total > done:
+        if total > done and total >= from_step:  # the final model is a candidate only from its step
             candidates.append((total, final))
     if not candidates:
         raise ZodriveError(f"{run} has no checkpoints from step {from_step} on")
