@@ -1,0 +1,117 @@
+"""A property of the whole command line: whatever argument vector a user types, zodrive ends
+with exit code 0, 2 (one line on stderr) or 130, never a traceback.
+
+Argument vectors are drawn by hypothesis from each subcommand's flags with good and bad
+values. Commands that would run for minutes once their arguments pass (training, the
+reproduction, grids, checkpoint selection, the demo) are stubbed *after* validation: the
+stub raises a one-line error, so what is tested is everything up to the work itself.
+Evaluations and renders run for real on two-step episodes.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from zodrive.errors import ZodriveError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = [str(ROOT / "models" / "dqn"), str(ROOT / "models" / "ddpg"), "baseline:slower", "baseline:rules",
+          "baseline:nope", "missing.zip", str(ROOT / "README.md"), "x.py:make"]
+NUMBERS = ["1", "2", "0", "-1", "abc", "0.05", "inf", "nan", "1e9"]
+EPS = ["0.05", "0.2", "0", "-1", "inf", "x"]
+COMMON = {
+    "--preset": ["discrete", "continuous", "merge", "intersection", "nope"],
+    "--env-id": ["CartPole-v1", "Nope-v0"], "--obs-bounds": ["-1,1", "1,0", "a"],
+    "--env-set": ["highway.duration=abc", "highway.lanes_count=0", "highway.nope=1", "max_episode_steps=2",
+                  "highway.observation.vehicles_count=x"],
+    "--seed": NUMBERS, "--episodes": ["1", "2", "0", "-3", "x"],
+}
+ATTACK = {
+    "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise"], "--eps": EPS,
+    "--norm": ["linf", "l2", "l3"], "--mode": ["budgeted", "paper", "x"], "--steps": ["1", "2", "0", "x"],
+    "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9"],
+    "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
+    "--timing": ["0.5", "2"], "--max-change": ["0.01", "-1"], "--access": ["score", "decision", "x"],
+    "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"], "--episode-query-budget": ["10", "0"],
+    "--on-failure": ["best", "clean", "x"], "--warm-start": [None], "--trust-model": [None],
+    "--defense": ["kinematic", "nope"],
+}
+COMMANDS = {
+    "evaluate": ({**COMMON, **ATTACK, "--out": ["{tmp}/e", "/proc/x"], "--workers": ["1", "0"]}, True),
+    "render": ({**COMMON, **ATTACK, "--out": ["{tmp}/r", "/proc/x"], "--until-crash": ["1", "0"], "--force": [None]},
+               True),
+    "compare": ({**COMMON, "--attacks": ["random-search", "nope"], "--eps": EPS, "--out": ["{tmp}/c", "/proc/c"],
+                 "--plot": ["{tmp}/p.png", "{tmp}/p.txt", "{tmp}"], "--query-budgets": ["50", "0"],
+                 "--defense": ["none", "kinematic", "x"], "--force": [None]}, True),
+    "train": ({"--algo": ["dqn", "ddpg", "td3", "x"], "--recipe": ["dqn", "nope", "ddpg"], "--seed": NUMBERS,
+               "--steps": NUMBERS, "--out": ["{tmp}/t", "/proc/t"], "--set": ["hyperparameters.batch_size=-4",
+               "total_timesteps=10", "nope=1"], "--env-set": COMMON["--env-set"], "--resume": [None],
+               "--force": [None]}, False),
+    "adv-train": ({"--attack": ["zo-signsgd", "nope"], "--no-attack": [None], "--steps": NUMBERS,
+                   "--out": ["{tmp}/a"], "--warmup": NUMBERS, "--trust-model": [None],
+                   "--attack-set": ["eps=0.1", "early_stop=nope"]}, True),
+    "robust-train": ({"--method": ["sa", "at", "distill", "x"], "--eps": EPS, "--steps": NUMBERS,
+                      "--out": ["{tmp}/rt"], "--kappa": NUMBERS, "--epochs": NUMBERS,
+                      "--teacher": ["baseline:rules", "baseline:slower"], "--pgd-steps": NUMBERS}, True),
+    "reproduce": ({"--out": ["{tmp}/rep", "/sys/x"], "--episodes": NUMBERS, "--quick": [None],
+                   "--workers": NUMBERS, "--robustness-episodes": NUMBERS, "--backend": ["local", "ray", "x"]}, False),
+    "select": ({"--episodes": NUMBERS, "--from-step": NUMBERS, "--force": [None]}, False),
+    "export": ({"--out": ["{tmp}/m.onnx", "{tmp}/m.txt", "/proc/m.onnx"], "--force": [None]}, True),
+    "card": ({"--note": ["x"], "--force": [None]}, False),
+    "curves": ({"--bin": NUMBERS, "--plot": ["{tmp}/c.png", "{tmp}/c.txt"]}, False),
+    "env": ({}, False),
+}
+POSITIONAL = {"select": [str(ROOT / "models" / "dqn-driver"), "missing"], "card": ["{tmp}", "missing"],
+              "curves": [str(ROOT / "models" / "dqn"), "missing"], "env": ["list", "show discrete", "show nope"]}
+
+
+def _stub(*args, **kwargs):  # noqa: ANN002, ANN003
+    raise ZodriveError("stubbed: the arguments passed validation")
+
+
+@st.composite
+def argv(draw) -> list[str]:  # noqa: ANN001
+    command = draw(st.sampled_from(sorted(COMMANDS)))
+    flags, takes_model = COMMANDS[command]
+    args = [command]
+    if takes_model:
+        args.append(draw(st.sampled_from(MODELS)))
+    elif command in POSITIONAL:
+        args += draw(st.sampled_from(POSITIONAL[command])).split()
+    for flag in draw(st.lists(st.sampled_from(sorted(flags)), max_size=5, unique=True)) if flags else []:
+        value = draw(st.sampled_from(flags[flag]))
+        args += [flag] if value is None else [flag, value]
+    if command in ("evaluate", "render", "compare"):
+        args += ["--env-set", "max_episode_steps=2"]  # whatever else passes, episodes stay short
+    return args
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(args=argv())
+def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) -> None:
+    import zodrive.agents.training as training
+    import zodrive.defense.adversarial as adversarial
+    import zodrive.defense.robust as robust
+    import zodrive.experiments.compare as compare
+    import zodrive.experiments.reproduce as reproduce
+    import zodrive.experiments.select as select
+    from zodrive.cli import main
+
+    for module, name in ((training, "train"), (adversarial, "adversarial_train"), (robust, "robust_train"),
+                         (compare, "compare"), (reproduce, "reproduce"), (select, "select_checkpoint")):
+        monkeypatch.setattr(module, name, _stub)
+    with tempfile.TemporaryDirectory() as tmp:
+        code = main([a.replace("{tmp}", tmp) for a in args])
+    err = capsys.readouterr().err
+    hypothesis.event(f"exit {code}")
+    assert code in (0, 2, 130), (args, code, err)
+    assert "Traceback" not in err, (args, err)
+    if code == 2:
+        assert len(err.strip().splitlines()) == 1, (args, err)
