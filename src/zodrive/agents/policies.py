@@ -105,6 +105,8 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
         if attacked and baseline.reads == "nothing":
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} takes one constant action whatever it observes: an "
                                "observation attack cannot change it (evaluate it clean: it is the floor)")
+        if baseline.reads == "observation":
+            load_victim(model, preset)  # the rules check the observation they are given
         return
     if is_factory(model):
         load_victim(model, preset)  # builds the policy and checks its outputs against the scenario

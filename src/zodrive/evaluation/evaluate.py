@@ -80,14 +80,19 @@ def _setup(job: EvalJob) -> None:
 
 
 def _worker_setup(job: EvalJob) -> None:
-    """A worker process owns its torch setting: one thread per process."""
+    """A worker process owns its torch setting: one thread per process. The policy and its
+    environment are built by the first episode, so that a failure to build them reaches the
+    caller as the error it is (an initializer's failure only breaks the pool)."""
     import torch
 
     torch.set_num_threads(1)
-    _setup(job)
+    _WORKER.clear()
+    _WORKER["pending"] = job
 
 
 def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    if "pending" in _WORKER:
+        _setup(_WORKER.pop("pending"))
     job: EvalJob = _WORKER["job"]
     env = _WORKER["env"]
     seed = job.seed + index

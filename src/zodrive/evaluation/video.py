@@ -16,7 +16,7 @@ import numpy as np
 from zodrive.attacks.victim import Victim
 from zodrive.evaluation.rollout import act, left_road
 
-X_RANGE, Y_RANGE = 100.0, 100.0  # [m] the presets' features_range for x and y
+X_RANGE, Y_RANGE = 100.0, 100.0  # [m] the paper's presets' features_range for x and y
 
 
 @dataclass
@@ -28,6 +28,7 @@ class Frame:
     stats: dict[str, Any] = field(default_factory=dict)
     label: str = ""            # the action in words (the scenario's meta-action name, or the values)
     panel: bool = True         # the observation is ego-relative (presence, x, y, ...) rows: draw it
+    scale: tuple[float, float] = (X_RANGE, Y_RANGE)  # [m] what a normalized x and y of 1 mean
 
 
 def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[str, Any]]:
@@ -39,13 +40,14 @@ def record_episode(env, victim: Victim, seed: int) -> tuple[list[Frame], dict[st
         clean = info.get("clean_obs")
         action = act(victim, obs, env.action_space)
         frames.append(Frame(env.render(), np.asarray(obs if clean is None else clean), np.asarray(obs),
-                            action, dict(info.get("attack", {})), _action_label(env, action), _relative(env)))
+                            action, dict(info.get("attack", {})), _action_label(env, action), _relative(env),
+                            _scale(env)))
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         crashed = bool(info.get("crashed", False))
         done = terminated or truncated
     last = frames[-1]
-    frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}, last.label, last.panel))
+    frames.append(Frame(env.render(), last.clean, last.perceived, last.action, {}, last.label, last.panel, last.scale))
     return frames, {"seed": seed, "return": total, "length": len(frames) - 1, "crashed": crashed,
                     "offroad": left_road(env, terminated, crashed)}
 
@@ -55,6 +57,14 @@ def _relative(env) -> bool:
     observer = getattr(env.unwrapped, "observation_type", None)
     features = list(getattr(observer, "features", []))[:3]
     return features == ["presence", "x", "y"] and not getattr(observer, "absolute", True)
+
+
+def _scale(env) -> tuple[float, float]:
+    """The metres behind a normalized x and y of 1: the observer's `features_range` (highway-env
+    fills in its own default, from the road, at the first observation)."""
+    ranges = getattr(getattr(env.unwrapped, "observation_type", None), "features_range", None) or {}
+    x, y = ranges.get("x", (-X_RANGE, X_RANGE)), ranges.get("y", (-Y_RANGE, Y_RANGE))
+    return float(max(abs(x[0]), abs(x[1]))), float(max(abs(y[0]), abs(y[1])))
 
 
 def _action_label(env, action: Any) -> str:
@@ -89,7 +99,7 @@ def draw(frame: Frame, fig, step: int, title: str = "") -> None:
         for i, row in enumerate(obs):
             if row[0] <= 0 or i == 0:
                 continue
-            x, y = row[1] * X_RANGE, row[2] * Y_RANGE
+            x, y = row[1] * frame.scale[0], row[2] * frame.scale[1]
             right.add_patch(_car(x, y, **style, label=label if i == 1 else None))
     right.add_patch(_car(0.0, 0.0, facecolor="tab:blue", label="ego"))
     (x_low, x_high), y_half = panel_extent(frame)
@@ -108,8 +118,8 @@ def panel_extent(frame: Frame) -> tuple[tuple[float, float], float]:
     """Axis limits of the perception panel: the four lanes at least, and every vehicle drawn,
     real or perceived (an attack may move a vehicle 20 m sideways)."""
     rows = [row for obs in (frame.clean, frame.perceived) for i, row in enumerate(obs) if i > 0 and row[0] > 0]
-    xs = [row[1] * X_RANGE for row in rows] or [0.0]
-    ys = [abs(row[2] * Y_RANGE) for row in rows] or [0.0]
+    xs = [row[1] * frame.scale[0] for row in rows] or [0.0]
+    ys = [abs(row[2] * frame.scale[1]) for row in rows] or [0.0]
     return (min(-30.0, min(xs) - 5.0), max(90.0, max(xs) + 5.0)), max(14.0, max(ys) + 3.0)
 
 
