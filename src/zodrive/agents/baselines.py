@@ -113,10 +113,12 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
                                             or env.action_names != META_ACTIONS):
         raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
                            "issues its five meta-actions: presets discrete, highway, highway-fast")
-    if baseline.reads == "simulator" and (not env.road or (env.kind == "discrete" and env.action_names != META_ACTIONS)
+    if baseline.reads == "simulator" and (preset.get("env_id") not in RULES_ENVS
+                                          or (env.kind == "discrete" and env.action_names != META_ACTIONS)
                                           or (env.kind == "continuous" and env.action_names != CONTINUOUS_DIMS)):
-        raise ZodriveError(f"{name} drives highway-env roads with the five meta-actions or [acceleration, steering]; "
-                           f"preset {preset['name']!r} has {', '.join(env.action_names)}")
+        raise ZodriveError(f"{name} drives a straight highway (it plans no route: no merge, exit or turn) with the "
+                           "five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
+                           "highway-fast")
 
 
 CONTINUOUS_DIMS = ("acceleration", "steering")
