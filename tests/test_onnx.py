@@ -48,3 +48,22 @@ def test_a_file_without_the_contract_is_refused(tmp_path: Path, capsys) -> None:
     bad.write_bytes(b"not onnx")
     assert main(["evaluate", str(bad), "--episodes", "1"]) == 2
     assert "not a readable ONNX model" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("algo,env_id", [("PPO", "Pendulum-v1"), ("SAC", "Pendulum-v1"), ("PPO", "CartPole-v1")])
+def test_other_algorithms_export_with_their_output_heads(tmp_path: Path, algo: str, env_id: str) -> None:
+    """Clipping (PPO), the tanh + rescaling to [-2, 2] (SAC) and logits travel into the ONNX file."""
+    import gymnasium as gym
+    import stable_baselines3
+
+    options = {"n_steps": 32, "batch_size": 32} if algo == "PPO" else {"learning_starts": 10, "buffer_size": 100}
+    model = getattr(stable_baselines3, algo)("MlpPolicy", gym.make(env_id), seed=0, device="cpu", **options)
+    model.save(tmp_path / "m")
+    assert main(["export", str(tmp_path / "m.zip"), "--out", str(tmp_path / "m.onnx")]) == 0
+    from zodrive.agents.safe_load import load_policy_network
+    from zodrive.agents.victims import network_victim
+
+    network = load_policy_network(tmp_path / "m.zip")
+    reference = network_victim(network.net, network.kind, network.obs_shape)
+    x = np.random.default_rng(0).uniform(-3, 3, (64, *network.obs_shape)).astype(np.float32)
+    np.testing.assert_allclose(onnx_victim(tmp_path / "m.onnx").query(x), reference.query(x), rtol=1e-5, atol=1e-5)
