@@ -17,6 +17,8 @@ from zodrive.wrappers import AttackWrapper
 
 
 def main(train_steps: int = 20_000, episodes: int = 5) -> dict[str, float]:
+    """Train, attack, and return the mean clean and attacked returns, the share of attacked
+    steps whose decision flipped and the queries spent."""
     model = DQN("MlpPolicy", gym.make("CartPole-v1"), learning_starts=1000, exploration_fraction=0.2,
                 seed=0).learn(train_steps)
     victim = sb3_victim(model)  # observations in, Q-values out: all the attacker gets
@@ -27,16 +29,22 @@ def main(train_steps: int = 20_000, episodes: int = 5) -> dict[str, float]:
     for name, env in (("clean", gym.make("CartPole-v1")),
                       ("attacked", AttackWrapper(gym.make("CartPole-v1"), attack, objective, oracle))):
         totals = []
+        flips = []
         for seed in range(episodes):
-            obs, _ = env.reset(seed=seed)
+            obs, info = env.reset(seed=seed)
             done, total = False, 0.0
             while not done:
-                obs, reward, terminated, truncated, _ = env.step(int(model.predict(obs, deterministic=True)[0]))
+                action = int(model.predict(obs, deterministic=True)[0])
+                if "clean_obs" in info:  # what the policy would have done on the true observation
+                    flips.append(action != int(model.predict(info["clean_obs"], deterministic=True)[0]))
+                obs, reward, terminated, truncated, info = env.step(action)
                 total, done = total + float(reward), terminated or truncated
             totals.append(total)
         returns[name] = float(np.mean(totals))
-    print(f"clean return {returns['clean']:.1f}, attacked {returns['attacked']:.1f}, "
-          f"{oracle.total_queries} queries to the policy")
+    returns["flipped"] = float(np.mean(flips))  # share of attacked steps where the policy acted otherwise
+    returns["queries"] = float(oracle.total_queries)
+    print(f"clean return {returns['clean']:.1f}, attacked {returns['attacked']:.1f}, decisions changed on "
+          f"{returns['flipped']:.0%} of attacked steps, {oracle.total_queries} queries to the policy")
     return returns
 
 

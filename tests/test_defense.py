@@ -59,7 +59,24 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path) -> 
                  "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
     train = json.loads((control / "train.json").read_text())
     assert train["kind"] == "control (no attack)" and train["attack_queries"] == 0
-    assert (control / "model.zip").is_file()
+    attacked = tmp_path / "attacked"
+    assert main(["adv-train", str(base), "--attack", "uniform-noise", "--steps", "60", "--out", str(attacked),
+                 "--no-progress", "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
+    import yaml
+
+    runs = [yaml.safe_load((folder / "config.yaml").read_text()) for folder in (control, attacked)]
+    differs = {k for k in set(runs[0]) | set(runs[1]) if runs[0].get(k) != runs[1].get(k)}
+    assert differs == {"attack"}  # source, preset, steps, warmup, noise, method: the same training but the attack
+    assert runs[0]["attack"] is None and runs[1]["attack"]["attack"] == "uniform-noise"
+    seeds = [json.loads((folder / "run.json").read_text())["seed"] for folder in (control, attacked)]
+    assert seeds[0] == seeds[1]
+    again = tmp_path / "control-again"  # the control is a function of its settings: run twice, same network
+    assert main(["adv-train", str(base), "--no-attack", "--steps", "60", "--out", str(again), "--no-progress",
+                 "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
+    from zodrive.agents.safe_load import read_plain
+
+    first, second = read_plain(control / "model.zip")[1], read_plain(again / "model.zip")[1]
+    assert all(torch.equal(first[k], second[k]) for k in first)
 
 
 def test_sa_dqn_regularizer_is_the_worst_case_margin_inside_the_ball() -> None:

@@ -12,5 +12,8 @@ def test_own_sb3_loop_attacks_a_cartpole_dqn() -> None:
     spec = importlib.util.spec_from_file_location("own_sb3_loop", EXAMPLES / "own_sb3_loop.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    returns = module.main(train_steps=300, episodes=2)
-    assert set(returns) == {"clean", "attacked"} and returns["clean"] > 0
+    returns = module.main(train_steps=6000, episodes=2)
+    assert returns["clean"] > 0 and returns["attacked"] > 0
+    # the policy acts otherwise on what it is fed than on the truth (a pass-through wrapper: never)
+    assert returns["flipped"] > 0
+    assert returns["queries"] > 2 * returns["attacked"]  # and the attacker paid for it in queries

@@ -34,3 +34,19 @@ def test_wrapper_changes_the_observation_not_the_simulator() -> None:
         np.testing.assert_array_equal(info["clean_obs"], obs_c)
         assert {"queries", "iterations", "success", "linf", "l2"} <= set(info["attack"])
         assert attacked.last_wall_time > 0
+        # what the policy is fed is the attack's point, not the clean observation
+        assert np.abs(obs_a - obs_c).max() == np.float32(info["attack"]["linf"]) <= 0.2 + 1e-6
+
+
+def test_the_policy_is_fed_the_perturbation_that_flips_it() -> None:
+    victim = linear_victim()
+    attacked = make_attacked_env(PRESET, victim, AttackSpec(attack="random-search", steps=30, n_directions=10,
+                                                            target="none", eps=0.2))
+    obs, info = attacked.reset(seed=4)
+    flipped = 0
+    for _ in range(8):
+        fed, truth = victim.query(obs[None])[0].argmax(), victim.query(info["clean_obs"][None])[0].argmax()
+        assert (fed != truth) == info["attack"]["success"]  # it acts otherwise exactly where the attack says so
+        flipped += int(fed != truth)
+        obs, *_, info = attacked.step(1)
+    assert flipped > 0
