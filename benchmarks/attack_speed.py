@@ -3,12 +3,14 @@
 1. Per environment step, ZO-SignSGD at T iterations and q directions (early stopping off,
    so both do all T iterations): Algorithm 1 done literally - one victim query per call,
    q + 1 calls per iteration - against zodrive's engine - one batched call per iteration.
-2. A clean and attacked evaluations of the same episodes (same seeds): the default attack
-   config (T = 100, q = 20, early stopping on) and the query-saving one (`--warm-start
-   --patience 10`: start from the last step's perturbation, give up a stalled step); total
-   wall time, return and queries per step of each.
+2. Per environment step on the *same states*: a clean rollout records its observations and
+   times each step (environment step + the policy's decision); then the default attack
+   (T = 100, q = 20, early stopping on) and the query-saving one (`--warm-start --patience
+   10`) attack exactly those observations in order (episode boundaries kept, so warm starts
+   carry as in an evaluation). Attacked cost per step = the recorded step + the attack; a
+   crash cannot shorten anything, since both sides see the same steps.
 
-Ends with one line: speedup_vs_naive=<x> attacked_over_clean=<y> saving_over_clean=<z>
+Ends with one line: speedup_vs_naive=<x> attacked_over_clean_per_step=<y> saving_over_clean_per_step=<z>
 """
 
 from __future__ import annotations
@@ -23,8 +25,7 @@ from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import attack_context, load_preset, make_env
-from zodrive.evaluation.rollout import clean_states, run_episode
-from zodrive.wrappers import make_attacked_env
+from zodrive.evaluation.rollout import clean_states
 
 from zodrive.seeds import TUNING_SEED as SEED  # tuning range, disjoint from evaluation seeds
 
@@ -71,22 +72,42 @@ def per_step(model: str, states: int, steps: int, q: int) -> tuple[float, float]
     return naive, batched
 
 
-def evaluation(model: str, episodes: int) -> dict[str, tuple[float, int, float, float]]:
-    """{config: (wall time [s], steps, mean return, queries per step)} on the same seeds."""
-    preset = load_preset("discrete")
+def same_states(model: str, episodes: int, max_steps: int) -> dict[str, tuple[float, float, float]]:
+    """{config: (ms per step, queries per step, success on applicable steps)} on one clean
+    trajectory's states; `clean` is the environment step plus the policy's decision."""
+    preset = load_preset("discrete", [f"max_episode_steps={max_steps}"])
     victim = sb3_victim(load_model(model, preset))
+    env = make_env(preset)
+    states, starts, step_time = [], [], 0.0
+    for i in range(episodes):
+        obs, _ = env.reset(seed=SEED + i)
+        starts.append(len(states))
+        done = False
+        while not done:
+            states.append(obs)
+            t0 = time.perf_counter()
+            action = int(victim.query(obs[None]).argmax())
+            obs, _, terminated, truncated, _ = env.step(action)
+            step_time += time.perf_counter() - t0
+            done = terminated or truncated
+    clean = step_time / len(states)
+    results = {"clean": (1000 * clean, 1.0, float("nan"))}
     default = load_attack("zo-signsgd")
-    configs = {"clean": None, "default": default,
-               "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}
-    results = {}
-    for name, spec in configs.items():
-        env = make_attacked_env(preset, victim, spec)
-        t0, n, returns, queries = time.perf_counter(), 0, [], 0
-        for i in range(episodes):
-            record = run_episode(env, victim, episode=i, seed=SEED + i, max_return=450.0)
-            n, queries = n + record.length, queries + record.queries
-            returns.append(record.return_)
-        results[name] = (time.perf_counter() - t0, n, float(np.mean(returns)), queries / n)
+    for name, spec in {"default": default,
+                       "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}.items():
+        attack, objective, oracle = spec.build(victim, **attack_context(preset))
+        spent, queries, hits, applicable = 0.0, 0, 0, 0
+        for k, obs in enumerate(states):
+            if k in starts:
+                attack.begin_episode()
+                oracle.begin_episode()
+            t0 = time.perf_counter()
+            result = attack.perturb(obs[None], oracle, objective)
+            spent += time.perf_counter() - t0
+            queries += int(result.queries[0])
+            hits += int(result.success[0])
+            applicable += int(not result.already[0])
+        results[name] = (1000 * (clean + spent / len(states)), queries / len(states), hits / max(applicable, 1))
     return results
 
 
@@ -96,22 +117,24 @@ def main() -> None:
     parser.add_argument("--states", type=int, default=5, help="environment steps timed per method")
     parser.add_argument("--steps", type=int, default=100, help="T")
     parser.add_argument("--n-directions", type=int, default=20, help="q")
-    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--episodes", type=int, default=3, help="clean episodes whose states are attacked")
+    parser.add_argument("--max-steps", type=int, default=150, help="steps per clean episode at most")
     args = parser.parse_args()
     torch.set_num_threads(1)
     naive, batched = per_step(args.model, args.states, args.steps, args.n_directions)
     print(f"per environment step, T={args.steps}, q={args.n_directions}, all iterations:")
     print(f"  literal Algorithm 1 (1 query per call): {1000 * naive:8.1f} ms")
     print(f"  zodrive engine (1 call per iteration):  {1000 * batched:8.1f} ms")
-    results = evaluation(args.model, args.episodes)
+    results = same_states(args.model, args.episodes, args.max_steps)
     clean = results["clean"][0]
-    print(f"evaluation of {args.episodes} episodes (seeds {SEED}..{SEED + args.episodes - 1}):")
-    for name, (wall, n, ret, queries) in results.items():
-        print(f"  {name:20s} {wall:7.1f} s for {n:5d} steps ({1000 * wall / n:6.2f} ms/step), mean return "
-              f"{ret:6.1f}, {queries:7.1f} queries/step, wall time x{wall / clean:.2f} of clean")
-    print("  (attacked episodes end sooner when the agent crashes)")
-    print(f"speedup_vs_naive={naive / batched:.1f} attacked_over_clean={results['default'][0] / clean:.2f} "
-          f"saving_over_clean={results['warm-start+patience'][0] / clean:.2f}")
+    print(f"per environment step on the same states ({args.episodes} clean episodes of at most {args.max_steps} "
+          f"steps, seeds {SEED}..{SEED + args.episodes - 1}):")
+    for name, (ms, queries, success) in results.items():
+        print(f"  {name:20s} {ms:8.2f} ms/step, {queries:7.1f} queries/step, success {success:.1%}, "
+              f"x{ms / clean:.2f} of clean")
+    print(f"speedup_vs_naive={naive / batched:.1f} attacked_over_clean_per_step={results['default'][0] / clean:.2f} "
+          f"saving_over_clean_per_step={results['warm-start+patience'][0] / clean:.2f}")
+
 
 if __name__ == "__main__":
     main()

@@ -121,7 +121,6 @@ def test_robust_train_sa_runs_and_records_its_method(tmp_path: Path) -> None:
 def test_robust_distillation_writes_a_model_every_command_reads(tmp_path: Path) -> None:
     """The student is an ordinary DQN zip (read without unpickling); its robustness term makes
     it harder to flip inside the ball than the teacher, on the teacher's own states."""
-    import numpy as np
     import torch
 
     from zodrive.agents.loading import load_network
