@@ -96,7 +96,7 @@ def _message(error: ValidationError, context: str, fields: set[str], prefix: str
     if first["type"] == "extra_forbidden":
         close = difflib.get_close_matches(where.split(".")[-1], sorted(fields), n=1)
         return f"unknown key {where!r} in {context}" + (f"; did you mean '{prefix}{close[0]}'?" if close else "")
-    value = first.get("input")
+    value = _short(first.get("input"))
     text = first["msg"].removeprefix("Value error, ")
     for words, sign in (("Input should be greater than or equal to", "must be >="),
                         ("Input should be greater than", "must be >"),
@@ -106,6 +106,15 @@ def _message(error: ValidationError, context: str, fields: set[str], prefix: str
                          "dict_type"):
         return f"{context}: {where} must be {_expected(first)}, not {value!r}"
     return f"{context}: {where} {text}" + ("" if repr(value) in text else f" (got {value!r})")
+
+
+class _short:  # noqa: N801 - a repr cut to one readable line
+    def __init__(self, value: Any) -> None:
+        self.value = value
+
+    def __repr__(self) -> str:
+        text = repr(self.value)
+        return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _expected(error: dict[str, Any]) -> str:
