@@ -1,6 +1,6 @@
 """Shipped models reproduce their committed evaluations, clean and under attack, episode for
-episode: the PPO made by plain stable-baselines3 on highway-fast-v0, and the paper-budget DQN
-and DDPG of Table 1 on their first episodes (slow: real highway-env episodes; CI runs these)."""
+episode: the paper-budget DQN its card, the PPO made by plain stable-baselines3 on highway-fast-v0,
+and the DQN and DDPG of Table 1 on their first episodes (slow: real highway-env episodes; CI runs these)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,31 @@ from zodrive.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 CELLS = ROOT / "results" / "ppo-highway-fast" / "cells"
+
+
+def _records(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+@pytest.mark.slow
+def test_the_shipped_dqn_reproduces_its_card_on_its_first_episodes(tmp_path: Path) -> None:
+    folder = ROOT / "models" / "dqn"
+    card = json.loads((folder / "eval" / "summary.json").read_text())
+    assert f"**Mean return {card['mean_return']:.2f} " in (folder / "CARD.md").read_text()  # the card states it
+    # the card's evaluation, episode by episode, is committed as the Table 1 cell: same key (model hash,
+    # preset, seed, no attack), as many episodes, and their mean is the card's
+    cell = ROOT / "results" / "reproduction" / "cells" / "dqn-initial"
+    assert json.loads((cell / "eval_key.json").read_text()) == json.loads((folder / "eval" / "eval_key.json").read_text())
+    committed = _records(cell / "episodes.jsonl")
+    assert len(committed) == card["episodes"]
+    assert sum(r["return"] for r in committed) / len(committed) == pytest.approx(card["mean_return"], abs=1e-9)
+    out = tmp_path / "eval"
+    assert main(["evaluate", str(folder), "--episodes", "3", "--out", str(out), "--no-progress"]) == 0
+    mine = _records(out / "episodes.jsonl")
+    assert len(mine) == 3
+    for record, theirs in zip(mine, committed):
+        assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
+        assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)
 
 
 @pytest.mark.slow

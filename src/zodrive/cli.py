@@ -311,6 +311,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--model", default=None, help="model folder or zip; None = the DQN shipped inside the package")
     demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
 
+    cert = sub.add_parser("certify", help="share of a model's clean states where no perturbation within eps can "
+                                          "change the action (interval bounds; reads the weights: white-box)")
+    cert.add_argument("model", help="SB3 / sb3-contrib zip or model folder (MLP policies)")
+    cert.add_argument("--eps", nargs="+", type=_positive_float, required=True, help="L-inf radii to certify")
+    _scenario_flags(cert, trust=False)
+    cert.add_argument("--episodes", type=_positive_int, default=5, help="clean episodes whose states are certified")
+    cert.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
+    cert.add_argument("--tol", type=_positive_float, default=0.2,
+                      help="continuous policies: a state counts as certified if no action dimension can move more")
+    cert.add_argument("--out", type=Path, help="folder for certify.json")
+    cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
+
     curves = sub.add_parser("curves", help="learning curves of training runs side by side (table, --plot PNG)")
     curves.add_argument("runs", nargs="+", type=Path, help="run folders (with monitor.monitor.csv)")
     curves.add_argument("--bin", type=_positive_int, default=20000, help="steps per window")
@@ -643,6 +655,33 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_certify(args: argparse.Namespace) -> int:
+    from zodrive.agents.policies import is_factory
+    from zodrive.certify import certify_model
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
+    from zodrive.runinfo import command_line, write_json
+
+    model = str(args.model)
+    if model.startswith("baseline:") or model.lower().endswith(".onnx") or is_factory(model):
+        raise ZodriveError("certify bounds an SB3 zip's rebuilt network; baselines, ONNX files and Python "
+                           "policies have no network zodrive can read")
+    if args.out is not None:
+        _refuse_nonempty(args.out / "certify.json", args.force, "certificates")
+    preset = _preset_of(args)
+    result = certify_model(model, preset, args.eps, episodes=args.episodes,
+                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=args.tol)
+    what = ("the action cannot change" if result["kind"] == "discrete"
+            else f"no action dimension can move more than {args.tol}")
+    print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
+          f"certified = {what} (CROWN or interval bounds: sound, not complete)")
+    for row in result["rows"]:
+        print(f"  eps {row['eps']:<8g} certified {row['certified_share']:.1%}")
+    if args.out is not None:
+        write_json(args.out / "certify.json", {**result, "command": command_line()})
+        print(f"results: {args.out}/certify.json")
+    return 0
+
+
 def cmd_curves(args: argparse.Namespace) -> int:
     from zodrive.experiments.curves import curves_markdown, plot_curves
 
@@ -670,7 +709,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
             "adv-train": cmd_adv_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
-            "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves}
+            "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves, "certify": cmd_certify}
 
 
 def _check_model_paths(args: argparse.Namespace) -> None:
