@@ -67,6 +67,8 @@ COMMANDS = {
     "card": ({"--note": ["x"], "--force": [None]}, False),
     "curves": ({"--bin": NUMBERS, "--plot": ["{tmp}/c.png", "{tmp}/c.txt"]}, False),
     "env": ({}, False),
+    "certify": ({"--eps": EPS, "--episodes": ["1", "0", "x"], "--preset": COMMON["--preset"], "--tol": EPS,
+                 "--out": ["{tmp}/ce", "/proc/ce"], "--force": [None]}, True),
 }
 POSITIONAL = {"select": [str(ROOT / "models" / "dqn-driver"), "missing"], "card": ["{tmp}", "missing"],
               "curves": [str(ROOT / "models" / "dqn"), "missing"], "env": ["list", "show discrete", "show nope"]}
@@ -88,7 +90,7 @@ def argv(draw) -> list[str]:  # noqa: ANN001
     for flag in draw(st.lists(st.sampled_from(sorted(flags)), max_size=5, unique=True)) if flags else []:
         value = draw(st.sampled_from(flags[flag]))
         args += [flag] if value is None else [flag, value]
-    if command in ("evaluate", "render", "compare"):
+    if command in ("evaluate", "render", "compare", "certify"):
         args += ["--env-set", "max_episode_steps=2"]  # whatever else passes, episodes stay short
     return args
 
