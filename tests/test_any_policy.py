@@ -113,3 +113,16 @@ def test_a_ppo_saved_by_plain_sb3_is_evaluated_and_attacked(tmp_path: Path, caps
     summary = json.loads((tmp_path / "eval" / "summary.json").read_text())
     assert summary["preset"] == "highway-fast" and summary["max_linf"] <= 0.05 + 1e-6
     assert summary["queries_per_step"] > 0
+
+
+@pytest.mark.parametrize("algo,env_id", [("dqn", "CartPole-v1"), ("sac", "Pendulum-v1")])
+def test_any_gymnasium_environment_by_id(tmp_path: Path, algo: str, env_id: str, capsys) -> None:
+    path, _ = _saved(tmp_path, algo, env_id)
+    out = tmp_path / "eval"
+    assert main(["evaluate", str(path), "--env-id", env_id, "--obs-bounds=-10,10", "--episodes", "1",
+                 "--attack", "random-search", "--target", "none", "--eps", "0.1", "--steps", "3",
+                 "--out", str(out), "--no-progress"]) == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["preset"] == env_id and summary["max_linf"] <= 0.1 + 1e-6 and summary["queries_per_step"] > 1
+    printed = capsys.readouterr().out
+    assert "m/s" not in printed  # no driving metrics off a highway-env road
