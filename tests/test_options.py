@@ -39,6 +39,7 @@ def _error(capsys, args: list[str]) -> str:
     (["train", "--algo", "dqn", "--resume", "--out", "{tmp}/empty"], "nothing to resume"),
     (["train", "--algo", "dqn", "--resume", "--force", "--out", "{tmp}/empty"], "give one of them"),
     (["evaluate", "baseline:slower", "--attack", "random-search"], "constant action"),
+    (["certify", DQN, "--eps", "0.01", "--tol", "0.1"], "--tol applies to continuous policies"),
     # tracebacks
     (["evaluate", "baseline:slower", "--env-set", "highway.duration=abc"], "highway.duration must be a number"),
     (["evaluate", "baseline:slower", "--env-set", "highway.collision_reward=abc"], "collision_reward must be a number"),

@@ -318,8 +318,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_flags(cert, trust=False)
     cert.add_argument("--episodes", type=_positive_int, default=5, help="clean episodes whose states are certified")
     cert.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
-    cert.add_argument("--tol", type=_positive_float, default=0.2,
-                      help="continuous policies: a state counts as certified if no action dimension can move more")
+    cert.add_argument("--tol", type=_positive_float,
+                      help="continuous policies: a state counts as certified if no action dimension can move more [0.2]")
     cert.add_argument("--out", type=Path, help="folder for certify.json")
     cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
 
@@ -668,10 +668,15 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.out is not None:
         _refuse_nonempty(args.out / "certify.json", args.force, "certificates")
     preset = _preset_of(args)
+    from zodrive.agents.loading import model_kind
+
+    if args.tol is not None and model_kind(model) == "discrete":
+        raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
+    tol = 0.2 if args.tol is None else args.tol
     result = certify_model(model, preset, args.eps, episodes=args.episodes,
-                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=args.tol)
+                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol)
     what = ("the action cannot change" if result["kind"] == "discrete"
-            else f"no action dimension can move more than {args.tol}")
+            else f"no action dimension can move more than {tol}")
     print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
           f"certified = {what} (CROWN or interval bounds: sound, not complete)")
     for row in result["rows"]:
