@@ -146,7 +146,6 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
             last = max(i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear))
             if any(isinstance(layer, MONOTONE) for layer in layers[last + 1:]):
                 raise ZodriveError("a discrete policy's scores must come out of a Linear layer")
-            h_lo, h_hi = _interval(layers[:last], torch.as_tensor(lo_np), torch.as_tensor(hi_np))
             w, b = layers[last].weight.double(), layers[last].bias.double()
             if post == "quantiles":  # the mean over quantiles is linear: fold it into the last layer
                 q = owner.n_quantiles
@@ -159,6 +158,7 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
                 spec = torch.eye(n_out, dtype=torch.float64)[action][:, None, :] - torch.eye(n_out, dtype=torch.float64)[None]
                 lower = _crown(affine[:-1] + [(w, b)], spec, torch.as_tensor(lo_np), torch.as_tensor(hi_np))
             else:
+                h_lo, h_hi = _interval(layers[:last], torch.as_tensor(lo_np), torch.as_tensor(hi_np))
                 diff_w = w[action][:, None, :] - w[None]          # (N, k, hidden): score(a*) - score(j)
                 diff_b = b[action][:, None] - b[None]
                 mid, rad = (h_hi + h_lo) / 2, (h_hi - h_lo) / 2

@@ -287,11 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
-    cmp_.add_argument("--preset", help="preset of every model (default: the paper's preset of each model's action kind)")
-    cmp_.add_argument("--env-id", metavar="ID", help="any gymnasium environment with a Box observation, instead of --preset")
-    cmp_.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH", help="with --env-id: a clean observation's range")
-    cmp_.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE",
-                      help="preset override, applied to every model's preset")
+    _scenario_flags(cmp_, trust=False)  # applied to every model
     cmp_.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
                       help="attack option for every attack of the grid, e.g. patience=10")
     cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", *DEFENSES],
@@ -448,25 +444,20 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def resolve_model_preset(model: str, preset: str | None, env_set: list[str], env_id: str | None = None,
-                         obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
+def _preset_of(args: argparse.Namespace) -> dict[str, Any]:
+    """Where `args.model` drives: --preset, --env-id (with --obs-bounds) or its action kind's preset."""
     from zodrive.agents.policies import resolve_preset
 
-    return resolve_preset(model, preset, env_set, env_id, obs_bounds)
-
-
-def _preset_of(args: argparse.Namespace) -> dict[str, Any]:
-    return resolve_model_preset(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
-                                getattr(args, "obs_bounds", None))
+    return resolve_preset(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
+                          getattr(args, "obs_bounds", None))
 
 
 def _check_trust(args: argparse.Namespace) -> None:
     """--trust-model reads SB3 zips; for anything else it would be ignored: an error."""
     if getattr(args, "trust_model", False):
-        from zodrive.agents.policies import is_factory
+        from zodrive.agents.policies import is_sb3_zip
 
-        model = str(args.model)
-        if model.startswith("baseline:") or model.lower().endswith(".onnx") or is_factory(model):
+        if not is_sb3_zip(str(args.model)):
             raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")
 
 
@@ -474,13 +465,14 @@ def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> 
     """--loss chooses between the DQN objectives of a targeted attack; elsewhere it does nothing."""
     if spec is None or getattr(args, "loss", None) is None:
         return
-    from zodrive.envs import scenario
+    from zodrive.envs import action_kind
 
-    untargeted = str(spec.target).lower() in ("none", "untargeted", "worst")
-    if scenario(preset).kind != "discrete" or untargeted:
+    if action_kind(preset) != "discrete":
+        raise ZodriveError("--loss chooses the objective of a targeted attack on a discrete policy; this policy "
+                           "acts continuously (its objective is the paper's Eq. 6)")
+    if str(spec.target).lower() in ("none", "untargeted", "worst"):
         raise ZodriveError("--loss chooses the objective of a targeted attack on a discrete policy; "
-                           + ("this policy acts continuously (its objective is the paper's Eq. 6)"
-                              if scenario(preset).kind != "discrete" else f"target {spec.target} has no such choice"))
+                           f"target {spec.target} has no such choice")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -549,7 +541,7 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
     from zodrive.defense.adversarial import adversarial_train
 
-    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    preset = _preset_of(args)
     if args.no_attack and (args.attack_set or args.attack):
         raise ZodriveError(f"{'--attack-set' if args.attack_set else '--attack'} has no effect with --no-attack")
     spec = None if args.no_attack else load_attack(args.attack or "zo-signsgd", args.attack_set)
@@ -568,7 +560,7 @@ def cmd_robust_train(args: argparse.Namespace) -> int:
     for option in ("kappa", "pgd_steps", "warmup", "epochs", "teacher", "trust_model"):
         if getattr(args, option) not in (None, False) and option not in uses:
             raise ZodriveError(f"--{option.replace('_', '-')} has no effect with --method {args.method}")
-    preset = resolve_model_preset(args.model, args.preset, args.env_set)
+    preset = _preset_of(args)
     path = robust_train(args.model, preset, args.method, args.eps, args.steps, args.out, seed=args.seed,
                         warmup=1000 if args.warmup is None else args.warmup,
                         kappa=0.5 if args.kappa is None else args.kappa,
@@ -636,7 +628,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.config import demo_model
 
     model = args.model or str(demo_model())
-    preset = resolve_model_preset(model, None, [])
+    from zodrive.agents.policies import resolve_preset
+
+    preset = resolve_preset(model, None, [])
     ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
     spec = load_attack("zo-signsgd")
     results = {}
@@ -656,20 +650,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_certify(args: argparse.Namespace) -> int:
-    from zodrive.agents.policies import is_factory
+    from zodrive.agents.loading import model_kind
+    from zodrive.agents.policies import is_sb3_zip
     from zodrive.certify import certify_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.runinfo import command_line, write_json
 
     model = str(args.model)
-    if model.startswith("baseline:") or model.lower().endswith(".onnx") or is_factory(model):
+    if not is_sb3_zip(model):
         raise ZodriveError("certify bounds an SB3 zip's rebuilt network; baselines, ONNX files and Python "
                            "policies have no network zodrive can read")
     if args.out is not None:
         _refuse_nonempty(args.out / "certify.json", args.force, "certificates")
     preset = _preset_of(args)
-    from zodrive.agents.loading import model_kind
-
     if args.tol is not None and model_kind(model) == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol

@@ -213,7 +213,7 @@ def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: 
 # ---------------------------------------------------------------- recipes
 
 POSITIVE_INTS = ("batch_size", "buffer_size", "gradient_steps", "target_update_interval", "n_steps", "n_epochs",
-                 "policy_delay", "learning_starts_min")
+                 "policy_delay")
 NON_NEGATIVE_INTS = ("learning_starts",)
 UNIT = ("gamma", "tau", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps", "gae_lambda")
 

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from zodrive.attacks.victim import Victim
+from zodrive.envs.presets import ACTION_NAMES, CONTINUOUS_NAMES
 from zodrive.errors import ZodriveError
 
 PREFIX = "baseline:"
@@ -89,7 +90,6 @@ def get_baseline(model: str) -> Baseline:
                    label=f"{baseline.label} (eps {eps})")
 
 
-META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 RULES_ENVS = ("zodrive/highway-v0", "zodrive/highway-fast-v0")  # straight multi-lane highways
 RULES_FEATURES = ("presence", "x", "y", "vx", "vy")
 
@@ -106,26 +106,23 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
     if env.kind == "discrete" and isinstance(baseline.action, str) and baseline.action not in env.action_names:
         raise ZodriveError(f"{name} always takes {baseline.action}, which preset {preset['name']!r} does not have "
                            f"(its actions: {', '.join(env.action_names)})")
-    if env.kind == "continuous" and baseline.action is not None and env.action_names != CONTINUOUS_DIMS:
+    if env.kind == "continuous" and baseline.action is not None and env.action_names != CONTINUOUS_NAMES:
         raise ZodriveError(f"{name} is an [acceleration, steering] action; preset {preset['name']!r} acts on "
                            f"{', '.join(env.action_names)}")
     if baseline.reads == "observation" and (preset.get("env_id") not in RULES_ENVS or env.features != RULES_FEATURES
-                                            or env.action_names != META_ACTIONS):
+                                            or env.action_names != ACTION_NAMES):
         raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
                            "issues its five meta-actions: presets discrete, highway, highway-fast")
     if baseline.reads == "simulator" and (preset.get("env_id") not in RULES_ENVS
-                                          or (env.kind == "discrete" and env.action_names != META_ACTIONS)
-                                          or (env.kind == "continuous" and env.action_names != CONTINUOUS_DIMS)):
+                                          or (env.kind == "discrete" and env.action_names != ACTION_NAMES)
+                                          or (env.kind == "continuous" and env.action_names != CONTINUOUS_NAMES)):
         raise ZodriveError(f"{name} drives a straight highway (it plans no route: no merge, exit or turn) with the "
                            "five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
                            "highway-fast")
 
 
-CONTINUOUS_DIMS = ("acceleration", "steering")
-
-
 def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int,
-                    action_names: tuple[str, ...] = META_ACTIONS) -> Victim:
+                    action_names: tuple[str, ...] = ACTION_NAMES) -> Victim:
     """A victim that outputs the same thing for every observation (one-hot scores or the action)."""
     if isinstance(baseline.action, str):
         index = action_names.index(baseline.action)

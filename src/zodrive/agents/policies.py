@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 
 from zodrive.agents import baselines as bl
+from zodrive.agents.factory import is_factory
 from zodrive.attacks.victim import Victim
 from zodrive.envs import action_kind, n_actions, observation_shape
 from zodrive.errors import ZodriveError
@@ -87,11 +88,11 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
     return load_preset(preset or policy_kind(model), env_set)
 
 
-def is_factory(model: str) -> bool:
-    """`FILE.py:NAME`: a Python function that builds the policy (runs the user's code)."""
-    from zodrive.agents.factory import is_factory as _is
+def is_sb3_zip(model: str) -> bool:
+    """Whether `model` names an SB3 zip or model folder (not a baseline, ONNX file or Python factory)."""
+    from zodrive.agents.onnx_policy import is_onnx
 
-    return _is(model)
+    return not (bl.is_baseline(model) or is_onnx(model) or is_factory(model))
 
 
 def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) -> None:

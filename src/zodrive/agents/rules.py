@@ -36,7 +36,6 @@ or beyond the four nearest), which the plain rules do not see either.
 
 from __future__ import annotations
 
-import functools
 
 from typing import Any
 
@@ -55,46 +54,22 @@ MARGIN = 15.0          # [m] extra gap asked of a lane before moving into it or 
 BESIDE = 8.0           # [m] |dx| within which a vehicle beside the ego blocks a lane change
 
 
-def _observer(preset: dict[str, Any]) -> dict[str, Any]:
-    """The observation the environment really produces (features, ranges, frame) and its road."""
-    import json
-
-    return _observer_of(json.dumps(preset, sort_keys=True, default=str))
-
-
-@functools.lru_cache(maxsize=8)
-def _observer_of(key: str) -> dict[str, Any]:
-    import json
-
-    from zodrive.envs import make_env
-
-    env = make_env(json.loads(key))
-    try:
-        env.reset(seed=0)  # highway-env fills in its default feature ranges at the first observation
-        core = env.unwrapped
-        observer = core.observation_type
-        ranges = {k: list(v) for k, v in (getattr(observer, "features_range", None) or {}).items()}
-        return {"features": list(getattr(observer, "features", [])), "absolute": bool(getattr(observer, "absolute", True)),
-                "normalize": bool(getattr(observer, "normalize", False)), "features_range": ranges,
-                "action": core.config["action"]["type"], "lanes": core.config.get("lanes_count", 4)}
-    finally:
-        env.close()
-
-
 class ObservationRules:
     """Vectorized rules: `actions(obs)` maps observations (B, V, 5) to meta-actions (B,)."""
 
     def __init__(self, preset: dict[str, Any], eps: float = 0.0) -> None:
-        obs = _observer(preset)  # as the environment builds it: highway-env's defaults filled in
-        if tuple(obs["features"]) != ("presence", "x", "y", "vx", "vy") or obs["absolute"] or not obs["normalize"]:
+        from zodrive.envs import scenario
+
+        env = scenario(preset)  # the observation as the environment builds it: highway-env's defaults filled in
+        if env.features != ("presence", "x", "y", "vx", "vy") or not env.relative or not env.normalized:
             raise ZodriveError("baseline:rules reads the relative, normalized Kinematics observation "
                                "(features presence, x, y, vx, vy)")
-        if obs["action"] != "DiscreteMetaAction":
+        if env.kind != "discrete":
             raise ZodriveError("baseline:rules issues meta-actions: it drives discrete presets")
-        ranges = obs["features_range"]
+        ranges = env.feature_ranges
         self.scale = np.array([1.0, ranges["x"][1], ranges["y"][1], ranges["vx"][1], ranges["vy"][1]],
                               dtype=np.float64)
-        self.lanes = int(obs["lanes"])
+        self.lanes = int(env.lanes or 4)
         self.eps = float(eps)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 

@@ -246,7 +246,7 @@ def _check_options(data: dict[str, Any], kwargs: Any, family: str, path: Path) -
 
 
 def _mlp(weights: dict[str, torch.Tensor], prefix: str, activation: type[nn.Module], *, act_after_last: bool,
-         path: Path) -> tuple[list[nn.Module], dict[str, torch.Tensor]]:
+         path: Path) -> list[nn.Module]:
     """SB3's `create_mlp`: Linear layers at even indices with an activation between them (and
     after the last one for the latent networks of SAC and PPO)."""
     layers = sorted({int(m.group(1)) for key in weights
@@ -258,7 +258,7 @@ def _mlp(weights: dict[str, torch.Tensor], prefix: str, activation: type[nn.Modu
         modules.append(_linear(weights, f"{prefix}.{index}", path))
         if i < len(layers) - 1 or act_after_last:
             modules.append(activation())
-    return modules, {}
+    return modules
 
 
 def _linear(weights: dict[str, torch.Tensor], prefix: str, path: Path) -> nn.Linear:
@@ -289,7 +289,7 @@ def network_from(data: dict[str, Any], weights: dict[str, torch.Tensor], path: P
     post, n_quantiles = "none", 0
     if family in ("dqn", "qrdqn", "ddpg"):
         prefix = {"dqn": "q_net.q_net", "qrdqn": "quantile_net.quantile_net", "ddpg": "actor.mu"}[family]
-        modules, _ = _mlp(weights, prefix, activation, act_after_last=False, path=path)
+        modules = _mlp(weights, prefix, activation, act_after_last=False, path=path)
         if family == "ddpg":
             modules.append(nn.Tanh())  # SB3's actor squashes its action into [-1, 1]
             post = "none" if identity else "unscale"
@@ -300,11 +300,11 @@ def network_from(data: dict[str, Any], weights: dict[str, torch.Tensor], path: P
                                    f"of {info['n_actions']} actions")
             post = "quantiles"
     elif family == "sac":
-        modules, _ = _mlp(weights, "actor.latent_pi", activation, act_after_last=True, path=path)
+        modules = _mlp(weights, "actor.latent_pi", activation, act_after_last=True, path=path)
         modules += [_linear(weights, "actor.mu", path), nn.Tanh()]  # deterministic: tanh of the mean
         post = "none" if identity else "unscale"
     else:  # ppo / a2c
-        modules, _ = _mlp(weights, "mlp_extractor.policy_net", activation, act_after_last=True, path=path)
+        modules = _mlp(weights, "mlp_extractor.policy_net", activation, act_after_last=True, path=path)
         modules.append(_linear(weights, "action_net", path))
         if info["kind"] == "continuous":
             if kwargs.get("squash_output"):

@@ -64,11 +64,14 @@ def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torc
     """What the loaded SB3 policy acts on, as a torch function of an observation batch."""
     from stable_baselines3 import DQN, TD3, SAC
     from stable_baselines3.common.policies import ActorCriticPolicy
+    from stable_baselines3.common.torch_layers import FlattenExtractor
 
     policy = model.policy
     space = model.action_space
-    if isinstance(model, DQN):
-        return policy.q_net, "discrete"
+    if isinstance(model, DQN):  # the MLP after the flatten extractor: same arithmetic, less Python per query
+        net = policy.q_net
+        head = net.q_net if isinstance(net.features_extractor, FlattenExtractor) else None
+        return (lambda x: head(x.flatten(1))) if head is not None else net, "discrete"
     name = type(model).__name__
     if name == "QRDQN":
         net = policy.quantile_net
@@ -80,8 +83,10 @@ def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torc
     def squashed(action: torch.Tensor) -> torch.Tensor:
         return action if identity else unscale(action, low, high)
 
-    if isinstance(model, TD3):  # DDPG is a TD3 subclass
-        return (lambda x: squashed(policy.actor(x))), "continuous"
+    if isinstance(model, TD3):  # DDPG is a TD3 subclass; the actor's MLP ends in tanh
+        actor = policy.actor
+        mu = actor.mu if isinstance(actor.features_extractor, FlattenExtractor) else None
+        return (lambda x: squashed(mu(x.flatten(1)) if mu is not None else actor(x))), "continuous"
     if isinstance(model, SAC) or name == "TQC":
         return (lambda x: squashed(policy.actor(x, deterministic=True))), "continuous"
     if isinstance(policy, ActorCriticPolicy):

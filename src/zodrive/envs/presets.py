@@ -14,7 +14,7 @@ import functools
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -46,6 +46,10 @@ class Scenario:
     action_high: tuple[float, ...]
     road: bool                         # a highway-env road: driving metrics and the driver baselines
     max_return: float | None           # the return of a perfect episode, where it is known
+    feature_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # what a normalized 1 means
+    relative: bool = False             # highway-env rows relative to the ego (not absolute positions)
+    normalized: bool = False           # highway-env rows normalized by `feature_ranges`
+    lanes: int | None = None           # lanes of a highway-env road
 
 
 def register() -> None:
@@ -74,12 +78,6 @@ def is_highway(env_id: str) -> bool:
 
     cls = _env_class(env_id)
     return cls is not None and issubclass(cls, AbstractEnv)
-
-
-def highway_keys(env_id: str = ENV_ID) -> set[str]:
-    """The configuration keys the highway-env scenario `env_id` knows."""
-    cls = _env_class(env_id)
-    return set(cls.default_config()) if cls is not None and hasattr(cls, "default_config") else set()
 
 
 def load_preset(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
@@ -179,8 +177,10 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
     road = hasattr(core, "road") and hasattr(core, "observation_type")
     features: tuple[str, ...] = ()
     bounds = (float("-inf"), float("inf"))
-    if road and hasattr(core.observation_type, "features") and hasattr(core.observation_type, "normalize"):
-        observer = core.observation_type
+    observer = getattr(core, "observation_type", None)
+    kinematic = road and hasattr(observer, "features") and hasattr(observer, "normalize")
+    if kinematic:
+        env.reset(seed=0)  # highway-env fills in its default feature ranges at the first observation
         features = tuple(observer.features)
         if observer.normalize and getattr(observer, "clip", False):
             bounds = (-1.0, 1.0)  # highway-env declares (-inf, inf) for a normalized, clipped observation
@@ -206,9 +206,14 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
         low_a, high_a = tuple(map(float, actions.low)), tuple(map(float, actions.high))
     else:
         raise ZodriveError(f"{name}: zodrive attacks policies with Discrete or 1-D Box actions, not {actions}")
+    observed: dict[str, Any] = {}
+    if kinematic:
+        observed = {"feature_ranges": {k: (float(v[0]), float(v[1])) for k, v in (observer.features_range or {}).items()},
+                    "relative": not observer.absolute, "normalized": bool(observer.normalize),
+                    "lanes": core.config.get("lanes_count")}
     return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
                     n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
-                    max_return=_max_return(config, core))
+                    max_return=_max_return(config, core), **observed)
 
 
 def _max_return(config: dict[str, Any], core: Any) -> float | None:
