@@ -3,21 +3,26 @@
 1. Per environment step, ZO-SignSGD at T iterations and q directions (early stopping off,
    so both do all T iterations): Algorithm 1 done literally - one victim query per call,
    q + 1 calls per iteration - against zodrive's engine - one batched call per iteration.
-2. Per environment step on the *same states*: a clean rollout records its observations and
-   times each step (environment step + the policy's decision); then the default attack
+2. Per environment step on the *same states*: clean rollouts record their observations and
+   time each step (environment step + the policy's decision); then the default attack
    (T = 100, q = 20, early stopping on) and the query-saving one (`--warm-start --patience
-   10`) attack exactly those observations in order (episode boundaries kept, so warm starts
-   carry as in an evaluation). Attacked cost per step = the recorded step + the attack; a
-   crash cannot shorten anything, since both sides see the same steps.
+   10`) attack exactly those observations in order, through the evaluation's own lockstep
+   loop (`run_lockstep` over environments that replay the recorded episodes; episode
+   boundaries kept, so warm starts carry as in an evaluation), with 1, 8 and 32 episodes
+   side by side. Attacked cost per step = the recorded step + the attack's time per step; a
+   crash cannot shorten anything, since every side sees the same steps.
 
 Ends with one line: speedup_vs_naive=<x> attacked_over_clean_per_step=<y> saving_over_clean_per_step=<z>
+lockstep_speedup=<w> (the attack's time per step with one episode at a time over 8 side by side)
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 
@@ -25,7 +30,8 @@ from zodrive.agents.loading import load_model
 from zodrive.agents.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import attack_context, load_preset, make_env
-from zodrive.evaluation.rollout import clean_states
+from zodrive.evaluation.evaluate import DEFAULT_ENVS
+from zodrive.evaluation.rollout import clean_states, run_lockstep
 
 from zodrive.seeds import TUNING_SEED as SEED  # tuning range, disjoint from evaluation seeds
 
@@ -72,17 +78,33 @@ def per_step(model: str, states: int, steps: int, q: int) -> tuple[float, float]
     return naive, batched
 
 
-def same_states(model: str, episodes: int, max_steps: int, seed: int = SEED) -> dict[str, tuple[float, float, float]]:
-    """{config: (ms per step, queries per step, success on applicable steps)} on one clean
-    trajectory's states; `clean` is the environment step plus the policy's decision."""
+class Replay(gym.Env):
+    """Replays recorded clean episodes whatever the policy does: `reset(seed=s)` starts the
+    episode recorded from seed s. Attacks then see exactly the clean states, in order."""
+
+    def __init__(self, episodes: dict[int, np.ndarray], action_space: gym.Space) -> None:
+        self.episodes, self.action_space = episodes, action_space
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, next(iter(episodes.values())).shape[1:], np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):  # type: ignore[override]
+        self.states, self.t = self.episodes[seed], 0
+        return self.states[0], {}
+
+    def step(self, action):  # type: ignore[override]
+        self.t += 1
+        return self.states[min(self.t, len(self.states) - 1)], 0.0, self.t >= len(self.states), False, {}
+
+
+def clean_episodes(model: str, episodes: int, max_steps: int, seed: int) -> tuple[dict[int, np.ndarray], float, Any]:
+    """The states of `episodes` clean episodes (by seed), the time of a clean step
+    (environment step + the policy's decision) [s], and the victim."""
     preset = load_preset("discrete", [f"max_episode_steps={max_steps}"])
     victim = sb3_victim(load_model(model, preset))
     env = make_env(preset)
-    states, starts, step_time = [], [], 0.0
+    recorded, step_time, count = {}, 0.0, 0
     for i in range(episodes):
         obs, _ = env.reset(seed=seed + i)
-        starts.append(len(states))
-        done = False
+        states, done = [], False
         while not done:
             states.append(obs)
             t0 = time.perf_counter()
@@ -90,25 +112,25 @@ def same_states(model: str, episodes: int, max_steps: int, seed: int = SEED) -> 
             obs, _, terminated, truncated, _ = env.step(action)
             step_time += time.perf_counter() - t0
             done = terminated or truncated
-    clean = step_time / len(states)
-    results = {"clean": (1000 * clean, 1.0, float("nan"))}
-    default = load_attack("zo-signsgd")
-    for name, spec in {"default": default,
-                       "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}.items():
-        attack, objective, oracle = spec.build(victim, **attack_context(preset))
-        spent, queries, hits, applicable = 0.0, 0, 0, 0
-        for k, obs in enumerate(states):
-            if k in starts:
-                attack.begin_episode()
-                oracle.begin_episode()
-            t0 = time.perf_counter()
-            result = attack.perturb(obs[None], oracle, objective)
-            spent += time.perf_counter() - t0
-            queries += int(result.queries[0])
-            hits += int(result.success[0])
-            applicable += int(not result.already[0])
-        results[name] = (1000 * (clean + spent / len(states)), queries / len(states), hits / max(applicable, 1))
-    return results
+        recorded[seed + i] = np.stack(states)
+        count += len(states)
+    return recorded, step_time / count, (victim, preset, env.action_space)
+
+
+def same_states(recorded: dict[int, np.ndarray], victim_of: Any, spec: AttackSpec, envs: int) -> tuple[float, float, float]:
+    """(attack time per step [s], queries per step, success on applicable steps) of `spec`
+    on the recorded states, `envs` episodes side by side as `zodrive evaluate --envs` runs
+    them (episode boundaries kept, so warm starts carry as in an evaluation)."""
+    victim, preset, space = victim_of
+    steps: list[dict[str, Any]] = []
+    attacker = spec.build(victim, **attack_context(preset))
+    replays = [Replay(recorded, space) for _ in range(envs)]
+    for _ in run_lockstep(replays, victim, [(i, s) for i, s in enumerate(recorded)], max_return=None,
+                          attacker=attacker, on_step=steps.append):
+        pass
+    applicable = sum(not s["already"] for s in steps)
+    return (sum(s["wall_time"] for s in steps) / len(steps), sum(s["queries"] for s in steps) / len(steps),
+            sum(s["success"] for s in steps) / max(applicable, 1))
 
 
 def main() -> None:
@@ -120,22 +142,34 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3, help="clean episodes whose states are attacked")
     parser.add_argument("--max-steps", type=int, default=150, help="steps per clean episode at most")
     parser.add_argument("--seed", type=int, default=SEED, help="first clean episode's seed (default: tuning seeds)")
+    parser.add_argument("--envs", type=int, nargs="+", default=[1, DEFAULT_ENVS, 32],
+                        help="episodes side by side (the first is the reference of lockstep_speedup)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     naive, batched = per_step(args.model, args.states, args.steps, args.n_directions)
     print(f"per environment step, T={args.steps}, q={args.n_directions}, all iterations:")
     print(f"  literal Algorithm 1 (1 query per call): {1000 * naive:8.1f} ms")
     print(f"  zodrive engine (1 call per iteration):  {1000 * batched:8.1f} ms")
-    results = same_states(args.model, args.episodes, args.max_steps, args.seed)
-    clean = results["clean"][0]
+    recorded, clean, victim_of = clean_episodes(args.model, args.episodes, args.max_steps, args.seed)
     print(f"per environment step on the same states ({args.episodes} clean episodes of at most {args.max_steps} "
-          f"steps, seeds {args.seed}..{args.seed + args.episodes - 1}):")
-    for name, (ms, queries, success) in results.items():
-        print(f"  {name:20s} {ms:8.2f} ms/step, {queries:7.1f} queries/step, success {success:.1%}, "
-              f"x{ms / clean:.2f} of clean")
-    print(f"speedup_vs_naive={naive / batched:.1f} attacked_over_clean_per_step={results['default'][0] / clean:.2f} "
-          f"saving_over_clean_per_step={results['warm-start+patience'][0] / clean:.2f}")
-
+          f"steps, seeds {args.seed}..{args.seed + args.episodes - 1}; clean step {1000 * clean:.2f} ms = "
+          "environment step + decision):")
+    default = load_attack("zo-signsgd")
+    ratio: dict[tuple[str, int], float] = {}
+    for name, spec in {"default": default,
+                       "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}.items():
+        for envs in args.envs:
+            attack, queries, success = same_states(recorded, victim_of, spec, envs)
+            ratio[name, envs] = (clean + attack) / clean
+            print(f"  {name:20s} --envs {envs:<3d} attack {1000 * attack:6.2f} ms/step, {queries:6.1f} queries/step, "
+                  f"success {success:.1%}, x{ratio[name, envs]:.2f} of clean")
+    n1, nd = args.envs[0], DEFAULT_ENVS if DEFAULT_ENVS in args.envs else args.envs[-1]
+    attack_ms = {envs: ratio["default", envs] - 1 for envs in args.envs}
+    print(f"speedup_vs_naive={naive / batched:.1f} "
+          f"attacked_over_clean_per_step={ratio['default', nd]:.2f} (--envs {nd}) "
+          f"saving_over_clean_per_step={ratio['warm-start+patience', nd]:.2f} (--envs {nd}) "
+          f"lockstep_speedup={attack_ms[n1] / attack_ms[nd]:.1f} (attack time, --envs {n1} over {nd}; "
+          + ", ".join(f"{e}: x{attack_ms[n1] / attack_ms[e]:.1f}" for e in args.envs) + ")")
 
 if __name__ == "__main__":
     main()

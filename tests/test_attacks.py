@@ -25,7 +25,7 @@ def test_estimator_points_along_the_true_gradient(name: str) -> None:
     threat = ThreatModel(frozen=())
     attack = make_attack(name, threat, n_directions=4000, mu=1e-3, seed=0)
     mask = np.ones(d)
-    u = attack.directions(1, d, mask)
+    u = attack.directions(np.arange(1), d, mask)
     f = lambda z: 0.5 * np.einsum("...i,ij,...j->...", z, hess, z) + z @ b  # noqa: E731
     points = [x[None, None]] + [x + s * attack.mu * u for s in ((1, -1) if attack.antithetic else (1,))]
     values = f(np.concatenate(points, axis=1))
@@ -98,8 +98,9 @@ def test_oracle_counts_every_query_exactly() -> None:
     victim = counting_victim(calls)
     x0 = observations(4)
     result, oracle, attack = _run("zo-signsgd", victim, x0, steps=10, n_directions=7, early_stop=False)
-    assert oracle.step_queries == sum(calls) == result.queries.sum()
-    assert oracle.calls == len(calls) == 1 + 10  # clean batch, then one call per iteration
+    assert oracle.step_queries + oracle.calibration_queries == sum(calls)
+    assert oracle.step_queries == result.queries.sum()
+    assert oracle.calls == 1 + 10  # clean batch, then one call per iteration
     # iteration 0's base point is the clean observation: queried once, not twice
     assert result.queries.max() == attack.queries_per_step() == 10 * 8
 
@@ -150,14 +151,46 @@ def test_paper_mode_is_unconstrained_but_clipped() -> None:
 
 
 def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
-    """Batched across environments: the victim sees one call per iteration, whatever N is."""
+    """Batched across environments: one victim call per iteration whatever N is, once each
+    row's share of it is a batch whose outputs no longer depend on the batch size; the clean
+    query (one row each) goes row by row, as N one-row runs would send it."""
     calls: list[int] = []
     victim = counting_victim(calls)
     for n in (1, 6):
         calls.clear()
-        result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=4, early_stop=False)
-        assert len(calls) == 11
-        assert calls[1] == n * 4 and calls[2] == n * 5  # iteration 0: probes only
+        result, oracle, _ = _run("zo-signsgd", victim, observations(n), steps=10, n_directions=15, early_stop=False)
+        probes = int(np.searchsorted(np.cumsum([0, *calls]), oracle.calibration_queries))  # the calibration's calls come first
+        assert n == 1 or oracle.stable_batch <= 15  # the premise: a share of 15 or 16 rows is batched
+        assert len(calls) == probes + n + 10
+        assert calls[probes:probes + n + 2] == [1] * n + [n * 15, n * 16]  # iteration 0: probes only
+
+
+def test_rows_are_independent_of_each_other() -> None:
+    """N rows with their own seeds give what N one-row runs give, bit for bit, for every
+    attack, with per-step and per-episode budgets and the per-step state (warm start,
+    max_change) carried over two steps: what lockstep evaluation rests on."""
+    x0 = observations(5)
+    later = np.clip(x0 + 0.01, -1, 1).astype(np.float32)  # the next step's observations
+    for name in ["zo-signsgd", "zo-sgd", "nes", "spsa", "coordinate-fd", "random-search", "uniform-noise",
+                 "pgd", "fgsm"]:
+        options = dict(steps=6, n_directions=5, warm_start=True, max_change=0.05, restarts=1,
+                       query_budget=40, episode_query_budget=70, eps=0.1)
+        spec = AttackSpec(attack=name, **options)
+        together = spec.build(linear_victim(), **CONTEXT)
+        together[0].reseed([11, 12, 13, 14, 15])
+        joint = [_step_of(together, x) for x in (x0, later)]
+        for row in range(5):
+            alone = spec.build(linear_victim(), **CONTEXT)
+            alone[0].reseed(11 + row)
+            single = [_step_of(alone, x[row:row + 1]) for x in (x0, later)]
+            for a, b in zip(joint, single):
+                for field in ("x_adv", "success", "queries", "iterations"):
+                    assert np.array_equal(getattr(a, field)[row], getattr(b, field)[0]), (name, row, field)
+
+
+def _step_of(built, x):
+    attack, objective, oracle = built
+    return attack.perturb(x, oracle, objective)
 
 
 def test_an_eps_that_covers_the_whole_box_is_reported(caplog) -> None:

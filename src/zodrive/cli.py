@@ -71,6 +71,26 @@ def _bounds(text: str) -> tuple[float, float]:
     return low, high
 
 
+def _envs_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--envs", type=_positive_int, default=None,
+                        help="episodes each worker runs side by side, attacked in one call per step; the records "
+                             "are the same for every value (default 8; 1 where the policy keeps state or reads "
+                             "its simulator)")
+
+
+def _envs_of(args: argparse.Namespace, *jobs: Any) -> int:
+    """`--envs`, or the default; an explicit value above 1 that some job cannot use is an error."""
+    from zodrive.evaluation.evaluate import DEFAULT_ENVS, lockstep_blocker
+
+    if args.envs is None:
+        return DEFAULT_ENVS
+    for job in jobs:
+        reason = lockstep_blocker(job)
+        if args.envs > 1 and reason:
+            raise ZodriveError(f"--envs {args.envs}: episodes cannot run side by side here ({reason}); use --envs 1")
+    return args.envs
+
+
 def _scenario_flags(parser: argparse.ArgumentParser, *, trust: bool = True) -> None:
     """Where a policy drives: a preset or any gymnasium id; and how to read an SB3 zip."""
     parser.add_argument("--preset", help="preset (`zodrive env list`; default: the paper's preset of the model's "
@@ -197,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=_seed, default=None, help="first evaluation seed (default 100000)")
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
     ev.add_argument("--workers", type=_positive_int, default=1)
+    _envs_flag(ev)
     ev.add_argument("--defense", choices=DEFENSES,
                     help="filter between the (attacked) sensor and the policy; attacks query the defended system")
     _attack_flags(ev)
@@ -274,6 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", type=Path, required=True)
     rep.add_argument("--episodes", type=_positive_int, help="episodes per cell [100]")
     rep.add_argument("--workers", type=_positive_int, default=2)
+    _envs_flag(rep)
     rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes); not with --episodes")
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--robustness-episodes", type=_nonnegative_int, default=10,
@@ -298,6 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     _backend_flags(cmp_)
     cmp_.add_argument("--episodes", type=_positive_int, default=20)
     cmp_.add_argument("--workers", type=_positive_int, default=1)
+    _envs_flag(cmp_)
     cmp_.add_argument("--out", type=Path, required=True)
     cmp_.add_argument("--force", action="store_true", help="replace the tables of another comparison in --out")
     cmp_.add_argument("--no-progress", action="store_true")
@@ -498,7 +521,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         attack=spec.to_dict() if spec else None,
         seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
     )
-    summary = evaluate(job, args.episodes, args.out, workers=args.workers, progress=not args.no_progress)
+    summary = evaluate(job, args.episodes, args.out, workers=args.workers, envs=_envs_of(args, job),
+                       progress=not args.no_progress)
     print(format_summary(summary))
     if args.out:
         print(f"results: {args.out}/summary.json")
@@ -597,7 +621,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         raise ZodriveError("--quick runs 5 episodes per cell; --episodes would be ignored: give one of them")
     table = reproduce(args.out, episodes=args.episodes or 100, workers=args.workers, quick=args.quick,
                       robustness_episodes=args.robustness_episodes,
-                      retrain=args.retrain, progress=not args.no_progress, backend=args.backend, address=args.address)
+                      retrain=args.retrain, progress=not args.no_progress, backend=args.backend, address=args.address,
+                      envs=_envs_of(args))
     print(table_markdown(table["rows"]), end="")
     print(f"report: {args.out}/report.html")
     return 0
@@ -612,7 +637,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
                    backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
                    attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds,
-                   force=args.force)
+                   force=args.force, envs=_envs_of(args))
     print(markdown(rows), end="")
     if args.plot:
         (plot_budget_curves if args.query_budgets else plot_robustness)(rows, args.plot)

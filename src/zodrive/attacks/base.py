@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 import torch
@@ -45,7 +45,8 @@ never feeds a perturbation that failed, since it may well help the victim)."""
 ENGINE_VERSION = 2
 """Bumped whenever the driver's behaviour changes what an attack returns (results on disk
 made by another version are not mixed with new ones). 2: one driver loop, per-row budgets,
-the clean query reused, the best of every queried point."""
+the clean query reused, the best of every queried point. (One random stream per row left
+every one-row result as it was: a one-row step draws what it drew before.)"""
 
 
 @dataclass
@@ -138,18 +139,47 @@ class Attack(abc.ABC):
         self.timing = timing
         self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
-        self.rng = np.random.default_rng(seed)
-        self._carry: np.ndarray | None = None  # the last step's best perturbation (warm start)
-        self._fed: np.ndarray | None = None    # the last step's fed perturbation (max_change)
+        self._rngs = [np.random.default_rng(seed)]  # one random stream per row
+        # per row, the last step's best perturbation (warm start) and fed perturbation
+        # (max_change); a row of NaN has none (its episode has just begun)
+        self._carry: np.ndarray | None = None
+        self._fed: np.ndarray | None = None
 
-    def reseed(self, seed: int) -> None:
-        """Restart the attack's random stream (e.g. per episode, for reproducible episodes)."""
-        self.rng = np.random.default_rng(seed)
+    def reseed(self, seed: int | Sequence[int]) -> None:
+        """Restart the random streams (per episode, for reproducible episodes): one seed for
+        a one-row attack, or one per row when rows are episodes run in lockstep."""
+        seeds = [seed] if isinstance(seed, (int, np.integer)) else list(seed)
+        self._rngs = [np.random.default_rng(s) for s in seeds]
         self.begin_episode()
 
     def begin_episode(self) -> None:
         """Forget the previous step's perturbation: a new episode starts from scratch."""
         self._carry = self._fed = None
+
+    def restart_row(self, row: int, seed: int) -> None:
+        """Row `row` begins a new episode (lockstep): a fresh stream, nothing carried."""
+        self._rngs[row] = np.random.default_rng(seed)
+        for state in (self._carry, self._fed):
+            if state is not None:
+                state[row] = np.nan
+
+    def keep_rows(self, rows: np.ndarray) -> None:
+        """Only `rows` go on (lockstep episodes that ended without a successor are dropped)."""
+        self._rngs = [self._rngs[r] for r in rows]
+        self._carry = None if self._carry is None else self._carry[rows]
+        self._fed = None if self._fed is None else self._fed[rows]
+
+    def draw(self, rows: np.ndarray, sample: Callable[[np.random.Generator], np.ndarray]) -> np.ndarray:
+        """`sample` from each of `rows`' own streams, stacked: a row's random numbers do not
+        depend on which other rows share the step, so N episodes in lockstep draw exactly
+        what N one-row runs draw."""
+        return np.stack([sample(self._rngs[r]) for r in rows])
+
+    def _streams(self, n: int) -> None:
+        """One stream per row for a step of `n` rows; a caller that never seeded rows (a
+        batch of states) gets row 0's stream from the attack's seed, row r's from (seed, r)."""
+        if len(self._rngs) != n:
+            self._rngs = [np.random.default_rng(self.seed if r == 0 else (self.seed, r)) for r in range(n)]
 
     # -- what an attack defines ---------------------------------------------------------
     @abc.abstractmethod
@@ -166,16 +196,23 @@ class Attack(abc.ABC):
         the admissible point nearest the clean one): the least a step can cost."""
         return self.queries_per_run(1) + (self.max_change is not None)
 
-    def smooth_box(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def smooth_box(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """With `max_change`, the box (flattened, (N, dim) each) every fed point of this step
         must lie in: within max_change (L-inf) of the previous step's perturbation carried to
         the new clean observations `x0` (N, *obs) and re-projected into the threat model, so
-        the box meets it. None on an episode's first step or without `max_change`."""
+        the box meets it; and which rows have one (N,). A row whose episode has just begun
+        has none (an unbounded box). None when no row has one, or without `max_change`."""
         flat0 = x0.reshape(len(x0), -1)
         if self.max_change is None or self._fed is None or self._fed.shape != flat0.shape:
             return None
-        center = self.threat.project((flat0 + self._fed).reshape(x0.shape), x0).reshape(flat0.shape)
-        return center - self.max_change, center + self.max_change
+        has = ~np.isnan(self._fed).any(axis=1)
+        if not has.any():
+            return None
+        fed = np.where(has[:, None], self._fed, 0.0).astype(self._fed.dtype)
+        center = self.threat.project((flat0 + fed).reshape(x0.shape), x0).reshape(flat0.shape)
+        low = np.where(has[:, None], center - self.max_change, -np.inf)
+        high = np.where(has[:, None], center + self.max_change, np.inf)
+        return low, high, has
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The first base point of every row (N, dim) from the flattened clean x0 (N, dim)."""
@@ -214,7 +251,8 @@ class Attack(abc.ABC):
                 inside = np.clip(inside, box[0][rows, None], box[1][rows, None])
                 # a point already inside up to rounding keeps its exact value (projection is then
                 # idempotent, so a step onto a queried point is recognised and not queried again)
-                inside = np.where(np.abs(inside - cand) <= 1e-6, cand, inside)
+                snap = (np.abs(inside - cand) <= 1e-6) & box[2][rows, None, None]
+                inside = np.where(snap, cand, inside)
             return inside
 
         def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -228,19 +266,28 @@ class Attack(abc.ABC):
             return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
 
         everyone = np.arange(n)
-        if oracle.episode_query_budget is not None and oracle.remaining(everyone).min() < self.first_iteration_cost():
-            return self._untouched(x0, oracle, box)  # the episode's budget cannot pay for one iteration
+        self._streams(n)
+        # a row whose episode budget cannot pay for one iteration is left untouched this step
+        live = np.ones(n, dtype=bool)
+        if oracle.episode_query_budget is not None:
+            live = oracle.remaining(everyone) >= self.first_iteration_cost()
+            if not live.any():
+                return self._untouched(x0, oracle, box)
+        asked = everyone if live.all() else np.flatnonzero(live)
         if self.black_box:
-            clean, grad0 = oracle(flat0.reshape(n, *shape), everyone), None
+            clean, grad0 = oracle(flat0[asked].reshape(-1, *shape), asked), None
         else:
-            clean, grad0 = oracle.gradient(flat0.reshape(n, *shape), white_box_loss(None), everyone)
+            clean, grad0 = oracle.gradient(flat0[asked].reshape(-1, *shape), white_box_loss(None), asked)
+        if len(asked) < n:  # rows not asked: no outputs, never attacked (NaN: nothing is compared to them)
+            clean = _rows_of(clean, asked, n, np.nan)
+            grad0 = None if grad0 is None else _rows_of(grad0, asked, n, 0.0)
         clean = clean.astype(np.float32)
-        already = objective.already(torch.from_numpy(clean)).numpy()
+        already = objective.already(torch.from_numpy(clean)).numpy() & live
         # the fallback: the clean observation, or with max_change the admissible point nearest it
         start, start_out, start_grad = flat0, clean, grad0
         if box is not None:
             start = project(flat0[:, None], everyone)[:, 0]
-            moved = np.flatnonzero(np.any(start != flat0, axis=1))
+            moved = np.flatnonzero(np.any(start != flat0, axis=1) & live)
             start_out = clean.copy()
             if moved.size and self.black_box:
                 start_out[moved] = oracle(start[moved].reshape(-1, *shape), moved)
@@ -249,7 +296,7 @@ class Attack(abc.ABC):
                 start_out[moved], start_grad[moved] = oracle.gradient(
                     start[moved].reshape(-1, *shape), white_box_loss(moved), moved)
         _, _, f0, ok0 = values(start[:, None], start_out[:, None], everyone)
-        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0])
+        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0] & live)
         # the last evaluated base point of each row, so that it is never queried twice
         known_x, known_out = start.copy(), start_out.copy()
         known_grad = None if start_grad is None else start_grad.reshape(n, dim).astype(np.float32)
@@ -260,12 +307,14 @@ class Attack(abc.ABC):
         for run in range(1 + self.restarts):
             x = self.init(flat0.copy(), mask).astype(np.float32)
             if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
-                x = flat0 + self.threat.random_delta(flat0.shape, mask, self.rng)
+                x = flat0 + self.draw(everyone, lambda g: self.threat.random_delta((1, dim), mask, g)[0])
             elif self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
-                x = flat0 + self._carry  # consecutive observations differ little: start where the last step ended
+                # consecutive observations differ little: start where the last step ended
+                carried = ~np.isnan(self._carry).any(axis=1)
+                x = np.where(carried[:, None], flat0 + self._carry, x)
             x = project(x[:, None], everyone)[:, 0]
             active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= (oracle.remaining(everyone) > 0) & timed  # timed: only where the policy cares which action
+            active &= (oracle.remaining(everyone) > 0) & timed & live  # timed: only where the policy cares which action
             stalled = np.zeros(n, dtype=np.int64)
             for k in range(self.steps):
                 rows = np.flatnonzero(active)
@@ -326,6 +375,7 @@ class Attack(abc.ABC):
                     known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
         if self.warm_start:
             self._carry = best.x - flat0
+            self._carry[~live] = np.nan  # a row that could not pay carries nothing (its episode's budget is spent)
         fed, fed_out = best.x, best.out
         if self.on_failure == "clean":
             failed = ~best.ok
@@ -342,7 +392,7 @@ class Attack(abc.ABC):
 
 
     def _untouched(self, x0: np.ndarray, oracle: QueryOracle,
-                   box: tuple[np.ndarray, np.ndarray] | None = None) -> AttackResult:
+                   box: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> AttackResult:
         """A step the attacker cannot afford to look at: nothing queried; the clean
         observation is fed (with max_change, the admissible point nearest it)."""
         n = len(x0)
@@ -357,6 +407,13 @@ class Attack(abc.ABC):
         return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
                             iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
                             linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
+
+
+def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.ndarray:
+    """`values` of `rows` placed in an array of `n` rows, the others `fill`."""
+    full = np.full((n, *values.shape[1:]), fill, dtype=np.float32)
+    full[rows] = values
+    return full
 
 
 def preference(outputs: np.ndarray) -> np.ndarray:
@@ -384,8 +441,9 @@ class GradientEstimateAttack(Attack):
         return (steps or self.steps) * (1 + self.n_directions * (2 if self.antithetic else 1))
 
     @abc.abstractmethod
-    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
-        """(n, q, dim) directions for n rows, zero on masked coordinates."""
+    def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
+        """(len(rows), q, dim) directions for `rows` (each from its own stream, `draw`),
+        zero on masked coordinates."""
 
     def estimate(self, f: np.ndarray, u: np.ndarray, d: int) -> np.ndarray:
         """Gradient estimate (A, dim) from objective values f (A, M) at [x, x+mu u(, x-mu u)].
@@ -409,7 +467,7 @@ class GradientEstimateAttack(Attack):
         """Per-call state (e.g. an optimizer) before the first update."""
 
     def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        self._u = self.directions(len(rows), x.shape[1], mask).astype(np.float32)
+        self._u = self.directions(rows, x.shape[1], mask).astype(np.float32)
         signs = (1.0, -1.0) if self.antithetic else (1.0,)
         return np.concatenate([x[:, None] + (s * self.mu) * self._u for s in signs], axis=1)
 
@@ -421,7 +479,7 @@ class GradientEstimateAttack(Attack):
         """One step from flattened iterates x (A, dim) with estimate g (A, dim)."""
 
 
-def unit_sphere(rng: np.random.Generator, n: int, q: int, dim: int, mask: np.ndarray) -> np.ndarray:
-    """q directions per row, uniform on the unit sphere of the unmasked subspace."""
-    u = rng.standard_normal((n, q, dim)) * mask
+def unit_sphere(rng: np.random.Generator, q: int, dim: int, mask: np.ndarray) -> np.ndarray:
+    """q directions (q, dim), uniform on the unit sphere of the unmasked subspace."""
+    u = rng.standard_normal((q, dim)) * mask
     return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)

@@ -23,11 +23,12 @@ class CoordinateFD(GradientEstimateAttack):
     antithetic = True
     unit_directions = True
 
-    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
+    def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
         free = np.flatnonzero(mask)
         q = min(self.n_directions, free.size)
+        n = len(rows)
         u = np.zeros((n, q, dim))  # q <= number of free coordinates: no wasted queries
-        picks = np.argsort(self.rng.random((n, free.size)), axis=1)[:, :q]
+        picks = np.argsort(self.draw(rows, lambda g: g.random(free.size)), axis=1)[:, :q]
         rows = np.repeat(np.arange(n), q)
         u[rows, np.tile(np.arange(q), n), free[picks].reshape(-1)] = 1.0
         return u

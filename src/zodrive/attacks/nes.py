@@ -21,8 +21,8 @@ class NES(GradientEstimateAttack):
     reference = "Ilyas et al., Black-box Adversarial Attacks with Limited Queries and Information, ICML 2018"
     antithetic = True
 
-    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
-        return self.rng.standard_normal((n, self.n_directions, dim)) * mask
+    def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
+        return self.draw(rows, lambda g: g.standard_normal((self.n_directions, dim))) * mask
 
     def update(self, x: np.ndarray, g: np.ndarray, rows: np.ndarray) -> np.ndarray:
         return x - self.step_size * np.sign(g)

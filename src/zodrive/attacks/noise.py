@@ -27,7 +27,8 @@ class UniformNoise(Attack):
         return 2
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        return x0 + self.threat.random_delta(x0.shape, mask, self.rng)
+        dim = x0.shape[1]
+        return x0 + self.draw(np.arange(len(x0)), lambda g: self.threat.random_delta((1, dim), mask, g)[0])
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         raise AssertionError("uniform noise takes no step")  # steps = 1: the driver never asks

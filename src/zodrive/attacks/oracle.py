@@ -21,10 +21,19 @@ class QueryOracle:
     A step attacks `rows` environments at once (`begin_step`); every query belongs to one
     row (`owners`) and `query_budget` caps the queries of each row in one environment step
     (None = unlimited). Rows never share an allowance: a row that finishes early leaves
-    nothing to the others. `episode_query_budget` caps the queries of an episode (since
-    `begin_episode`; an oracle serves one environment, as in the attack wrapper). Counters: `row_queries` (per row, since `begin_step`),
-    `step_queries`, `episode_queries` (since `begin_episode`), `total_queries`, and
-    `calls` (victim invocations; one per batch).
+    nothing to the others. `episode_query_budget` caps the queries of each row's episode
+    (since `begin_episode`; a row is one environment: one in the attack wrapper, N when
+    episodes run in lockstep). Counters: `row_queries` (per row, since `begin_step`),
+    `row_episode_queries` (per row, since `begin_episode`), `step_queries`,
+    `episode_queries` (their sums), `total_queries`, and `calls` (oracle calls).
+
+    A row's outputs never depend on which other rows share a call. BLAS libraries pick
+    another kernel for small batches (on this machine's torch, a batch of 1-3 rows rounds
+    the last bits differently from a batch of 4 or more), so the first call that mixes rows
+    measures, once, from which batch size the victim's outputs stop depending on it
+    (`stable_batch`, on random inputs that are not observations and whose outputs reach no
+    attack; counted apart, in `calibration_queries`); a row whose share of a call is smaller is sent on its own, as a one-row run
+    would send it. That is what makes N episodes in lockstep equal N one-episode runs.
     """
 
     def __init__(self, victim: Victim, query_budget: int | None = None,
@@ -37,9 +46,15 @@ class QueryOracle:
         self.query_budget = query_budget
         self.episode_query_budget = episode_query_budget
         self.row_queries = np.zeros(1, dtype=np.int64)
-        self.episode_queries = 0
+        self.row_episode_queries = np.zeros(1, dtype=np.int64)
         self.total_queries = 0
         self.calls = 0
+        self.stable_batch: int | None = None  # measured when first needed
+        self.calibration_queries = 0
+
+    @property
+    def episode_queries(self) -> int:
+        return int(self.row_episode_queries.sum())
 
     @property
     def kind(self) -> str:
@@ -55,15 +70,26 @@ class QueryOracle:
         if self.query_budget is not None:
             left = (self.query_budget - self.row_queries[rows]).astype(np.float64)
         if self.episode_query_budget is not None:
-            left = np.minimum(left, self.episode_query_budget - self.episode_queries)
+            left = np.minimum(left, self.episode_query_budget - self.row_episode_queries[rows])
         return left
 
-    def begin_episode(self) -> None:
-        self.episode_queries = 0
+    def begin_episode(self, row: int | None = None) -> None:
+        """A new episode for every row, or (lockstep) for row `row` only."""
+        if row is None:
+            self.row_episode_queries[:] = 0
+        else:
+            self.row_episode_queries[row] = 0
+
+    def keep_rows(self, rows: np.ndarray) -> None:
+        """Only `rows` go on (lockstep episodes that ended without a successor are dropped)."""
+        self.row_episode_queries = self.row_episode_queries[rows]
 
     def begin_step(self, rows: int = 1) -> None:
-        """Start an environment step for `rows` environments attacked together."""
+        """Start an environment step for `rows` environments attacked together (a different
+        number of rows than the episode counters hold: new rows, new episodes)."""
         self.row_queries = np.zeros(rows, dtype=np.int64)
+        if len(self.row_episode_queries) != rows:
+            self.row_episode_queries = np.zeros(rows, dtype=np.int64)
 
     def _charge(self, owners: np.ndarray) -> None:
         counts = np.bincount(owners, minlength=len(self.row_queries))
@@ -74,10 +100,13 @@ class QueryOracle:
             raise QueryBudgetExhausted(
                 f"row {over} would spend {int(self.row_queries[over] + counts[over])} of {self.query_budget} queries"
             )
-        if self.episode_query_budget is not None and self.episode_queries + len(owners) > self.episode_query_budget:
-            raise QueryBudgetExhausted(f"the episode would spend {self.episode_queries + len(owners)} of "
+        if self.episode_query_budget is not None and np.any(self.row_episode_queries + counts > self.episode_query_budget):
+            over = int(np.argmax(self.row_episode_queries + counts - self.episode_query_budget))
+            raise QueryBudgetExhausted(f"row {over}'s episode would spend "
+                                       f"{int(self.row_episode_queries[over] + counts[over])} of "
                                        f"{self.episode_query_budget} queries")
         self.row_queries += counts
+        self.row_episode_queries += counts
 
     def _owners(self, n: int, owners: np.ndarray | None) -> np.ndarray:
         if owners is None:  # one query per row, rows in order
@@ -91,7 +120,14 @@ class QueryOracle:
         """Send observations (B, *obs) to the victim; query b is charged to row `owners[b]`."""
         owners = self._owners(len(batch), owners)
         self._charge(owners)
-        outputs = np.asarray(self.victim.query(batch))
+        calls = self._calls(owners)
+        if len(calls) == 1:
+            outputs = np.asarray(self.victim.query(batch))
+        else:
+            parts = [np.asarray(self.victim.query(batch[part])) for part in calls]
+            outputs = np.empty((len(batch), *parts[0].shape[1:]), dtype=parts[0].dtype)
+            for part, out in zip(calls, parts):
+                outputs[part] = out
         if not np.all(np.isfinite(outputs)):
             raise ZodriveError("victim returned NaN or infinite outputs (NaN observation?)")
         self._count(len(batch))
@@ -110,12 +146,52 @@ class QueryOracle:
         owners = self._owners(len(batch), owners)
         self._charge(owners)
         x = torch.tensor(np.asarray(batch, dtype=np.float32), requires_grad=True)
-        out = self.victim.differentiable(x)
+        calls = self._calls(owners)
+        if len(calls) == 1:
+            out = self.victim.differentiable(x)
+        else:  # each call its own graph (its own kernels), the outputs put back in order
+            order = torch.from_numpy(np.argsort(np.concatenate(calls), kind="stable"))
+            out = torch.cat([self.victim.differentiable(x[torch.from_numpy(part)]) for part in calls])[order]
         loss(out).sum().backward()
         self._count(len(batch))
         return out.detach().numpy(), x.grad.numpy()
 
     def _count(self, n: int) -> None:
-        self.episode_queries += n
         self.total_queries += n
         self.calls += 1
+
+    def _calls(self, owners: np.ndarray) -> list[np.ndarray]:
+        """The victim calls a batch is sent in (index arrays into it): one, unless some row's
+        share is below `stable_batch` and other rows share the batch; then that row's queries
+        go on their own and the rest together."""
+        if len(owners) == 0 or owners.min() == owners.max():
+            return [np.arange(len(owners))]
+        if self.stable_batch is None:
+            self.stable_batch, self.calibration_queries = stable_batch(self.victim.query, self.victim.obs_shape)
+        share = np.bincount(owners)[owners]
+        alone = share < self.stable_batch
+        if not alone.any():
+            return [np.arange(len(owners))]
+        calls = [np.flatnonzero(owners == row) for row in np.unique(owners[alone])]
+        if not alone.all():
+            calls.append(np.flatnonzero(~alone))
+        return calls
+
+
+PROBE_SIZES = (*range(1, 17), 24, 32, 48, 64, 128, 256, 512, 1024, 2048)
+
+
+def stable_batch(query: Callable[[np.ndarray], np.ndarray], obs_shape: tuple[int, ...]) -> tuple[int, int]:
+    """The smallest batch size from which `query`'s output for a row is the same in every
+    larger batch (of `PROBE_SIZES`), measured on random inputs (beyond the largest size
+    probed if none agree: then rows are never mixed); and the rows queried to find it."""
+    rng = np.random.default_rng(0)
+    batch = rng.uniform(-1.0, 1.0, size=(PROBE_SIZES[-1], *obs_shape)).astype(np.float32)
+    reference = np.asarray(query(batch))
+    floor, spent = PROBE_SIZES[-1] + 1, PROBE_SIZES[-1]
+    for size in reversed(PROBE_SIZES[:-1]):
+        spent += size
+        if not np.array_equal(np.asarray(query(batch[:size])), reference[:size]):
+            break
+        floor = size
+    return floor, spent

@@ -30,19 +30,25 @@ class RandomSearch(Attack):
     def _fraction(self, k: int) -> float:
         return max(self.p_init * 0.5 ** int(np.log2(1 + 10 * k / self.steps)), 1.0 / 25)
 
-    def _vertices(self, shape: tuple[int, ...]) -> np.ndarray:
+    def _vertices(self, g: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
         eps = self.threat.eps
-        return self.rng.choice(np.array([-eps, eps], dtype=np.float32), size=shape)
+        return g.choice(np.array([-eps, eps], dtype=np.float32), size=shape)
 
     def init(self, x0: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._x0 = x0
-        return x0 + self._vertices(x0.shape) * mask
+        return x0 + self.draw(np.arange(len(x0)), lambda g: self._vertices(g, x0.shape[1:])) * mask
 
     def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        a, dim = x.shape
-        change = (self.rng.random((a, self.n_directions, dim)) < self._fraction(k)) & (mask > 0)
+        q, dim = self.n_directions, x.shape[1]
+        fraction = self._fraction(k)
+
+        def draw(g: np.random.Generator) -> np.ndarray:  # which coordinates change, then to what
+            change = (g.random((q, dim)) < fraction) & (mask > 0)
+            return np.where(change, self._vertices(g, change.shape), np.nan)
+
+        fresh = self.draw(rows, draw)
         current = (x - self._x0[rows])[:, None]
-        return self._x0[rows, None] + np.where(change, self._vertices(change.shape), current)
+        return self._x0[rows, None] + np.where(np.isnan(fresh), current, fresh)
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         pick = 1 + f[:, 1:].argmin(axis=1)

@@ -23,8 +23,9 @@ class SPSA(GradientEstimateAttack):
     reference = "Spall 1992; Uesato et al., ICML 2018"
     antithetic = True
 
-    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
-        return self.rng.choice(np.array([-1.0, 1.0]), size=(n, self.n_directions, dim)) * mask
+    def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
+        signs = np.array([-1.0, 1.0])
+        return self.draw(rows, lambda g: g.choice(signs, size=(self.n_directions, dim))) * mask
 
     def start(self, x0: np.ndarray) -> None:
         self._param = torch.nn.Parameter(torch.from_numpy(x0.astype(np.float32).copy()))

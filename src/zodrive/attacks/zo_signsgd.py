@@ -23,8 +23,8 @@ class ZOSignSGD(GradientEstimateAttack):
     reference = "Liu et al., signSGD via Zeroth-Order Oracle, ICLR 2019"
     unit_directions = True
 
-    def directions(self, n: int, dim: int, mask: np.ndarray) -> np.ndarray:
-        return unit_sphere(self.rng, n, self.n_directions, dim, mask)
+    def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
+        return self.draw(rows, lambda g: unit_sphere(g, self.n_directions, dim, mask))
 
     def update(self, x: np.ndarray, g: np.ndarray, rows: np.ndarray) -> np.ndarray:
         return x - self.step_size * np.sign(g)

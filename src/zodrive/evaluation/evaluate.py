@@ -12,6 +12,7 @@ import json
 import logging
 import multiprocessing as mp
 import os
+import queue
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
-from zodrive.evaluation.rollout import run_episode
+from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
 from zodrive.runinfo import command_line, to_json, versions, write_json
 from zodrive.seeds import EVAL_SEED
@@ -70,16 +71,42 @@ class EvalJob:
         return key
 
 
+DEFAULT_ENVS = 8
+"""Episodes a process runs side by side (`--envs`): their observations are attacked in one
+call per step. The records are the same for every value; only the time differs."""
+
 _WORKER: dict[str, Any] = {}
 
 
-def _setup(job: EvalJob) -> None:
+def lockstep_blocker(job: EvalJob) -> str | None:
+    """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
+    policy that reads nothing but the observation and keeps no state between steps."""
+    from zodrive.agents.baselines import get_baseline
+
+    if job.defense is not None:
+        return f"the {job.defense} defense keeps its own state for one episode"
+    if is_baseline(job.model) and get_baseline(job.model).reads == "simulator":
+        return f"{job.model} reads its own simulator"
+    return None
+
+
+def _setup(job: EvalJob, envs: int = 1) -> None:
+    """Build the policy and its environment(s): one wrapped in the attack (`envs` 1), or
+    `envs` plain ones and the attack apart, for lockstep."""
     spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
-    victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
-    _WORKER.update(job=job, victim=victim, env=env)
+    if envs <= 1:
+        victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
+        _WORKER.update(job=job, victim=victim, env=env)
+        return
+    from zodrive.agents.policies import load_victim
+    from zodrive.envs import attack_context, make_env
+
+    victim = load_victim(job.model, job.preset, trust=job.trust)
+    attacker = spec.build(victim, **attack_context(job.preset)) if spec is not None else None
+    _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
 
 
-def _worker_setup(job: EvalJob) -> None:
+def _worker_setup(job: EvalJob, envs: int = 1) -> None:
     """A worker process owns its torch setting: one thread per process. The policy and its
     environment are built by the first episode, so that a failure to build them reaches the
     caller as the error it is (an initializer's failure only breaks the pool)."""
@@ -87,12 +114,12 @@ def _worker_setup(job: EvalJob) -> None:
 
     torch.set_num_threads(1)
     _WORKER.clear()
-    _WORKER["pending"] = job
+    _WORKER["pending"] = (job, envs)
 
 
 def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     if "pending" in _WORKER:
-        _setup(_WORKER.pop("pending"))
+        _setup(*_WORKER.pop("pending"))
     job: EvalJob = _WORKER["job"]
     env = _WORKER["env"]
     seed = job.seed + index
@@ -103,6 +130,28 @@ def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
         on_step=steps.append if job.record_steps else None,
     )
     return record.to_dict(), steps
+
+
+def _lockstep(indices: list[int], done: Any = None) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
+    """This process's episodes `indices`, side by side; (record, step records) as each ends
+    (also put on the queue `done`, when a pool worker runs it)."""
+    if "pending" in _WORKER:
+        _setup(*_WORKER.pop("pending"))
+    job: EvalJob = _WORKER["job"]
+    steps: dict[int, list[dict[str, Any]]] = {i: [] for i in indices}
+    on_step = (lambda row: steps[row["episode"]].append(row)) if job.record_steps else None
+    for record in run_lockstep(_WORKER["envs"], _WORKER["victim"], [(i, job.seed + i) for i in indices],
+                               max_return=_max_return(job.preset), attacker=_WORKER["attacker"], on_step=on_step):
+        item = (record.to_dict(), steps.pop(record.episode))
+        if done is not None:
+            done.put(item)
+        yield item
+
+
+def _lockstep_share(indices: list[int], done: Any) -> None:
+    """A pool worker's share of the episodes, reported one by one through `done`."""
+    for _ in _lockstep(indices, done):
+        pass
 
 
 def _max_return(preset: dict[str, Any]) -> float | None:
@@ -131,17 +180,41 @@ def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
         os.fsync(handle.fileno())
 
 
-def run_episodes(job: EvalJob, indices: list[int], workers: int) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
-    """Yield (episode record, step records) as episodes finish, in any order."""
+def run_episodes(job: EvalJob, indices: list[int], workers: int,
+                 envs: int = 1) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
+    """Yield (episode record, step records) as episodes finish, in any order: `workers`
+    processes, each running `envs` episodes side by side (when `lockstep_blocker` allows)."""
+    envs = 1 if lockstep_blocker(job) else min(envs, max(1, -(-len(indices) // max(workers, 1))))
     if workers <= 1 or len(indices) <= 1:
         with torch_threads(1):  # the caller's torch setting is restored afterwards
-            _setup(job)
-            for i in indices:
-                yield _episode(i)
+            _setup(job, envs)
+            if envs > 1:
+                yield from _lockstep(indices)
+            else:
+                for i in indices:
+                    yield _episode(i)
         return
     ctx = mp.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_setup, initargs=(job,)) as pool:
-        yield from pool.map(_episode, indices, chunksize=1)
+    if envs <= 1:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_setup,
+                                 initargs=(job,)) as pool:
+            yield from pool.map(_episode, indices, chunksize=1)
+        return
+    # each worker runs its share side by side and reports every episode as it ends
+    shares = [indices[w::workers] for w in range(workers)]
+    with ctx.Manager() as manager, ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                                       initializer=_worker_setup, initargs=(job, envs)) as pool:
+        done = manager.Queue()
+        futures = [pool.submit(_lockstep_share, share, done) for share in shares if share]
+        for _ in indices:
+            while True:
+                try:
+                    yield done.get(timeout=0.5)
+                    break
+                except queue.Empty:
+                    for future in futures:
+                        if future.done() and future.exception() is not None:
+                            raise future.exception()
 
 
 def evaluate(
@@ -150,13 +223,17 @@ def evaluate(
     out: Path | None,
     *,
     workers: int = 1,
+    envs: int = DEFAULT_ENVS,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Run `episodes` episodes (resuming from `out` if it holds part of this run); summarize."""
+    """Run `episodes` episodes (resuming from `out` if it holds part of this run) over
+    `workers` processes, `envs` side by side in each; summarize."""
     if not isinstance(episodes, int) or episodes < 1:
         raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
     if workers < 1:
         raise ZodriveError(f"workers must be >= 1, not {workers}")
+    if envs < 1:
+        raise ZodriveError(f"envs must be >= 1, not {envs}")
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
     done: dict[int, dict[str, Any]] = {}
     if out is not None:
@@ -177,7 +254,7 @@ def evaluate(
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
     bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
-    for record, steps in run_episodes(job, todo, workers):
+    for record, steps in run_episodes(job, todo, workers, envs):
         done[record["episode"]] = record
         if out is not None:
             _append_jsonl(out / "steps.jsonl", steps)

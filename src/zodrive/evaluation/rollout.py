@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import gymnasium as gym
 import numpy as np
 
+from zodrive.attacks.base import Attack
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.victim import Victim
-from zodrive.wrappers import AttackWrapper
+from zodrive.wrappers import AttackWrapper, attack_observations, episode_seed, step_stats
 
 
 @dataclass
@@ -63,6 +66,63 @@ def clean_states(env: gym.Env, victim: Victim, seed: int, count: int) -> np.ndar
     return np.stack(states)
 
 
+class Episode:
+    """The running figures of one episode, fed step by step (`acted`, `stepped`); `record()`
+    makes its `EpisodeRecord`. Driving metrics (speed, lanes, distance) are read on
+    highway-env roads only; elsewhere they stay empty."""
+
+    def __init__(self, env: gym.Env, policy: Victim, *, episode: int, seed: int, max_return: float | None) -> None:
+        self.env, self.episode, self.seed, self.max_return = env, episode, seed, max_return
+        self.road = hasattr(env.unwrapped, "vehicle") and hasattr(env.unwrapped, "road")
+        ego = env.unwrapped.vehicle if self.road else None  # read for the driving metrics only; the policy sees `obs`
+        self.start_x, self.lane = (float(ego.position[0]), ego.lane_index[2]) if self.road else (0.0, None)
+        self.lane_changes = self.length = self.right = 0
+        self.total = 0.0
+        self.speeds: list[float] = []
+        self.crashed = self.terminated = False
+        self.queries = self.successes = self.applicable = 0
+        self.max_linf = 0.0
+        space = env.action_space
+        self.counts = (np.zeros(int(space.n), dtype=np.int64)
+                       if policy.kind == "discrete" and hasattr(space, "n") else None)
+
+    def acted(self, action: Any, attack: dict[str, Any] | None) -> None:
+        """The policy chose `action` on an observation the attack's step `attack` made (None: clean)."""
+        if self.counts is not None:
+            self.counts[action] += 1
+        if attack is not None:
+            self.queries += attack["queries"]
+            self.successes += attack["success"]
+            self.applicable += not attack["already"]
+            self.max_linf = max(self.max_linf, attack["linf"])
+
+    def stepped(self, reward: float, terminated: bool, info: dict[str, Any]) -> None:
+        self.total += float(reward)
+        self.length += 1
+        self.speeds.append(float(info.get("speed", np.nan)))
+        self.right += float(info.get("rewards", {}).get("right_lane_reward", 0.0)) >= 1.0
+        self.crashed = bool(info.get("crashed", False))
+        self.terminated = terminated
+        if self.road:
+            ego = self.env.unwrapped.vehicle
+            self.lane_changes += ego.lane_index[2] != self.lane
+            self.lane = ego.lane_index[2]
+
+    def record(self, attacked: bool) -> EpisodeRecord:
+        road, env = self.road, self.env
+        return EpisodeRecord(
+            episode=self.episode, seed=self.seed, return_=self.total,
+            pct_of_max=100.0 * self.total / self.max_return if self.max_return else float("nan"),
+            length=self.length, crashed=self.crashed, offroad=left_road(env, self.terminated, self.crashed),
+            mean_speed=float(np.nanmean(self.speeds)) if road and self.speeds else float("nan"),
+            right_lane_share=self.right / max(self.length, 1), lane_changes=int(self.lane_changes),
+            distance=float(env.unwrapped.vehicle.position[0]) - self.start_x if road else 0.0, queries=self.queries,
+            attacked_steps=self.length if attacked else 0, successes=int(self.successes),
+            applicable=int(self.applicable), max_linf=self.max_linf,
+            action_counts=self.counts.tolist() if self.counts is not None else None,
+        )
+
+
 def run_episode(
     env: gym.Env,
     victim: Victim,
@@ -77,59 +137,101 @@ def run_episode(
 
     If `env` is wrapped in an `AttackWrapper`, the policy sees attacked observations and each
     step's attack stats go to `on_step`. `policy` (default: `victim`) chooses the actions.
-    Driving metrics (speed, lanes, distance) are read on highway-env roads only; elsewhere
-    they stay empty. `max_return` None: no percentage of the maximum.
+    `max_return` None: no percentage of the maximum.
     """
     policy = policy or victim
     wrapper = _find_attack(env)
     attacked = wrapper is not None
     obs, info = env.reset(seed=seed)
-    road = hasattr(env.unwrapped, "vehicle") and hasattr(env.unwrapped, "road")
-    ego = env.unwrapped.vehicle if road else None  # read for the driving metrics only; the policy sees `obs`
-    start_x, lane = (float(ego.position[0]), ego.lane_index[2]) if road else (0.0, None)
-    lane_changes = 0
-    total, length, speeds, right = 0.0, 0, [], 0
-    crashed = False
-    queries = successes = applicable = 0
-    max_linf = 0.0
+    tracker = Episode(env, policy, episode=episode, seed=seed, max_return=max_return)
     space = env.action_space
-    counts = np.zeros(int(space.n), dtype=np.int64) if policy.kind == "discrete" and hasattr(space, "n") else None
     pending = info.get("attack") if attacked else None
     done = False
     while not done:
         action = act(policy, obs, space)
-        if counts is not None:
-            counts[action] += 1
-        if pending is not None:
-            queries += pending["queries"]
-            successes += pending["success"]
-            applicable += not pending["already"]
-            max_linf = max(max_linf, pending["linf"])
-            if on_step is not None:
-                on_step({"episode": episode, "step": length, "action": _plain(action), **pending,
-                         "wall_time": wrapper.last_wall_time})
+        tracker.acted(action, pending)
+        if pending is not None and on_step is not None:
+            on_step({"episode": episode, "step": tracker.length, "action": _plain(action), **pending,
+                     "wall_time": wrapper.last_wall_time})
         obs, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-        length += 1
-        speeds.append(float(info.get("speed", np.nan)))
-        right += float(info.get("rewards", {}).get("right_lane_reward", 0.0)) >= 1.0
-        crashed = bool(info.get("crashed", False))
-        if road:
-            ego = env.unwrapped.vehicle
-            lane_changes += ego.lane_index[2] != lane
-            lane = ego.lane_index[2]
+        tracker.stepped(reward, terminated, info)
         pending = info.get("attack") if attacked else None
         done = terminated or truncated
-    return EpisodeRecord(
-        episode=episode, seed=seed, return_=total,
-        pct_of_max=100.0 * total / max_return if max_return else float("nan"),
-        length=length, crashed=crashed, offroad=left_road(env, terminated, crashed), mean_speed=float(np.nanmean(speeds)) if road and speeds else float("nan"),
-        right_lane_share=right / max(length, 1), lane_changes=int(lane_changes),
-        distance=float(env.unwrapped.vehicle.position[0]) - start_x if road else 0.0, queries=queries,
-        attacked_steps=length if attacked else 0, successes=int(successes),
-        applicable=int(applicable), max_linf=max_linf,
-        action_counts=counts.tolist() if counts is not None else None,
-    )
+    return tracker.record(attacked)
+
+
+def run_lockstep(
+    envs: list[gym.Env],
+    victim: Victim,
+    episodes: list[tuple[int, int]],
+    *,
+    max_return: float | None,
+    attacker: tuple[Attack, Objective, QueryOracle] | None = None,
+    on_step: Callable[[dict[str, Any]], None] | None = None,
+) -> Iterator[EpisodeRecord]:
+    """Roll out `episodes` ((index, seed) pairs) side by side, one per environment of `envs`;
+    an environment whose episode ends starts the next one waiting. Records come out as
+    episodes end.
+
+    Under attack, the N observations of a step are attacked in one call, each row with its
+    own random stream (seeded per episode as the attack wrapper seeds it), budgets and
+    carried state, and the oracle sends no row's queries in a batch that would change their
+    outputs; the policy acts on each row alone as in `run_episode`. So every episode is,
+    bit for bit, what `run_episode` gives for its seed; only the time per step is shared
+    (`wall_time` is the step's attack time divided by the rows attacked). The policy must
+    be memoryless and read only the observation (no defense state, no simulator).
+    """
+    waiting = list(episodes)
+    rows: list[tuple[gym.Env, Episode]] = []
+    obs: list[np.ndarray] = []
+    attack, objective, oracle = attacker if attacker is not None else (None, None, None)
+
+    def start(env: gym.Env, row: int | None) -> None:  # the next waiting episode on `env`
+        index, seed = waiting.pop(0)
+        first, _ = env.reset(seed=seed)
+        tracker = Episode(env, victim, episode=index, seed=seed, max_return=max_return)
+        if row is None:
+            rows.append((env, tracker))
+            obs.append(first)
+        else:
+            rows[row], obs[row] = (env, tracker), first
+            if attack is not None:
+                attack.restart_row(row, episode_seed(attack.seed, seed))
+                oracle.begin_episode(row)
+
+    for env in envs[: len(waiting)]:
+        start(env, None)
+    if attack is not None:
+        attack.reseed([episode_seed(attack.seed, tracker.seed) for _, tracker in rows])
+        oracle.begin_step(rows=len(rows))
+        oracle.begin_episode()
+    while rows:
+        seen, result, share = np.stack(obs), None, 0.0
+        if attack is not None:
+            result, wall = attack_observations(seen, attack, objective, oracle)
+            seen, share = result.x_adv, wall / len(rows)
+        ended = []
+        for row, (env, tracker) in enumerate(rows):
+            pending = None if result is None else step_stats(result, row)
+            action = act(victim, seen[row], env.action_space)
+            tracker.acted(action, pending)
+            if pending is not None and on_step is not None:
+                on_step({"episode": tracker.episode, "step": tracker.length, "action": _plain(action), **pending,
+                         "wall_time": share})
+            obs[row], reward, terminated, truncated, info = env.step(action)
+            tracker.stepped(reward, terminated, info)
+            if terminated or truncated:
+                yield tracker.record(attack is not None)
+                if waiting:
+                    start(env, row)
+                else:
+                    ended.append(row)
+        if ended:
+            keep = np.array([r for r in range(len(rows)) if r not in ended], dtype=np.int64)
+            rows[:], obs[:] = [rows[r] for r in keep], [obs[r] for r in keep]
+            if attack is not None:
+                attack.keep_rows(keep)
+                oracle.keep_rows(keep)
 
 
 def left_road(env: gym.Env, terminated: bool, crashed: bool) -> bool:

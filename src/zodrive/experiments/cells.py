@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import EvalJob, evaluate
+from zodrive.evaluation.evaluate import DEFAULT_ENVS, EvalJob, evaluate
 
 BACKENDS = ("local", "ray")
 
@@ -25,18 +25,19 @@ class Cell:
     folder: Path
 
 
-def _run_one(cell: Cell) -> dict[str, Any]:
-    return evaluate(cell.job, cell.episodes, cell.folder, workers=1, progress=False)
+def _run_one(cell: Cell, envs: int) -> dict[str, Any]:
+    return evaluate(cell.job, cell.episodes, cell.folder, workers=1, envs=envs, progress=False)
 
 
 def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, progress: bool = True,
-              address: str | None = None, on_done: Callable[[int, dict[str, Any]], None] | None = None
-              ) -> list[dict[str, Any]]:
-    """The summaries of `cells`, in order; `on_done(i, summary)` as each one finishes."""
+              address: str | None = None, on_done: Callable[[int, dict[str, Any]], None] | None = None,
+              envs: int = DEFAULT_ENVS) -> list[dict[str, Any]]:
+    """The summaries of `cells`, in order; `on_done(i, summary)` as each one finishes. Each
+    cell runs `envs` episodes side by side per process."""
     if backend not in BACKENDS:
         raise ZodriveError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
     results: list[dict[str, Any] | None] = [None] * len(cells)
-    stream = _local(cells, workers, progress) if backend == "local" else _ray(cells, workers, address)
+    stream = _local(cells, workers, progress, envs) if backend == "local" else _ray(cells, workers, address, envs)
     for i, summary in stream:
         results[i] = summary
         if on_done is not None:
@@ -44,12 +45,12 @@ def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, pr
     return results  # type: ignore[return-value]
 
 
-def _local(cells: list[Cell], workers: int, progress: bool) -> Iterator[tuple[int, dict[str, Any]]]:
+def _local(cells: list[Cell], workers: int, progress: bool, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
     for i, cell in enumerate(cells):  # one cell at a time, its episodes over `workers` processes
-        yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, progress=progress)
+        yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, envs=envs, progress=progress)
 
 
-def _ray(cells: list[Cell], workers: int, address: str | None) -> Iterator[tuple[int, dict[str, Any]]]:
+def _ray(cells: list[Cell], workers: int, address: str | None, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
     try:
         import ray
     except ImportError:
@@ -60,7 +61,7 @@ def _ray(cells: list[Cell], workers: int, address: str | None) -> Iterator[tuple
         else:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     task = ray.remote(num_cpus=1)(_run_one)
-    pending = {task.remote(cell): i for i, cell in enumerate(cells)}
+    pending = {task.remote(cell, envs): i for i, cell in enumerate(cells)}
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
         for ref in done:

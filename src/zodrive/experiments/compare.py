@@ -18,7 +18,7 @@ from zodrive.agents.baselines import get_baseline, is_baseline
 from zodrive.agents.policies import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import or_dash
 from zodrive.experiments.cells import Cell, run_cells
 from zodrive.runinfo import write_atomic, write_json
@@ -30,7 +30,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             address: str | None = None, defenses: list[str | None] | None = None,
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None,
-            force: bool = False, claim: bool = True) -> list[dict[str, Any]]:
+            force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
@@ -87,7 +87,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         }
         write_tables([r for r in rows if r is not None], out)  # in grid order, as cells finish
 
-    run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done)
+    run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done, envs=envs)
     return rows  # type: ignore[return-value]
 
 

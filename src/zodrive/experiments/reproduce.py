@@ -26,7 +26,7 @@ from zodrive.config import models_dir
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 from zodrive.experiments.cells import Cell, run_cells
-from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, same_evaluation
+from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob, same_evaluation
 from zodrive.experiments.paper import ADV_STEPS
 from zodrive.runinfo import write_atomic, write_json
 
@@ -108,7 +108,8 @@ def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str
 
 def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool = False,
               retrain: bool = False, progress: bool = True, seed: int = DEFAULT_EVAL_SEED,
-              backend: str = "local", address: str | None = None, robustness_episodes: int = 10) -> dict[str, Any]:
+              backend: str = "local", address: str | None = None, robustness_episodes: int = 10,
+              envs: int = DEFAULT_ENVS) -> dict[str, Any]:
     """Run (or resume) the whole reproduction into `out`; returns the Table 1 data.
     `robustness_episodes` episodes per robustness cell (0: no robustness section)."""
     from zodrive.experiments.report import build_table, write_report
@@ -147,10 +148,11 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
         write_json(out / "timings.json", timings)
 
     run_cells([cell for _, _, cell in todo], backend=backend, workers=workers, progress=progress,
-              address=address, on_done=done)
+              address=address, on_done=done, envs=envs)
     figures = make_figures(out, models, spec, quick=quick)
     curve = robustness(out / "robustness", episodes=min(robustness_episodes, 1) if quick else robustness_episodes,
-                       quick=quick, workers=workers, progress=progress, seed=seed, backend=backend, address=address)
+                       quick=quick, workers=workers, progress=progress, seed=seed, backend=backend, address=address,
+                       envs=envs)
     table = build_table(summaries, out)
     runs = sum(1 for key in timings if key.startswith("invocation "))
     timings[f"invocation {runs + 1} total"] = round(time.perf_counter() - start, 1)
