@@ -479,7 +479,8 @@ class GradientEstimateAttack(Attack):
         """One step from flattened iterates x (A, dim) with estimate g (A, dim)."""
 
 
-def unit_sphere(rng: np.random.Generator, q: int, dim: int, mask: np.ndarray) -> np.ndarray:
-    """q directions (q, dim), uniform on the unit sphere of the unmasked subspace."""
-    u = rng.standard_normal((q, dim)) * mask
+def unit_sphere(normal: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Directions (..., dim) uniform on the unit sphere of the unmasked subspace, from
+    standard normal draws of that shape (all rows normalized in one call)."""
+    u = normal * mask
     return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
