@@ -386,8 +386,12 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
     group.add_argument("--no-early-stop", dest="early_stop", action="store_false")
     group.add_argument("--patience", type=_positive_int, help="give up a step after N iterations without progress")
+    group.add_argument("--no-patience", action="store_true", default=None,
+                       help="run every step until its goal is met or T iterations are spent")
     group.add_argument("--warm-start", dest="warm_start", action="store_true", default=None,
                        help="start each step's search from the previous step's perturbation")
+    group.add_argument("--no-warm-start", dest="warm_start", action="store_false",
+                       help="start each step's search at the clean observation")
     group.add_argument("--on-failure", choices=["best", "clean"],
                        help="what a step that missed the goal feeds the policy")
     group.add_argument("--restarts", type=_nonnegative_int, help="further runs from random points (e.g. PGD)")
@@ -405,7 +409,8 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--n-directions": "n_directions", "--mu": "mu", "--step-size": "step_size",
                 "--l2-weight": "l2_weight", "--target": "target", "--loss": "loss",
                 "--query-budget": "query_budget", "--early-stop/--no-early-stop": "early_stop",
-                "--patience": "patience", "--warm-start": "warm_start", "--on-failure": "on_failure", "--restarts": "restarts",
+                "--patience": "patience", "--no-patience": "no_patience", "--warm-start/--no-warm-start": "warm_start",
+                "--on-failure": "on_failure", "--restarts": "restarts",
                 "--timing": "timing", "--episode-query-budget": "episode_query_budget", "--access": "access",
                 "--max-change": "max_change",
                 "--attack-seed": "attack_seed"}
@@ -420,9 +425,13 @@ def attack_spec_from_args(args: argparse.Namespace):
         if given:
             raise ZodriveError(f"{', '.join(given)} set an attack's options, but no --attack was given")
         return None
+    if args.patience is not None and args.no_patience:
+        raise ZodriveError("--patience N and --no-patience contradict each other: give one")
     # flags are named after AttackSpec fields; --attack-seed sets the spec's `seed`
-    return load_attack(args.attack).with_overrides(
-        **{("seed" if dest == "attack_seed" else dest): getattr(args, dest) for dest in ATTACK_FLAGS.values()})
+    spec = load_attack(args.attack).with_overrides(
+        **{("seed" if dest == "attack_seed" else dest): getattr(args, dest) for dest in ATTACK_FLAGS.values()
+           if dest != "no_patience"})
+    return spec.with_overrides(clear=["patience"]) if args.no_patience else spec
 
 
 def cmd_env(args: argparse.Namespace) -> int:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Sequence
 
 from zodrive.attacks.victim import Victim, decision_only
 from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack
@@ -66,9 +66,10 @@ class AttackSpec:
             values["target"] = tuple(values["target"])
         return cls(**values)
 
-    def with_overrides(self, **changes: Any) -> "AttackSpec":
-        """The spec with `changes` (None: unchanged), validated as a whole."""
-        data = {**self.to_dict(), **{k: v for k, v in changes.items() if v is not None}}
+    def with_overrides(self, clear: Sequence[str] = (), **changes: Any) -> "AttackSpec":
+        """The spec with `changes` (None: unchanged) and the options in `clear` set to None,
+        validated as a whole."""
+        data = {**self.to_dict(), **{k: v for k, v in changes.items() if v is not None}, **{k: None for k in clear}}
         return AttackSpec.from_mapping(data, "attack options")
 
     def to_dict(self) -> dict[str, Any]:

@@ -251,6 +251,10 @@ def evaluate(
                 (out / name).unlink(missing_ok=True)
             write_json(key_path, job.key())
     todo = [i for i in range(episodes) if i not in done]
+    if out is not None and not todo and (out / "summary.json").is_file():
+        summary = json.loads((out / "summary.json").read_text())
+        if summary.get("episodes") == episodes:  # finished before: its summary stands (step records may be gone)
+            return summary
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
     bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")

@@ -195,7 +195,7 @@ def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick:
     info_path = fig / "figures.json"
     info: dict[str, Any] = json.loads(info_path.read_text()) if info_path.is_file() else {}
     if not (fig / "fig2_loss.png").is_file():
-        trace_spec = spec.with_overrides(early_stop=False, l2_weight=0.1)
+        trace_spec = spec.with_overrides(early_stop=False, l2_weight=0.1, warm_start=False, patience=None)
         traces = {algo.upper(): loss_trace(str(models[algo]), load_preset(PRESET_OF[algo]), trace_spec,
                                            max_states=60 if quick else 200)
                   for algo in ("dqn", "ddpg")}
