@@ -27,7 +27,7 @@ import io
 import time
 import zipfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import torch
@@ -36,15 +36,23 @@ from torch.nn import functional as F
 from zodrive.compute import one_torch_thread
 from zodrive.errors import ZodriveError
 
+if TYPE_CHECKING:
+    import gymnasium as gym
+
+    from zodrive.attacks.victim import Victim
+
+Augment = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
+
 
 @one_torch_thread  # small MLPs: one thread is fastest, and the result does not depend on the load
 def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, seed: int = 1,
             kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False,
-            teacher: str | None = None) -> Path:
+            teacher: str | None = None, dagger: int | None = None) -> Path:
     """Collect `steps` teacher states (training seeds `seed`, `seed` + 1, ...), train the
     robust student (initialized as `model`; the teacher is `model` itself unless `teacher`
     names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
-    returns the zip's path."""
+    returns the zip's path. With `dagger` (rounds >= 0) the student is trained by `dagger_distill`
+    instead (this path is unchanged without it)."""
     from zodrive.agents.baselines import get_baseline, is_baseline
     from zodrive.agents.loading import load_network, model_file
     from zodrive.agents.policies import load_victim
@@ -63,6 +71,9 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
         raise ZodriveError(f"--teacher must be an observation-reading baseline (baseline:rules, "
                            f"baseline:robust-rules@EPS), not {teacher!r}")
     guide = load_victim(teacher, preset) if teacher else network_victim(source.net, "discrete", source.obs_shape)
+    if dagger is not None:
+        return dagger_distill(model, preset, eps, steps, out, guide=guide, teacher=teacher, rounds=dagger, seed=seed,
+                              kappa=kappa, pgd_steps=pgd_steps, epochs=epochs)
     start = time.perf_counter()
     torch.manual_seed(seed)
     env = make_env(preset)
@@ -129,3 +140,244 @@ def _write_zip(source: Path, student: torch.nn.Sequential, target: Path) -> None
         for name, data in members.items():
             archive.writestr(name, data)
     tmp.replace(target)
+
+
+# --- behaviour cloning with DAgger (`--dagger ROUNDS`) -------------------------------------------
+
+class Standardize(torch.nn.Module):
+    """Fixed input layer x -> (x - mean) / std (a constant feature keeps std 1). Affine, so
+    `folded` merges it into the first Linear layer and the saved network is the plain MLP."""
+
+    def __init__(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        super().__init__()
+        self.register_buffer("mean", mean.float())
+        self.register_buffer("std", torch.where(std > 1e-6, std, torch.ones_like(std)).float())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.mean) / self.std
+
+
+def standardized(net: torch.nn.Sequential, x: torch.Tensor | None = None) -> torch.nn.Sequential:
+    """`Standardize` in front of a copy of `net`, computing exactly what `net` does: with
+    statistics of the flat batch `x` (`restandardize`), or the identity until then. Why: the
+    rules' thresholds are on differences of small normalized numbers (a lane is 0.04 of the y
+    range, the "centred" test 0.005); in standardized coordinates every feature moves the
+    first layer on the scale of its data (alone it helps the fit little:
+    results/imitation/ablation.txt)."""
+    n = next(m for m in net if isinstance(m, torch.nn.Linear)).in_features
+    out = torch.nn.Sequential(Standardize(torch.zeros(n), torch.ones(n)), *copy.deepcopy(net))
+    if x is not None:
+        restandardize(out, x)
+    return out
+
+
+def restandardize(net: torch.nn.Sequential, x: torch.Tensor) -> None:
+    """In place: `net[0]` (a `Standardize`) takes the statistics of `x` and the first Linear
+    layer is rescaled so that `net` still computes the same function."""
+    scale = net[0]
+    new = Standardize(x.mean(dim=0), x.std(dim=0))
+    first = next(m for m in net if isinstance(m, torch.nn.Linear))
+    with torch.no_grad():
+        first.bias += first.weight @ ((new.mean - scale.mean) / scale.std)
+        first.weight *= new.std / scale.std
+        scale.mean.copy_(new.mean)
+        scale.std.copy_(new.std)
+
+
+def folded(net: torch.nn.Sequential) -> torch.nn.Sequential:
+    """`net` without its leading `Standardize`, merged into the first Linear layer (the same
+    function, as the plain MLP an SB3 zip holds)."""
+    if not isinstance(net[0], Standardize):
+        return net
+    scale, body = net[0], copy.deepcopy(torch.nn.Sequential(*list(net)[1:]))
+    first = next(m for m in body if isinstance(m, torch.nn.Linear))
+    with torch.no_grad():
+        first.weight /= scale.std
+        first.bias -= first.weight @ scale.mean
+    return body
+
+
+def class_weights(y: torch.Tensor, n_classes: int, power: float) -> torch.Tensor:
+    """Cross-entropy weights (count_c / count_mean) ** -power, 1 on average over the samples;
+    power 0 is the plain loss, 0.5 lifts the rare lane changes without drowning IDLE."""
+    counts = torch.bincount(y, minlength=n_classes).float().clamp(min=1)
+    w = (counts / counts.mean()) ** -power
+    return w / (w[y].mean())
+
+
+def jitter(label: Callable[[torch.Tensor], torch.Tensor], std: torch.Tensor, scale: float, low: float, high: float,
+           gen: torch.Generator) -> Augment:
+    """A batch augmentation for `fit`: (x, y) -> x and y followed by a copy of x with Gaussian
+    noise of `std` (per flat feature; 0 where nothing may change) times a per-state factor drawn
+    from U(0, `scale`), kept in [low, high], and labelled by `label` (flat states -> actions).
+    Why: the rules are a function of the observation, so any state can be labelled; the
+    states of one episode are nearly the same, and without this the network fits features
+    that merely co-occur with braking in the few car-following episodes it saw
+    (results/imitation/ablation.txt)."""
+
+    def augment(x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        factor = torch.rand(len(x), 1, generator=gen) * scale
+        noisy = (x + torch.randn(x.shape, generator=gen) * std * factor).clamp(low, high)
+        return torch.cat([x, noisy]), torch.cat([y, label(noisy)])
+
+    return augment
+
+
+def fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, *, epochs: int, lr: float, batch: int,
+        weight: torch.Tensor | None, gen: torch.Generator, robust: dict[str, Any] | None = None,
+        augment: Augment | None = None) -> list[float]:
+    """Adam on (weighted) cross-entropy over flat states `x` and labels `y`, the learning rate
+    cosine-annealed to 0 over `epochs`; each batch passes through `augment` (e.g. `jitter`) if
+    given; with `robust` (eps, kappa, pgd_steps, mask, low, high) the adversarial CE of
+    `distill` is added. Returns the mean loss per epoch (over the batches as augmented)."""
+    from zodrive.attacks.threat import worst_in_ball
+
+    net.train()
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=epochs * -(-len(x) // batch))
+    history = []
+    for _ in range(epochs):
+        total = 0.0
+        for idx in torch.randperm(len(x), generator=gen).split(batch):
+            xb, yb = x[idx], y[idx]
+            if augment is not None:
+                xb, yb = augment(xb, yb)
+            loss = F.cross_entropy(net(xb), yb, weight=weight)
+            if robust and robust["kappa"] > 0:
+                shape = (len(xb), *robust["mask"].shape)
+                x_adv = worst_in_ball(lambda z: F.cross_entropy(net(z.reshape(len(z), -1)), yb, reduction="none"),
+                                      xb.reshape(shape), robust["eps"], robust["pgd_steps"], robust["mask"],
+                                      robust["low"], robust["high"])
+                loss = loss + robust["kappa"] * F.cross_entropy(net(x_adv.reshape(len(xb), -1)), yb, weight=weight)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item() * len(idx)
+        history.append(round(total / len(x), 4))
+    net.eval()
+    return history
+
+
+def agreement(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, names: tuple[str, ...]) -> dict[str, Any]:
+    """Share of states where `net`'s argmax is the label: overall and per label class
+    (agreement, count)."""
+    with torch.no_grad():
+        hit = net(x).argmax(dim=1) == y
+    per = {name: [round(float(hit[y == c].float().mean()), 4), int((y == c).sum())]
+           for c, name in enumerate(names) if (y == c).any()}
+    return {"all": round(float(hit.float().mean()), 4), "count": len(y), "per_class": per}
+
+
+DAGGER_LR, DAGGER_BATCH = 1e-3, 256   # Adam, cosine-annealed per refit (results/imitation/ablation.txt)
+DAGGER_WEIGHT_POWER = 0.0             # class weights (count / mean) ** -power; see `class_weights`
+DAGGER_JITTER = 0.5                   # `jitter` scale (in standard deviations of round 0's states)
+
+
+def dagger_rounds(env: gym.Env, teacher: Victim, student: torch.nn.Module, obs_shape: tuple[int, ...], *,
+                  rounds: int, steps: int, seed: int,
+                  refit: Callable[[torch.nn.Module, torch.Tensor, torch.Tensor], list[float]],
+                  evaluate: Callable[[torch.nn.Module, torch.Tensor, torch.Tensor], dict[str, Any]],
+                  ) -> tuple[torch.Tensor, torch.Tensor, list[dict[str, Any]]]:
+    """DAgger (Ross et al., AISTATS 2011) with pure rollouts: round 0 collects `steps` states
+    the teacher drives into; each later round `steps` states the current student drives into;
+    every state is labelled with the teacher's action, added to the aggregate, and
+    `refit(student, x, y)` trains on the whole aggregate. Round r drives on seeds
+    [seed + r steps, seed + (r + 1) steps). `evaluate(student)` after each refit goes into the
+    round's record. Returns the aggregate (flat states, labels) and the records."""
+    from zodrive.agents.victims import network_victim
+    from zodrive.evaluation.rollout import clean_states
+
+    xs: list[torch.Tensor] = []
+    ys: list[torch.Tensor] = []
+    records = []
+    for r in range(rounds + 1):
+        driver = teacher if r == 0 else network_victim(student, "discrete", obs_shape)
+        states = clean_states(env, driver, seed + r * steps, steps)
+        xs.append(torch.as_tensor(states.reshape(len(states), -1), dtype=torch.float32))
+        ys.append(torch.as_tensor(teacher.query(states).argmax(axis=1), dtype=torch.long))
+        x, y = torch.cat(xs), torch.cat(ys)
+        losses = refit(student, x, y)
+        records.append({"round": r, "driver": "teacher" if r == 0 else "student", "seeds": [seed + r * steps,
+                        seed + (r + 1) * steps - 1], "aggregate": len(x), "loss_per_epoch": losses,
+                        **evaluate(student, x, y)})
+    return torch.cat(xs), torch.cat(ys), records
+
+
+@one_torch_thread
+def dagger_distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, guide: Victim,
+                   teacher: str | None, rounds: int, seed: int, kappa: float, pgd_steps: int,
+                   epochs: int) -> Path:
+    """`distill` with DAgger: the student (the source model's network, behind a standardized
+    input layer that is folded away before saving) is refit for `epochs` epochs on the
+    aggregate after each of `rounds` + 1 rounds of `steps` states (`dagger_rounds`), every
+    batch with a `jitter` copy labelled by the teacher, and the adversarial term when
+    `kappa` > 0 (0: plain behaviour cloning, no PGD). Agreement with the teacher is measured after each round
+    on the aggregate (train) and on states no round trained on: `steps // 2` the teacher drives
+    into and `steps // 2` the current student drives into, on the seeds after the training
+    ones. Writes `out/model.zip` (a plain SB3 DQN zip) and `out/train.json`."""
+    from zodrive.agents.loading import load_network, model_file
+    from zodrive.agents.victims import network_victim
+    from zodrive.attacks.threat import ThreatModel
+    from zodrive.envs import action_names, attack_context, make_env
+    from zodrive.evaluation.rollout import clean_states
+    from zodrive.runinfo import write_json, write_run_info
+
+    if rounds < 0 or steps < 2:
+        raise ZodriveError(f"DAgger needs rounds >= 0 and steps >= 2, not {rounds} and {steps}")
+    source = load_network(model, preset)
+    names = tuple(action_names(preset))
+    start = time.perf_counter()
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
+    env = make_env(preset)
+    held_seed = seed + (rounds + 1) * steps  # after every training seed
+    held = clean_states(env, guide, held_seed, steps // 2)
+    x_held = torch.as_tensor(held.reshape(len(held), -1), dtype=torch.float32)
+    y_held = torch.as_tensor(guide.query(held).argmax(axis=1), dtype=torch.long)
+    context = attack_context(preset)
+    low, high = context["bounds"]
+    robust = {"eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "low": low, "high": high,
+              "mask": torch.as_tensor(ThreatModel(eps=eps, features=context["features"]).mask(source.obs_shape))}
+    student = standardized(source.net)  # the identity scale until the first refit sets it from round 0's states
+
+    def label(flat: torch.Tensor) -> torch.Tensor:
+        return torch.as_tensor(guide.query(flat.numpy().reshape(len(flat), *source.obs_shape)).argmax(axis=1))
+
+    augment: list[Augment | None] = []
+
+    def refit(net: torch.nn.Sequential, x: torch.Tensor, y: torch.Tensor) -> list[float]:
+        if len(x) == steps:  # round 0: the teacher's states set the input scale and the noise
+            restandardize(net, x)
+            std = x.std(dim=0) * robust["mask"].reshape(-1)  # frozen features (presence) stay as observed
+            augment.append(jitter(label, std, DAGGER_JITTER, low, high, gen) if DAGGER_JITTER else None)
+        weight = class_weights(y, len(names), DAGGER_WEIGHT_POWER) if DAGGER_WEIGHT_POWER else None
+        return fit(net, x, y, epochs=epochs, lr=DAGGER_LR, batch=DAGGER_BATCH, weight=weight, gen=gen, robust=robust,
+                   augment=augment[0])
+
+    def evaluate(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor) -> dict[str, Any]:
+        own = clean_states(env, network_victim(net, "discrete", source.obs_shape), held_seed + steps // 2, steps // 2)
+        x_own = torch.as_tensor(own.reshape(len(own), -1), dtype=torch.float32)
+        y_own = torch.as_tensor(guide.query(own).argmax(axis=1), dtype=torch.long)
+        return {"train": agreement(net, x, y, names), "heldout_teacher_states": agreement(net, x_held, y_held, names),
+                "heldout_student_states": agreement(net, x_own, y_own, names)}
+
+    _, _, records = dagger_rounds(env, guide, student, source.obs_shape, rounds=rounds, steps=steps, seed=seed,
+                                  refit=refit, evaluate=evaluate)
+    env.close()
+    method = {"name": "dagger-distillation", "teacher": teacher or "the source model", "eps": eps, "kappa": kappa,
+              "pgd_steps": pgd_steps, "epochs": epochs, "states": steps, "rounds": rounds, "lr": DAGGER_LR,
+              "batch": DAGGER_BATCH, "class_weight_power": DAGGER_WEIGHT_POWER, "jitter": DAGGER_JITTER,
+              "input": "standardized (statistics of round 0's teacher states), folded into the first layer",
+              "reference": "Ross et al. 2011 (DAgger); Rusu et al. 2016; Madry et al. 2018"}
+    write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
+    _write_zip(model_file(model), folded(student), out / "model.zip")
+    wall = time.perf_counter() - start
+    total = (rounds + 1) * steps
+    write_json(out / "train.json", {
+        "algo": "dqn", "kind": "distill", "source_model": str(model_file(model)), "method": method,
+        "total_timesteps": total, "seed": seed, "heldout_seeds": [held_seed, held_seed + steps - 1],
+        "clean_agreement": records[-1]["train"]["all"],
+        "heldout_agreement": records[-1]["heldout_student_states"]["all"], "rounds": records,
+        "wall_time_s": round(wall, 1), "steps_per_s": round(total / wall, 1)})
+    return out / "model.zip"

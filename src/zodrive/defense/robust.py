@@ -6,7 +6,8 @@
   (`agents.dqn_variants.SADQN`) or SA-DDPG (`agents.state_adversarial.SADDPG`).
 - `distill`: adversarially robust distillation of the model's own decisions (or of a
   `--teacher` baseline's) on the states the teacher visits (`defense.distill`); `steps` is the
-  number of states collected, DQN only.
+  number of states collected, DQN only; with `dagger` (rounds), behaviour cloning with DAgger
+  (`defense.distill.dagger_distill`), `steps` states per round.
 `at` and `sa` continue from the model's weights with the same warm-buffer start as Algorithm 2;
 `distill` starts its student from them.
 """
@@ -28,7 +29,7 @@ METHODS = ("at", "sa", "distill")
 def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, steps: int, out: Path, *,
                  seed: int = 1, warmup: int = 1000, kappa: float = 0.5, pgd_steps: int = 5,
                  progress_bar: bool = True, trust: bool = False, force: bool = False,
-                 teacher: str | None = None, epochs: int = 20) -> Path:
+                 teacher: str | None = None, epochs: int = 20, dagger: int | None = None) -> Path:
     if method not in METHODS:
         raise ZodriveError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
     if not eps > 0:
@@ -37,7 +38,9 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, st
         from zodrive.defense.distill import distill
 
         return distill(model, preset, eps, steps, out, seed=seed, kappa=kappa, pgd_steps=pgd_steps, force=force,
-                       teacher=teacher, epochs=epochs)
+                       teacher=teacher, epochs=epochs, dagger=dagger)
+    if dagger is not None:
+        raise ZodriveError("--dagger applies to --method distill")
     if teacher is not None:
         raise ZodriveError("--teacher applies to --method distill")
     common = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust, "force": force}
