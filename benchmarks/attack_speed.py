@@ -5,15 +5,16 @@
    q + 1 calls per iteration - against zodrive's engine - one batched call per iteration.
 2. Per environment step on the *same states*: clean rollouts record their observations and
    time each step (environment step + the policy's decision); then the default attack
-   (T = 100, q = 20, early stopping on) and the query-saving one (`--warm-start --patience
-   10`) attack exactly those observations in order, through the evaluation's own lockstep
+   (T = 100, q = 20, early stopping, warm start, patience 10) and the same searching every
+   step from scratch until success or T (`--no-warm-start --no-patience`, the default
+   until 2026-11-23) attack exactly those observations in order, through the evaluation's own lockstep
    loop (`run_lockstep` over environments that replay the recorded episodes; episode
    boundaries kept, so warm starts carry as in an evaluation), with 1, 8 and 32 episodes
    side by side. Attacked cost per step = the recorded step + the attack's time per step; a
    crash cannot shorten anything, since every side sees the same steps.
 
-Ends with one line: speedup_vs_naive=<x> attacked_over_clean_per_step=<y> saving_over_clean_per_step=<z>
-lockstep_speedup=<w> (the attack's time per step with one episode at a time over 8 side by side)
+Ends with one line: speedup_vs_naive=<x> attacked_over_clean_per_step=<y> from_scratch_over_clean_per_step=<z>
+lockstep_speedup=<w> (the default attack's time per step, one episode at a time over 8 side by side)
 """
 
 from __future__ import annotations
@@ -58,24 +59,38 @@ def literal_algorithm1(x0: np.ndarray, victim, objective, mask: np.ndarray, *, s
     return x
 
 
-def per_step(model: str, states: int, steps: int, q: int) -> tuple[float, float]:
+def per_step(model: str, states: int, steps: int, q: int,
+             envs: list[int]) -> tuple[float, dict[int, float], dict[int, float]]:
+    """Per environment step [s]: literal Algorithm 1 on `states` states; the engine on
+    max(envs) states attacked `n` at a time (rows of one call, as in lockstep) for each n; and
+    the victim's forward passes alone for those queries in batches of n (q + 1) rows."""
     preset = load_preset("discrete")
     victim = sb3_victim(load_model(model, preset))
-    xs = clean_states(make_env(preset), victim, SEED, states)
+    xs = clean_states(make_env(preset), victim, SEED, max(states, *envs))
     spec = AttackSpec(steps=steps, n_directions=q, early_stop=False)
     attack, objective, oracle = spec.build(victim, **attack_context(preset))
     mask = attack.threat.mask((5, 5))
     rng = np.random.default_rng(0)
     t0 = time.perf_counter()
-    for x in xs:
+    for x in xs[:states]:
         literal_algorithm1(x, victim, objective, mask, steps=steps, q=q, mu=spec.mu,
                            step_size=spec.step_size, eps=spec.eps, rng=rng)
-    naive = (time.perf_counter() - t0) / len(xs)
-    t0 = time.perf_counter()
-    for x in xs:
-        attack.perturb(x[None], oracle, objective)
-    batched = (time.perf_counter() - t0) / len(xs)
-    return naive, batched
+    naive = (time.perf_counter() - t0) / states
+    engine = {}
+    for n in envs:
+        count = len(xs) // n * n
+        t0 = time.perf_counter()
+        for i in range(0, count, n):
+            attack.perturb(xs[i:i + n], oracle, objective)
+        engine[n] = (time.perf_counter() - t0) / count
+    forward = {}  # the arithmetic alone: the forward passes of a step's T (q + 1) queries, nothing else
+    for n in envs:
+        batch = np.resize(xs, (n * (q + 1), *xs.shape[1:]))
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            victim.query(batch)
+        forward[n] = (time.perf_counter() - t0) / n
+    return naive, engine, forward
 
 
 class Replay(gym.Env):
@@ -146,10 +161,12 @@ def main() -> None:
                         help="episodes side by side (the first is the reference of lockstep_speedup)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    naive, batched = per_step(args.model, args.states, args.steps, args.n_directions)
+    naive, engine, forward = per_step(args.model, args.states, args.steps, args.n_directions, args.envs)
     print(f"per environment step, T={args.steps}, q={args.n_directions}, all iterations:")
-    print(f"  literal Algorithm 1 (1 query per call): {1000 * naive:8.1f} ms")
-    print(f"  zodrive engine (1 call per iteration):  {1000 * batched:8.1f} ms")
+    print(f"  literal Algorithm 1 (1 query per call):   {1000 * naive:8.2f} ms")
+    for n, cost in engine.items():
+        print(f"  zodrive engine, {n:2d} steps per call:      {1000 * cost:8.2f} ms  (x{naive / cost:.1f}); "
+              f"its forward passes alone {1000 * forward[n]:.2f} ms (x{naive / forward[n]:.1f}: the ceiling)")
     recorded, clean, victim_of = clean_episodes(args.model, args.episodes, args.max_steps, args.seed)
     print(f"per environment step on the same states ({args.episodes} clean episodes of at most {args.max_steps} "
           f"steps, seeds {args.seed}..{args.seed + args.episodes - 1}; clean step {1000 * clean:.2f} ms = "
@@ -157,7 +174,7 @@ def main() -> None:
     default = load_attack("zo-signsgd")
     ratio: dict[tuple[str, int], float] = {}
     for name, spec in {"default": default,
-                       "warm-start+patience": default.with_overrides(warm_start=True, patience=10)}.items():
+                       "from-scratch": default.with_overrides(warm_start=False, clear=["patience"])}.items():
         for envs in args.envs:
             attack, queries, success = same_states(recorded, victim_of, spec, envs)
             ratio[name, envs] = (clean + attack) / clean
@@ -165,9 +182,9 @@ def main() -> None:
                   f"success {success:.1%}, x{ratio[name, envs]:.2f} of clean")
     n1, nd = args.envs[0], DEFAULT_ENVS if DEFAULT_ENVS in args.envs else args.envs[-1]
     attack_ms = {envs: ratio["default", envs] - 1 for envs in args.envs}
-    print(f"speedup_vs_naive={naive / batched:.1f} "
+    print(f"speedup_vs_naive={naive / engine[nd]:.1f} (--envs {nd}; {n1}: x{naive / engine[n1]:.1f}) "
           f"attacked_over_clean_per_step={ratio['default', nd]:.2f} (--envs {nd}) "
-          f"saving_over_clean_per_step={ratio['warm-start+patience', nd]:.2f} (--envs {nd}) "
+          f"from_scratch_over_clean_per_step={ratio['from-scratch', nd]:.2f} (--envs {nd}) "
           f"lockstep_speedup={attack_ms[n1] / attack_ms[nd]:.1f} (attack time, --envs {n1} over {nd}; "
           + ", ".join(f"{e}: x{attack_ms[n1] / attack_ms[e]:.1f}" for e in args.envs) + ")")
 
