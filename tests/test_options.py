@@ -60,6 +60,13 @@ def _error(capsys, args: list[str]) -> str:
     (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "eps must be a finite number"),
     # words
     (["export", str(ROOT / "README.md"), "--out", "{tmp}/m.onnx"], "not a stable-baselines3 model"),
+    # lockstep and the default attack's switches (issue 21)
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--defense", "kinematic", "--envs", "4"],
+     "cannot run side by side here (the kinematic defense keeps its own state"),
+    (["evaluate", "baseline:idm-mobil", "--envs", "2"], "reads its own simulator"),
+    (["evaluate", DQN, "--envs", "0"], "--envs"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--patience", "3", "--no-patience"], "contradict each other"),
+    (["evaluate", DQN, "--no-warm-start"], "no --attack was given"),
 ])
 def test_each_finding_is_one_clear_line(tmp_path: Path, capsys, args: list[str], message: str) -> None:
     err = _error(capsys, [a.replace("{tmp}", str(tmp_path)) for a in args])
@@ -139,3 +146,19 @@ def test_interrupted_train_names_the_flag_that_resumes(monkeypatch, tmp_path: Pa
     monkeypatch.setitem(cli.COMMANDS, "train", interrupted)
     assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "t")]) == 130
     assert "--resume" in capsys.readouterr().err
+
+
+def test_the_default_attack_can_search_every_step_from_scratch() -> None:
+    """`zo-signsgd` carries its perturbation and gives up stalled steps by default; the two
+    switches turn that off, and the paper's literal config never had it."""
+    from zodrive.attacks.spec import load_attack
+    from zodrive.cli import attack_spec_from_args, build_parser
+
+    parse = lambda *flags: attack_spec_from_args(build_parser().parse_args(["evaluate", DQN, *flags]))  # noqa: E731
+    default = parse("--attack", "zo-signsgd")
+    assert (default.warm_start, default.patience) == (True, 10)
+    scratch = parse("--attack", "zo-signsgd", "--no-warm-start", "--no-patience")
+    assert (scratch.warm_start, scratch.patience) == (False, None)
+    assert scratch.to_dict() == {**default.to_dict(), "warm_start": False, "patience": None}
+    paper = load_attack("zo-signsgd-paper")
+    assert (paper.warm_start, paper.patience, paper.early_stop) == (False, None, False)
