@@ -117,3 +117,13 @@ def test_dagger_distillation_writes_a_zip_that_reproduces_its_heldout_agreement(
     student = load_network(out, preset).net
     names = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
     assert agreement(student, x, y, names)["all"] == train["rounds"][-1]["heldout_teacher_states"]["all"]
+
+
+def test_dagger_is_an_error_outside_distill(tmp_path: Path) -> None:
+    from zodrive.defense.robust import robust_train
+    from zodrive.envs import load_preset
+    from zodrive.errors import ZodriveError
+
+    with pytest.raises(ZodriveError, match="--dagger applies to --method distill"):
+        robust_train("models/dqn", load_preset("discrete"), "sa", 0.05, 100, tmp_path / "x", dagger=2)
+    assert not (tmp_path / "x").exists()
