@@ -45,19 +45,19 @@ Augment = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tenso
 
 
 @one_torch_thread  # small MLPs: one thread is fastest, and the result does not depend on the load
-def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, seed: int = 1,
+def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, out: Path, *, seed: int = 1,
             kappa: float = 1.0, pgd_steps: int = 5, epochs: int = 20, force: bool = False,
             teacher: str | None = None, dagger: int | None = None) -> Path:
     """Collect `steps` teacher states (training seeds `seed`, `seed` + 1, ...), train the
     robust student (initialized as `model`; the teacher is `model` itself unless `teacher`
     names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
     returns the zip's path. With `dagger` (rounds >= 0) the student is trained by `dagger_distill`
-    instead (this path is unchanged without it)."""
+    instead (this path is unchanged without it). `eps` None: plain cloning (`kappa` must be 0)."""
     from zodrive.agents.baselines import get_baseline, is_baseline
     from zodrive.agents.loading import load_network, model_file
     from zodrive.agents.policies import load_victim
     from zodrive.agents.victims import network_victim
-    from zodrive.attacks.threat import ThreatModel, worst_in_ball
+    from zodrive.attacks.threat import worst_in_ball
     from zodrive.envs import attack_context, make_env
     from zodrive.evaluation.rollout import clean_states
     from zodrive.runinfo import write_json, write_run_info
@@ -81,7 +81,7 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
     env.close()
     context = attack_context(preset)
     low, high = context["bounds"]
-    mask = torch.as_tensor(ThreatModel(eps=eps, features=context["features"]).mask(states.shape[1:]))
+    mask = torch.as_tensor(_threat(eps, context["features"]).mask(states.shape[1:]))
     x_all = torch.as_tensor(states, dtype=torch.float32)
     y_all = torch.as_tensor(guide.query(states).argmax(axis=1), dtype=torch.long)
     student = copy.deepcopy(source.net).train()
@@ -93,10 +93,13 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
         total = 0.0
         for batch in order.split(256):
             x, y = x_all[batch], y_all[batch]
-            x_adv = worst_in_ball(lambda z: F.cross_entropy(student(z.reshape(len(z), -1)), y, reduction="none"),
-                                  x, eps, pgd_steps, mask, low, high)
-            loss = F.cross_entropy(student(x.reshape(len(x), -1)), y) \
-                + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
+            if eps is None:  # plain cloning
+                loss = F.cross_entropy(student(x.reshape(len(x), -1)), y)
+            else:  # (with kappa 0 and an eps the PGD still runs: results made so stay as they were)
+                x_adv = worst_in_ball(lambda z: F.cross_entropy(student(z.reshape(len(z), -1)), y, reduction="none"),
+                                      x, eps, pgd_steps, mask, low, high)
+                loss = F.cross_entropy(student(x.reshape(len(x), -1)), y) \
+                    + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -116,6 +119,14 @@ def distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Pat
         "total_timesteps": steps, "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
         "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1)})
     return out / "model.zip"
+
+
+def _threat(eps: float | None, features: Any) -> Any:
+    """The threat model whose mask (frozen presence) the noise and the adversarial term use;
+    without `eps` (plain cloning) only its mask is read."""
+    from zodrive.attacks.threat import ThreatModel
+
+    return ThreatModel(features=features) if eps is None else ThreatModel(eps=eps, features=features)
 
 
 def _write_zip(source: Path, student: torch.nn.Sequential, target: Path) -> None:
@@ -305,7 +316,7 @@ def dagger_rounds(env: gym.Env, teacher: Victim, student: torch.nn.Module, obs_s
 
 
 @one_torch_thread
-def dagger_distill(model: str, preset: dict[str, Any], eps: float, steps: int, out: Path, *, guide: Victim,
+def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, out: Path, *, guide: Victim,
                    teacher: str | None, rounds: int, seed: int, kappa: float, pgd_steps: int,
                    epochs: int) -> Path:
     """`distill` with DAgger: the student (the source model's network, behind a standardized
@@ -318,7 +329,6 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float, steps: int, o
     ones. Writes `out/model.zip` (a plain SB3 DQN zip) and `out/train.json`."""
     from zodrive.agents.loading import load_network, model_file
     from zodrive.agents.victims import network_victim
-    from zodrive.attacks.threat import ThreatModel
     from zodrive.envs import action_names, attack_context, make_env
     from zodrive.evaluation.rollout import clean_states
     from zodrive.runinfo import write_json, write_run_info
@@ -338,7 +348,7 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float, steps: int, o
     context = attack_context(preset)
     low, high = context["bounds"]
     robust = {"eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "low": low, "high": high,
-              "mask": torch.as_tensor(ThreatModel(eps=eps, features=context["features"]).mask(source.obs_shape))}
+              "mask": torch.as_tensor(_threat(eps, context["features"]).mask(source.obs_shape))}
     student = standardized(source.net)  # the identity scale until the first refit sets it from round 0's states
 
     def label(flat: torch.Tensor) -> torch.Tensor:

@@ -26,13 +26,16 @@ from zodrive.errors import ZodriveError
 METHODS = ("at", "sa", "distill")
 
 
-def robust_train(model: str, preset: dict[str, Any], method: str, eps: float, steps: int, out: Path, *,
+def robust_train(model: str, preset: dict[str, Any], method: str, eps: float | None, steps: int, out: Path, *,
                  seed: int = 1, warmup: int = 1000, kappa: float = 0.5, pgd_steps: int = 5,
                  progress_bar: bool = True, trust: bool = False, force: bool = False,
                  teacher: str | None = None, epochs: int = 20, dagger: int | None = None) -> Path:
     if method not in METHODS:
         raise ZodriveError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
-    if not eps > 0:
+    cloning = method == "distill" and kappa == 0  # no adversarial term: no radius to train against
+    if eps is None and not cloning:
+        raise ZodriveError(f"--method {method} needs --eps (the L-inf radius to train against)")
+    if eps is not None and not eps > 0:
         raise ZodriveError(f"eps must be > 0, not {eps}")
     if method == "distill":  # supervised on the teacher's states: no SB3 training loop, nothing unpickled
         from zodrive.defense.distill import distill
