@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 
 from zodrive.config import MODELS_ENV
-from zodrive.defense import DEFENSES
+from zodrive.defense import DEFENSE_NAMES, parse_defense
 from zodrive.errors import ZodriveError
 
 log = logging.getLogger("zodrive")
@@ -170,6 +170,18 @@ class _Help(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action) or text
 
 
+def _defense(text: str) -> str:
+    """`--defense`: a known defense, canonical (`shield` -> `shield@0.02`); else a one-line error."""
+    try:
+        return parse_defense(text)
+    except ZodriveError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _defense_or_none(text: str) -> str:
+    return "none" if text == "none" else _defense(text)
+
+
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", _Help)  # --help shows defaults
@@ -218,8 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl)")
     ev.add_argument("--workers", type=_positive_int, default=1)
     _envs_flag(ev)
-    ev.add_argument("--defense", choices=DEFENSES,
-                    help="filter between the (attacked) sensor and the policy; attacks query the defended system")
+    ev.add_argument("--defense", type=_defense, metavar="|".join(DEFENSE_NAMES),
+                    help="kinematic: filter between the (attacked) sensor and the policy; shield[@EPS]: the "
+                         "pessimistic rules at budget EPS (default 0.02) veto unsafe actions; attacks query the "
+                         "defended system")
     _attack_flags(ev)
     ev.add_argument("--no-progress", action="store_true")
 
@@ -228,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_flags(render)
     render.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     render.add_argument("--out", type=Path, required=True)
-    render.add_argument("--defense", choices=DEFENSES,
+    render.add_argument("--defense", type=_defense, metavar="|".join(DEFENSE_NAMES),
                         help="filter between the (attacked) sensor and the policy; 'perceived' is what passes it")
     render.add_argument("--force", action="store_true", help="overwrite a render already in --out")
     render.add_argument("--until-crash", type=_positive_int, default=1, metavar="N",
@@ -312,7 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_flags(cmp_, trust=False)  # applied to every model
     cmp_.add_argument("--attack-set", action="append", default=[], metavar="KEY=VALUE",
                       help="attack option for every attack of the grid, e.g. patience=10")
-    cmp_.add_argument("--defense", nargs="+", default=None, choices=["none", *DEFENSES],
+    cmp_.add_argument("--defense", nargs="+", default=None, type=_defense_or_none,
+                      metavar="none|" + "|".join(DEFENSE_NAMES),
                       help="defenses in front of each model, one set of cells each (none = undefended)")
     cmp_.add_argument("--plot", type=Path, default=None,
                       help="PNG: with --query-budgets, return and success against queries per step; "

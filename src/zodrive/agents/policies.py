@@ -174,7 +174,11 @@ def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mod
     if defense is None:
         return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
     from zodrive.defense.kinematic import FilterWrapper, defended_victim, make_defense
+    from zodrive.defense.shield import Shield, shielded_victim
 
     filt = make_defense(defense, preset)
+    if isinstance(filt, Shield):  # stateless: the defended system is a policy; it drives and is attacked
+        shielded = shielded_victim(victim, filt)
+        return shielded, make_attacked_env(preset, shielded, spec, render_mode=render_mode, trace=trace)
     env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
     return victim, FilterWrapper(env, filt)

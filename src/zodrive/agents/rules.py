@@ -73,7 +73,10 @@ class ObservationRules:
         self.eps = float(eps)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 
-    def actions(self, batch: np.ndarray) -> np.ndarray:
+    def _rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
+        """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
+        right; -inf where the lane does not exist), whether a vehicle may be beside the ego on the
+        left / right, and whether the ego is centred in its lane; pessimistic within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5
@@ -102,7 +105,18 @@ class ObservationRules:
         own, _ = room(0)
         left, left_blocked = room(-1)
         right, right_blocked = room(+1)
-        act = np.full(len(x), IDLE)
+        # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
+        lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
+        lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)
+        return {"own": own, "left": left, "left_blocked": left_blocked, "right": right,
+                "right_blocked": right_blocked, "centred": centred,
+                "left_exists": lane_lo - 1 >= 0, "right_exists": lane_hi + 1 <= self.lanes - 1}
+
+    def actions(self, batch: np.ndarray) -> np.ndarray:
+        r = self._rooms(batch)
+        own, left, right, centred = r["own"], r["left"], r["right"], r["centred"]
+        left_blocked, right_blocked = r["left_blocked"], r["right_blocked"]
+        act = np.full(len(own), IDLE)
         act[own > MARGIN] = FASTER
         keep_right = centred & ~right_blocked & (right > MARGIN)
         act[keep_right] = LANE_RIGHT
@@ -112,6 +126,25 @@ class ObservationRules:
         go_right = close & centred & ~right_blocked & (right > MARGIN) & ~go_left
         act[go_left], act[go_right] = LANE_LEFT, LANE_RIGHT
         return act
+
+    def safe_actions(self, batch: np.ndarray) -> np.ndarray:
+        """(B, 5) booleans: the meta-actions these rules' room test accepts on each observation,
+        whatever the rules would choose. FASTER: the own lane free by MARGIN (as the rules ask
+        before speeding up); IDLE: the own lane not too close (the rules keep speed there);
+        LANE_LEFT / LANE_RIGHT: the target lane exists, nothing may be beside the ego there, and
+        its room exceeds MARGIN (as the rules ask before any change; the "centred" test is left
+        out: it decides when to ask, not whether the target lane is free); SLOWER: always.
+        With eps > 0 every test is the pessimistic one, so an action accepted on an observation
+        is accepted by the same test on every true state within eps of it. The rules' own
+        choice is always accepted."""
+        r = self._rooms(batch)
+        safe = np.zeros((len(r["own"]), 5), dtype=bool)
+        safe[:, FASTER] = r["own"] > MARGIN
+        safe[:, IDLE] = r["own"] >= 0
+        safe[:, LANE_LEFT] = ~r["left_blocked"] & (r["left"] > MARGIN) & r["left_exists"]
+        safe[:, LANE_RIGHT] = ~r["right_blocked"] & (r["right"] > MARGIN) & r["right_exists"]
+        safe[:, SLOWER] = True
+        return safe
 
 
 def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0) -> Victim:

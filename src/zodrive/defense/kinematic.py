@@ -20,7 +20,7 @@ observation of an episode are trusted.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -28,6 +28,9 @@ import numpy as np
 from zodrive.attacks.victim import Victim
 from zodrive.defense import DEFENSES
 from zodrive.errors import ZodriveError
+
+if TYPE_CHECKING:
+    from zodrive.defense.shield import Shield
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
 
@@ -171,8 +174,13 @@ class FilterWrapper(gym.ObservationWrapper):
         return self.filt.update(observation)
 
 
-def make_defense(name: str, preset: dict[str, Any]) -> KinematicFilter:
-    """A defense by name (one name per idea: `--defense kinematic`)."""
+def make_defense(name: str, preset: dict[str, Any]) -> "KinematicFilter | Shield":
+    """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`)."""
+    from zodrive.defense.shield import Shield, parse_shield
+
+    eps = parse_shield(name)
+    if eps is not None:
+        return Shield(preset, eps)
     if name != "kinematic":
-        raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSES)})")
+        raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSES)}, shield@EPS)")
     return KinematicFilter(preset)

@@ -1,0 +1,159 @@
+"""A certified safety shield (`--defense shield[@EPS]`): the learned driver acts, the
+pessimistic rules veto.
+
+Each step the driver proposes its action (argmax of its scores). If the robust rules'
+room test at budget EPS (`ObservationRules.safe_actions`, the code `baseline:robust-rules@EPS`
+decides with, plus: a lane change only towards a lane that exists wherever the ego may truly
+be) does not accept that action on the observation, the shield takes the robust rules' own
+choice instead (SLOWER, IDLE, or a lane change they find room for; SLOWER if the test rejects it).
+
+Guarantee: the room test at EPS is pessimistic over every true state within L-inf EPS of the
+observation (every observed vehicle possibly anywhere its true state may be: closer, closing
+faster, in every lane it may overlap). So under any attack of budget <= EPS on the other
+vehicles' rows, every action the shielded car takes is one the plain rules' test (eps 0) accepts
+on the *true* observation: no FASTER or IDLE into an own-lane gap below the rules' safe gap, no
+lane change into a lane whose gap is too small or where a listed vehicle is beside. What it
+cannot cover: the ego row beyond the lane-existence test (an attacker may shift the ego's
+perceived lateral position and speed; the test assumes an own speed of 25 m/s, and the ego can
+drive faster), vehicles the observation does not list (behind the
+ego, or beyond the nearest four), attacks larger than EPS, and crashes the rules' test does not
+foresee (e.g. a vehicle cutting in, or the safe gap at the assumed 25 m/s being too short).
+
+The shield keeps no state between steps: it is a function of the observation, so the defended
+system (driver + shield) is itself a memoryless policy and the attacker queries it as one.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from zodrive.agents.rules import SLOWER, ObservationRules
+from zodrive.attacks.victim import Victim
+from zodrive.errors import ZodriveError
+
+DEFAULT_EPS = 0.02
+"""`--defense shield` = `shield@0.02`: a defense is one fixed system (its clean and attacked cells
+must describe the same car, so its budget cannot follow the attack's), and 0.02 is the smallest
+budget of zodrive's robustness grid, the one at which the pessimistic rules still overtake
+(at 0.05 they are the brake)."""
+
+
+def parse_shield(name: str) -> float | None:
+    """The budget of `shield` / `shield@EPS` (None if `name` is not a shield); one-line error on a
+    malformed budget."""
+    base, at, eps = str(name).partition("@")
+    if base != "shield":
+        return None
+    if not at:
+        return DEFAULT_EPS
+    try:
+        value = float(eps)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < 1:  # also rejects nan
+        raise ZodriveError(f"{name}: shield@EPS takes a budget EPS in (0, 1) in normalized units, "
+                           "e.g. shield@0.02")
+    return value
+
+
+def canonical_shield(name: str) -> str:
+    """`shield@EPS` with EPS written as a plain float (`shield` -> `shield@0.02`, `shield@.050` ->
+    `shield@0.05`), so one system has one results key."""
+    eps = parse_shield(name)
+    if eps is None:
+        raise ZodriveError(f"{name!r} is not a shield (shield or shield@EPS)")
+    return f"shield@{eps:g}"
+
+
+class Shield:
+    """`decide(obs, proposed)`: the proposed meta-actions where the robust rules' room test at
+    `eps` accepts them, the robust rules' choice elsewhere. Stateless."""
+
+    def __init__(self, preset: dict[str, Any], eps: float = DEFAULT_EPS) -> None:
+        from zodrive.envs import action_kind
+
+        if action_kind(preset) != "discrete":
+            raise ZodriveError("the shield vetoes meta-actions: it guards discrete policies (preset `discrete`), "
+                               "not continuous ones")
+        try:
+            self.rules = ObservationRules(preset, eps)
+        except ZodriveError as exc:
+            raise ZodriveError(f"the shield reads what the rules read: {exc}") from None
+        self.eps = float(eps)
+
+    def safe(self, batch: np.ndarray) -> np.ndarray:
+        """(B, 5) booleans: the actions safe for every true state within eps of each observation."""
+        return self.rules.safe_actions(np.asarray(batch))
+
+    def decide(self, batch: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        """Final actions (B,): `proposed` where safe, the robust rules' choice where not."""
+        batch = np.asarray(batch)
+        proposed = np.asarray(proposed, dtype=np.int64)
+        ok = self.safe(batch)[np.arange(len(batch)), proposed]
+        if ok.all():
+            return proposed
+        out = proposed.copy()
+        out[~ok] = self.fallback(batch[~ok])
+        return out
+
+    def fallback(self, batch: np.ndarray) -> np.ndarray:
+        """The robust rules' choice where the test accepts it, else SLOWER (their lane change
+        may target a lane that exists only for some ego positions within eps)."""
+        act = self.rules.actions(batch)
+        ok = self.safe(batch)[np.arange(len(batch)), act]
+        return np.where(ok, act, SLOWER)
+
+    def outputs(self, batch: np.ndarray, scores: np.ndarray) -> np.ndarray:
+        """The defended system's scores (B, 5) given the driver's (B, 5): the driver's scores on
+        the actions the shield accepts; unsafe ones shifted below every score of the row (order
+        among them kept); where the driver's choice is vetoed, the rules' choice lifted to the
+        row's max + 1. The argmax is the shielded decision."""
+        batch = np.asarray(batch)
+        scores = np.asarray(scores, dtype=np.float32)
+        safe = self.safe(batch)
+        rows = np.arange(len(scores))
+        proposed = scores.argmax(axis=-1)
+        hi, lo = scores.max(axis=-1, keepdims=True), scores.min(axis=-1, keepdims=True)
+        out = np.where(safe, scores, scores - (hi - lo) - 1.0).astype(np.float32)
+        vetoed = ~safe[rows, proposed]
+        if vetoed.any():
+            out[rows[vetoed], self.fallback(batch[vetoed])] = hi[vetoed, 0] + 1.0
+        return out
+
+
+def shielded_victim(victim: Victim, shield: Shield) -> Victim:
+    """The defended system (driver + shield) as the attacker and the car see it.
+
+    Outputs are scores, not a one-hot decision: the driver's own scores wherever the shield
+    lets them stand (`Shield.outputs`), so a score-based attacker learns as much from the
+    defended system as from the bare driver, and the shield is not credited with hiding the
+    scores (a one-hot output would flatten every score-based objective: obfuscation, not
+    safety). Every query sees the shield, so every attack on it is shield-aware: it searches for
+    perturbations whose *shielded* decision is its target. White-box access goes through the
+    shield by BPDA (as `defended_victim`): the value is the shielded output, the gradient the
+    driver network's, so PGD runs against the defended system."""
+    if victim.kind != "discrete":
+        raise ZodriveError("the shield guards discrete policies (their scores pick a meta-action)")
+    shape = victim.obs_shape
+
+    def shielded(batch: np.ndarray, scores: np.ndarray) -> np.ndarray:
+        """Shielded outputs for any leading batch axes (the attacks query (B, ...) or (N, M, ...))."""
+        out = shield.outputs(batch.reshape(-1, *shape), scores.reshape(-1, scores.shape[-1]))
+        return out.reshape(scores.shape)
+
+    def query(batch: np.ndarray) -> np.ndarray:
+        batch = np.asarray(batch)
+        return shielded(batch, np.asarray(victim.query(batch)))
+
+    differentiable = None
+    if victim.differentiable is not None:
+        net = victim.differentiable
+
+        def differentiable(x: Any) -> Any:
+            raw = net(x)
+            value = raw.new_tensor(shielded(x.detach().cpu().numpy(), raw.detach().cpu().numpy()))
+            return raw + (value - raw).detach()  # value: shielded; gradient: the driver's network
+
+    return Victim(query=query, kind="discrete", obs_shape=shape, differentiable=differentiable, reads=victim.reads)
