@@ -60,6 +60,12 @@ def _error(capsys, args: list[str]) -> str:
     (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "eps must be a finite number"),
     # words
     (["export", str(ROOT / "README.md"), "--out", "{tmp}/m.onnx"], "not a stable-baselines3 model"),
+    # plain cloning has no radius (issue 22)
+    (["robust-train", DQN, "--method", "distill", "--kappa", "0", "--eps", "0.05", "--steps", "5", "--out", "{tmp}/r"],
+     "--eps has no effect with --kappa 0"),
+    (["robust-train", DQN, "--method", "sa", "--steps", "5", "--out", "{tmp}/r"], "needs --eps"),
+    (["robust-train", DQN, "--method", "at", "--dagger", "2", "--eps", "0.1", "--steps", "5", "--out", "{tmp}/r"],
+     "--dagger has no effect with --method at"),
     # lockstep and the default attack's switches (issue 21)
     (["evaluate", DQN, "--attack", "zo-signsgd", "--defense", "kinematic", "--envs", "4"],
      "cannot run side by side here (the kinematic defense keeps its own state"),

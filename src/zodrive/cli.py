@@ -253,7 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("model")
     rob.add_argument("--method", choices=["sa", "at", "distill"], required=True,
                      help="sa: SA-DQN / SA-DDPG regularizer; at: Algorithm 2; distill: robust distillation of its own (or --teacher's) decisions")
-    rob.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius the agent is trained to withstand")
+    rob.add_argument("--eps", type=_positive_float,
+                     help="L-inf radius the agent is trained to withstand (not with distill --kappa 0: plain cloning)")
     rob.add_argument("--steps", type=_positive_int, required=True, help="training timesteps to add")
     rob.add_argument("--out", type=Path, required=True)
     rob.add_argument("--kappa", type=_nonnegative_float, help="sa, distill: weight of the robustness term "
@@ -268,6 +269,10 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--epochs", type=_positive_int, help="distill: passes over the collected states [20]")
     rob.add_argument("--teacher", metavar="baseline:NAME",
                      help="distill: an observation-reading baseline that drives and labels (default: the model itself)")
+    rob.add_argument("--dagger", type=_nonnegative_int, metavar="ROUNDS",
+                     help="distill: behaviour cloning with DAgger (Ross et al. 2011): after the teacher's --steps states, "
+                          "ROUNDS rounds of --steps states the student drives into, labelled by the teacher; "
+                          "--epochs per refit")
     rob.add_argument("--no-progress", action="store_true")
 
     exp = sub.add_parser("export", help="write a model's acting network as ONNX (a victim format with no pickle)")
@@ -604,16 +609,19 @@ def cmd_robust_train(args: argparse.Namespace) -> int:
     from zodrive.defense.robust import robust_train
 
     uses = {"sa": {"kappa", "pgd_steps", "warmup", "trust_model"}, "at": {"warmup", "trust_model"},
-            "distill": {"kappa", "pgd_steps", "epochs", "teacher"}}[args.method]
-    for option in ("kappa", "pgd_steps", "warmup", "epochs", "teacher", "trust_model"):
+            "distill": {"kappa", "pgd_steps", "epochs", "teacher", "dagger"}}[args.method]
+    for option in ("kappa", "pgd_steps", "warmup", "epochs", "teacher", "trust_model", "dagger"):
         if getattr(args, option) not in (None, False) and option not in uses:
             raise ZodriveError(f"--{option.replace('_', '-')} has no effect with --method {args.method}")
+    kappa = 0.5 if args.kappa is None else args.kappa
+    if args.method == "distill" and kappa == 0 and (args.eps is not None or args.pgd_steps is not None):
+        raise ZodriveError(f"--{'eps' if args.eps is not None else 'pgd-steps'} has no effect with --kappa 0 "
+                           "(plain cloning: no adversarial term)")
     preset = _preset_of(args)
     path = robust_train(args.model, preset, args.method, args.eps, args.steps, args.out, seed=args.seed,
-                        warmup=1000 if args.warmup is None else args.warmup,
-                        kappa=0.5 if args.kappa is None else args.kappa,
+                        warmup=1000 if args.warmup is None else args.warmup, kappa=kappa,
                         pgd_steps=args.pgd_steps or 5, progress_bar=not args.no_progress, trust=args.trust_model,
-                        force=args.force, teacher=args.teacher, epochs=args.epochs or 20)
+                        force=args.force, teacher=args.teacher, epochs=args.epochs or 20, dagger=args.dagger)
     print(f"saved {path}")
     return 0
 
