@@ -27,9 +27,10 @@ def _records(job: EvalJob, envs: int, out: Path) -> tuple[list[dict], list[dict]
 
 
 def _job(model: str, preset: str, attack: str, *overrides: str) -> EvalJob:
-    spec = load_attack(attack, list(overrides))
+    defense = next((o.split("=", 1)[1] for o in overrides if o.startswith("defense=")), None)
+    spec = load_attack(attack, [o for o in overrides if not o.startswith("defense=")])
     return EvalJob(model=str(models_dir() / model / "model.zip"), preset={**load_preset(preset), "max_episode_steps": STEPS},
-                   attack=spec.to_dict())
+                   attack=spec.to_dict(), defense=defense)
 
 
 CASES = [("dqn-driver", "discrete", name) for name in available("attacks")] + [
@@ -38,6 +39,8 @@ CASES = [("dqn-driver", "discrete", name) for name in available("attacks")] + [
     ("ddpg-driver", "continuous", "zo-signsgd"),
     ("ddpg-driver", "continuous", "random-search-smooth"),
     ("ddpg-driver", "continuous", "pgd", "norm=l2", "eps=0.3"),
+    ("dqn-driver", "discrete", "random-search", "eps=0.05", "defense=shield@0.05"),  # a stateless defense
+    ("dqn-driver", "discrete", "pgd", "defense=shield@0.02"),
 ]
 
 
