@@ -122,6 +122,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "method", "steps", "warmup")
                                       if config.get(k) is not None}
     kind = ROBUST_KINDS[train["kind"]] + " " if robust else ""
+    if robust and train["kind"] == "distill" and not train.get("method", {}).get("kappa"):  # no adversarial term
+        kind = "behaviour-cloned " + ("(DAgger) " if train["method"].get("rounds") is not None else "")
     lines = [
         f"# {folder.name}: {kind}{algo.upper()} on the `{config['preset']['name']}` preset",
         "",
