@@ -84,10 +84,9 @@ def _envs_of(args: argparse.Namespace, *jobs: Any) -> int:
 
     if args.envs is None:
         return DEFAULT_ENVS
-    for job in jobs:
-        reason = lockstep_blocker(job)
-        if args.envs > 1 and reason:
-            raise ZodriveError(f"--envs {args.envs}: episodes cannot run side by side here ({reason}); use --envs 1")
+    reasons = [reason for job in jobs if args.envs > 1 and (reason := lockstep_blocker(job))]
+    if reasons:
+        raise ZodriveError(f"--envs {args.envs}: episodes cannot run side by side here ({reasons[0]}); use --envs 1")
     return args.envs
 
 
@@ -542,7 +541,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
         spec.build(load_victim(args.model, preset, trust=args.trust_model), **attack_context(preset))
     if args.defense is not None:
-        from zodrive.defense.kinematic import make_defense
+        from zodrive.defense import make_defense
 
         make_defense(args.defense, preset)  # the preset must be one the defense understands
     job = EvalJob(

@@ -170,15 +170,28 @@ def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mod
         driver = bl.IdmMobilDriver(env, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
-    victim = load_victim(model, preset, trust=trust)  # checks that the policy fits the preset
-    if defense is None:
-        return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
-    from zodrive.defense.kinematic import FilterWrapper, defended_victim, make_defense
-    from zodrive.defense.shield import Shield, shielded_victim
+    from zodrive.defense import keeps_state, make_defense
 
+    if defense is None or not keeps_state(defense):
+        policy = load_policy(model, preset, defense, trust=trust)
+        return policy, make_attacked_env(preset, policy, spec, render_mode=render_mode, trace=trace)
+    from zodrive.defense.kinematic import FilterWrapper, defended_victim
+
+    victim = load_victim(model, preset, trust=trust)  # checks that the policy fits the preset
     filt = make_defense(defense, preset)
-    if isinstance(filt, Shield):  # stateless: the defended system is a policy; it drives and is attacked
-        shielded = shielded_victim(victim, filt)
-        return shielded, make_attacked_env(preset, shielded, spec, render_mode=render_mode, trace=trace)
     env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
     return victim, FilterWrapper(env, filt)
+
+
+def load_policy(model: str, preset: dict[str, Any], defense: str | None = None, *, trust: bool = False) -> Victim:
+    """What drives and what the attacker queries when nothing keeps per-episode state: the
+    model's victim, behind a stateless defense (the shield) if one is named."""
+    victim = load_victim(model, preset, trust=trust)  # checks that the policy fits the preset
+    if defense is None:
+        return victim
+    from zodrive.defense import keeps_state, make_defense
+    from zodrive.defense.shield import shielded_victim
+
+    if keeps_state(defense):
+        raise ZodriveError(f"the {defense} defense tracks an episode: it wraps the environment (make_policy_env)")
+    return shielded_victim(victim, make_defense(defense, preset))

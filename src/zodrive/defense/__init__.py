@@ -1,23 +1,51 @@
 """Defenses by name (`--defense NAME`): what stands between the sensor and the policy.
 
-`kinematic`: an observation filter (physics between two decisions). `shield[@EPS]`: a certified
-safety shield that vetoes the policy's action when the pessimistic rules at budget EPS do not
-find it safe (default EPS 0.02; `zodrive.defense.shield`)."""
+`kinematic`: an observation filter (physics between two decisions); it tracks an episode, so it
+wraps the environment. `shield[@EPS]`: a certified safety shield that vetoes the policy's action
+when the pessimistic rules at budget EPS do not find it safe (default EPS 0.02;
+`zodrive.defense.shield`); it keeps no state, so the shielded policy is itself a policy."""
 
 from __future__ import annotations
 
-DEFENSES = ("kinematic", "shield")
+from typing import TYPE_CHECKING, Any
+
+from zodrive.errors import ZodriveError
+
+if TYPE_CHECKING:
+    from zodrive.defense.kinematic import KinematicFilter
+    from zodrive.defense.shield import Shield
+
 DEFENSE_NAMES = ("kinematic", "shield", "shield@EPS")  # as the user may write them
 
 
 def parse_defense(name: str) -> str:
-    """The canonical name of a defense (`shield` -> `shield@0.02`), or a one-line error: a
-    result is keyed on this name, so one system has one key."""
-    from zodrive.defense.shield import canonical_shield, parse_shield
-    from zodrive.errors import ZodriveError
+    """The canonical name of a defense (`shield` -> `shield@0.02`, `shield@.050` -> `shield@0.05`),
+    or a one-line error: a result is keyed on this name, so one system has one key."""
+    from zodrive.defense.shield import parse_shield
 
     if name == "kinematic":
         return name
-    if parse_shield(name) is not None:
-        return canonical_shield(name)
-    raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSE_NAMES)})")
+    eps = parse_shield(name)
+    if eps is None:
+        raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSE_NAMES)})")
+    return f"shield@{eps:g}"
+
+
+def keeps_state(name: str) -> bool:
+    """Whether the defense tracks an episode (then it wraps the environment and episodes run one
+    at a time); a stateless one folds into the policy."""
+    return parse_defense(name) == "kinematic"
+
+
+def make_defense(name: str, preset: dict[str, Any]) -> KinematicFilter | Shield:
+    """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`)."""
+    from zodrive.defense.shield import Shield, parse_shield
+
+    eps = parse_shield(name)
+    if eps is not None:
+        return Shield(preset, eps)
+    if name != "kinematic":
+        raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSE_NAMES)})")
+    from zodrive.defense.kinematic import KinematicFilter
+
+    return KinematicFilter(preset)

@@ -20,17 +20,13 @@ observation of an episode are trusted.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from zodrive.attacks.victim import Victim
-from zodrive.defense import DEFENSES
 from zodrive.errors import ZodriveError
-
-if TYPE_CHECKING:
-    from zodrive.defense.shield import Shield
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
 
@@ -172,15 +168,3 @@ class FilterWrapper(gym.ObservationWrapper):
             self._fresh = False
             return self.filt.reset(observation)
         return self.filt.update(observation)
-
-
-def make_defense(name: str, preset: dict[str, Any]) -> "KinematicFilter | Shield":
-    """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`)."""
-    from zodrive.defense.shield import Shield, parse_shield
-
-    eps = parse_shield(name)
-    if eps is not None:
-        return Shield(preset, eps)
-    if name != "kinematic":
-        raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSES)}, shield@EPS)")
-    return KinematicFilter(preset)

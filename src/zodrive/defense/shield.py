@@ -58,15 +58,6 @@ def parse_shield(name: str) -> float | None:
     return value
 
 
-def canonical_shield(name: str) -> str:
-    """`shield@EPS` with EPS written as a plain float (`shield` -> `shield@0.02`, `shield@.050` ->
-    `shield@0.05`), so one system has one results key."""
-    eps = parse_shield(name)
-    if eps is None:
-        raise ZodriveError(f"{name!r} is not a shield (shield or shield@EPS)")
-    return f"shield@{eps:g}"
-
-
 class Shield:
     """`decide(obs, proposed)`: the proposed meta-actions where the robust rules' room test at
     `eps` accepts them, the robust rules' choice elsewhere. Stateless."""

@@ -82,9 +82,9 @@ def lockstep_blocker(job: EvalJob) -> str | None:
     """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
     policy that reads nothing but the observation and keeps no state between steps."""
     from zodrive.agents.baselines import get_baseline
-    from zodrive.defense.shield import parse_shield
+    from zodrive.defense import keeps_state
 
-    if job.defense is not None and parse_shield(job.defense) is None:  # a shield keeps no state; a filter does
+    if job.defense is not None and keeps_state(job.defense):
         return f"the {job.defense} defense keeps its own state for one episode"
     if is_baseline(job.model) and get_baseline(job.model).reads == "simulator":
         return f"{job.model} reads its own simulator"
@@ -99,15 +99,10 @@ def _setup(job: EvalJob, envs: int = 1) -> None:
         victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
         _WORKER.update(job=job, victim=victim, env=env)
         return
-    from zodrive.agents.policies import load_victim
+    from zodrive.agents.policies import load_policy
     from zodrive.envs import attack_context, make_env
 
-    victim = load_victim(job.model, job.preset, trust=job.trust)
-    if job.defense is not None:  # a stateless defense (`lockstep_blocker`): the defended system is the policy
-        from zodrive.defense.kinematic import make_defense
-        from zodrive.defense.shield import shielded_victim
-
-        victim = shielded_victim(victim, make_defense(job.defense, job.preset))
+    victim = load_policy(job.model, job.preset, job.defense, trust=job.trust)  # a defense here keeps no state
     attacker = spec.build(victim, **attack_context(job.preset)) if spec is not None else None
     _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
 

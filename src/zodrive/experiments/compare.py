@@ -35,7 +35,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     evaluation per cell. Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
     can change what they do; white-box attacks skip policies that offer no gradients."""
-    from zodrive.defense.kinematic import make_defense
+    from zodrive.defense import make_defense
 
     budgets = query_budgets or [None]
     defenses = defenses or [None]
