@@ -309,3 +309,20 @@ def test_max_change_is_an_linf_idea() -> None:
         AttackSpec(norm="l2", max_change=0.01).build(linear_victim(), **CONTEXT)
     with pytest.raises(ZodriveError, match="max_change"):
         AttackSpec(max_change=0.0).check()
+
+
+@pytest.mark.parametrize("threat", [ThreatModel(eps=0.1), ThreatModel(eps=0.3, norm="l2"),
+                                    ThreatModel(eps=0.1, mode="paper"), ThreatModel(eps=0.2, low=-0.5, high=0.5)])
+def test_projecting_around_rows_is_projecting_each_candidate(threat: ThreatModel) -> None:
+    """The engine projects (rows, candidates, dim) around each row's clean observation at once
+    (`ThreatModel.around`); every candidate must land exactly where `project` puts it alone."""
+    rng = np.random.default_rng(3)
+    x0 = rng.uniform(-1, 1, size=(4, 5, 5)).astype(np.float32)
+    x0[0, 0, 1] = 0.9  # a clean value outside the narrow box stays reachable
+    cand = (x0.reshape(4, 1, 25) + rng.normal(0, 0.4, size=(4, 7, 25))).astype(np.float32)
+    rows = np.array([2, 0, 3])
+    got = threat.around(x0.reshape(4, 25), (5, 5))(cand[rows], rows)
+    for i, r in enumerate(rows):
+        for m in range(7):
+            alone = threat.project(cand[r, m].reshape(1, 5, 5), x0[r:r + 1]).reshape(25)
+            assert np.array_equal(got[i, m], alone)

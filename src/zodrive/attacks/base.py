@@ -240,13 +240,12 @@ class Attack(abc.ABC):
         oracle.begin_step(rows=n)
         box = self.smooth_box(flat0.reshape(n, *shape))
 
+        around = self.threat.around(flat0, shape)
+
         def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
-            m = cand.shape[1]
-            if m == 0 or len(rows) == 0:  # an attack without probes (PGD, noise)
+            if cand.shape[1] == 0 or len(rows) == 0:  # an attack without probes (PGD, noise)
                 return cand
-            inside = self.threat.project(cand.reshape(-1, *shape).astype(np.float32),
-                                         np.repeat(flat0[rows], m, axis=0).reshape(-1, *shape))
-            inside = inside.reshape(len(rows), m, dim)
+            inside = around(cand, rows)
             if box is not None:  # both are boxes containing the carried point: clipping stays in both
                 inside = np.clip(inside, box[0][rows, None], box[1][rows, None])
                 # a point already inside up to rounding keeps its exact value (projection is then
@@ -258,6 +257,8 @@ class Attack(abc.ABC):
         def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
             out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean[rows])
             l1 = objective.loss(out_t, clean_t).numpy().astype(np.float64)
+            if self.l2_weight == 0 and not trace:  # f = l1 + 0 * l2 = l1 exactly: l2 is not needed
+                return l1, None, l1, objective.success(out_t, clean_t).numpy()
             l2 = ((cand - flat0[rows, None]).astype(np.float64) ** 2).sum(axis=-1)
             return l1, l2, l1 + self.l2_weight * l2, objective.success(out_t, clean_t).numpy()
 

@@ -66,17 +66,14 @@ class ThreatModel:
 
     def project(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
         """Map candidates `x` (B, *obs) around clean `x0` (B, *obs) into the threat model."""
-        delta = (x - x0) * self.mask(x0.shape[1:])
-        if self.mode == "budgeted":
-            if self.norm == "linf":
-                delta = np.clip(delta, -self.eps, self.eps)
-            else:
-                flat = delta.reshape(len(delta), -1)
-                norms = np.linalg.norm(flat, axis=1)
-                scale = np.minimum(1.0, self.eps / np.maximum(norms, 1e-12))
-                delta = (flat * scale[:, None]).reshape(delta.shape)
-        low, high = np.minimum(self.low, x0), np.maximum(self.high, x0)  # never move a clean value
-        return np.clip(x0 + delta, low, high).astype(x0.dtype, copy=False)
+        n = len(x0)
+        inside = self.around(x0.reshape(n, -1), x0.shape[1:])(x.reshape(n, 1, -1), np.arange(n))
+        return inside.reshape(x0.shape).astype(x0.dtype, copy=False)
+
+    def around(self, x0: np.ndarray, obs_shape: Sequence[int]) -> Projector:
+        """`project` around the flattened clean rows `x0` (N, dim) of observations of
+        `obs_shape`, their box computed once (an attack projects around them every iteration)."""
+        return Projector(self, x0, self.mask(obs_shape).reshape(-1))
 
     def random_delta(self, shape: tuple[int, ...], mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Uniform draws (shape = (N, dim)) from the budget set (L-inf box or L2 ball) on the
@@ -90,6 +87,27 @@ class ThreatModel:
             flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-12)
             delta = flat * self.eps * rng.uniform(size=(n, 1)) ** (1.0 / free)
         return (delta * mask).astype(np.float32)
+
+
+class Projector:
+    """`ThreatModel.project` around fixed clean rows: candidates (A, M, dim) of rows `rows`
+    into the threat model, by the same arithmetic as `project` (broadcast, not repeated)."""
+
+    def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray) -> None:
+        self.threat, self.x0, self.mask = threat, x0, mask
+        self.low, self.high = np.minimum(threat.low, x0), np.maximum(threat.high, x0)  # never move a clean value
+
+    def __call__(self, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        t, x0 = self.threat, self.x0[rows, None]
+        delta = (x - x0) * self.mask
+        if t.mode == "budgeted":
+            if t.norm == "linf":
+                delta = np.clip(delta, -t.eps, t.eps, out=delta)
+            else:
+                norms = np.linalg.norm(delta, axis=-1, keepdims=True)
+                delta = delta * np.minimum(1.0, t.eps / np.maximum(norms, 1e-12))
+        out = x0 + delta
+        return np.clip(out, self.low[rows, None], self.high[rows, None], out=out)
 
 
 def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
