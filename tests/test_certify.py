@@ -116,3 +116,24 @@ def test_bounds_hold_through_every_output_head(tmp_path: Path, algo: str, env_id
                 assert (out.argmax(1) == clean[i].argmax()).all()
             if network.kind == "continuous":
                 assert (out - clean[i]).abs().max().item() <= cert.bound[i] + 1e-6
+
+
+def test_attacks_and_certificates_sandwich_the_same_states(tmp_path: Path, capsys) -> None:
+    """`certify --attack`: each attack's success beside the certified share on the same states;
+    a sound certificate is never beaten (no contradictions) and success + certified <= 1."""
+    import json
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "sandwich"
+    assert main(["certify", str(root / "models" / "dqn-driver"), "--eps", "0.005", "0.05", "--episodes", "1",
+                 "--env-set", "max_episode_steps=25", "--attack", "random-search", "pgd", "--out", str(out)]) == 0
+    assert "unknown" in capsys.readouterr().out
+    rows = json.loads((out / "certify.json").read_text())["rows"]
+    for row in rows:
+        assert [side["attack"] for side in row["attacks"]] == ["random-search", "pgd"]
+        for side in [*row["attacks"], row["any_attack"]]:
+            assert side.get("contradictions", 0) == 0
+            assert side["success_share"] + row["certified_share"] <= 1.0 + 1e-12
+            assert side["unknown_share"] == pytest.approx(1 - side["success_share"] - row["certified_share"])
+    assert rows[1]["any_attack"]["success_share"] > rows[0]["any_attack"]["success_share"]  # a wider ball wins more
+    assert main(["certify", str(root / "models" / "dqn-driver"), "--eps", "0.01", "--attack", "no-such"]) == 2

@@ -205,9 +205,45 @@ def episode_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int
     return np.stack(states)
 
 
+PER_EPISODE = ("warm_start", "max_change", "timing", "episode_query_budget")
+"""Attack settings about an episode's sequence of steps; the sandwich attacks each state on its own."""
+
+CHUNK = 512  # states attacked per call
+
+
+def sandwich(states: np.ndarray, certified: np.ndarray, attack: str, eps: float, victim: Any,
+             preset: dict[str, Any], seed: int, tol: float) -> tuple[dict[str, Any], np.ndarray]:
+    """Attack every state on its own with `attack` (untargeted: any other action, or an action
+    moved by >= `tol`; its config otherwise, minus what is about episodes, `PER_EPISODE`) at
+    `eps`, beside the certified share on the same states. success + certified <= 1 whenever
+    the certificate is sound: a state both won and certified is a contradiction (counted, and
+    it must be 0); `unknown` = 1 - success - certified is what neither side decides. Returns the
+    summary and which states the attack won."""
+    from zodrive.attacks.spec import load_attack
+    from zodrive.envs import attack_context
+
+    base = load_attack(attack)
+    spec = base.with_overrides(eps=eps, target="none", tol=tol, warm_start=False,
+                               clear=[k for k in PER_EPISODE[1:] if getattr(base, k) is not None])
+    attacker, objective, oracle = spec.build(victim, **attack_context(preset))
+    won = np.zeros(len(states), dtype=bool)
+    queries = 0
+    for start in range(0, len(states), CHUNK):
+        rows = np.arange(start, min(start + CHUNK, len(states)))
+        attacker.reseed([seed + int(r) for r in rows])  # a state's attack does not depend on the chunking
+        result = attacker.perturb(states[rows], oracle, objective)
+        won[rows] = result.success | result.already
+        queries += int(result.queries.sum())
+    success = float(won.mean())
+    return {"attack": attack, "white_box": not attacker.black_box, "success_share": success,
+            "unknown_share": 1.0 - success - float(certified.mean()),
+            "contradictions": int((won & certified).sum()), "queries_per_state": queries / len(states)}, won
+
+
 def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *, episodes: int, seed: int,
-                  tol: float = 0.2) -> dict[str, Any]:
-    """The certified share of a model's clean states at each eps (see `certify`)."""
+                  tol: float = 0.2, attacks: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The certified share of a model's clean states at each eps (see `certify`), and for each
+    of `attacks` its success on the same states (`sandwich`)."""
     from zodrive.agents.loading import load_network
     from zodrive.agents.victims import network_victim
     from zodrive.attacks.spec import AttackSpec
@@ -221,8 +257,15 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
     for eps in eps_values:
         threat = AttackSpec(eps=eps).threat(env.features, env.bounds)  # the default threat model's mask
         cert = certify(network.net, network.kind, states, eps, threat.mask(states.shape[1:]), *env.bounds, tol=tol)
-        rows.append({"eps": eps, "certified_share": float(cert.certified.mean()), "states": int(len(states)),
-                     "mean_bound": float(np.mean(cert.bound))})
+        row: dict[str, Any] = {"eps": eps, "certified_share": float(cert.certified.mean()),
+                               "states": int(len(states)), "mean_bound": float(np.mean(cert.bound))}
+        if attacks:  # from above: each attack, and the states any of them won
+            sides = [sandwich(states, cert.certified, name, eps, victim, preset, seed, tol) for name in attacks]
+            row["attacks"] = [side for side, _ in sides]
+            anyone = np.any([won for _, won in sides], axis=0)
+            row["any_attack"] = {"success_share": float(anyone.mean()),
+                                 "unknown_share": 1.0 - float(anyone.mean()) - row["certified_share"]}
+        rows.append(row)
     return {"model": model, "preset": preset.get("name"), "kind": network.kind, "seed": seed, "episodes": episodes,
             "method": "CROWN (Zhang et al. 2018) on ReLU networks, interval bounds (Gowal et al. 2018) otherwise",
             "tol": tol if network.kind == "continuous" else None, "rows": rows}

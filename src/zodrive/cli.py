@@ -358,6 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
     cert.add_argument("--seed", type=_seed, default=None, help="first episode seed (default 100000)")
     cert.add_argument("--tol", type=_positive_float,
                       help="continuous policies: a state counts as certified if no action dimension can move more [0.2]")
+    cert.add_argument("--attack", nargs="+", default=[], metavar="NAME",
+                      help="also attack every one of those states on its own (untargeted) with these attacks: their "
+                           "success beside the certified share; the gap between them is unknown")
     cert.add_argument("--out", type=Path, help="folder for certify.json")
     cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
 
@@ -708,6 +711,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_certify(args: argparse.Namespace) -> int:
     from zodrive.agents.loading import model_kind
     from zodrive.agents.policies import is_sb3_zip
+    from zodrive.attacks.spec import load_attack
     from zodrive.certify import certify_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.runinfo import command_line, write_json
@@ -722,14 +726,25 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.tol is not None and model_kind(model) == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol
+    for name in args.attack:
+        load_attack(name)  # an unknown attack is an error before any episode runs
     result = certify_model(model, preset, args.eps, episodes=args.episodes,
-                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol)
+                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
+                           attacks=tuple(args.attack))
     what = ("the action cannot change" if result["kind"] == "discrete"
             else f"no action dimension can move more than {tol}")
     print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
           f"certified = {what} (CROWN or interval bounds: sound, not complete)")
     for row in result["rows"]:
         print(f"  eps {row['eps']:<8g} certified {row['certified_share']:.1%}")
+        for side in row.get("attacks", []):
+            label = " (white-box)" if side["white_box"] else ""
+            print(f"    {side['attack']}{label}: success {side['success_share']:.1%}, unknown "
+                  f"{side['unknown_share']:.1%}, {side['queries_per_state']:.0f} queries/state"
+                  + (f", {side['contradictions']} CONTRADICTIONS" if side["contradictions"] else ""))
+        if len(row.get("attacks", [])) > 1:
+            print(f"    any of them: success {row['any_attack']['success_share']:.1%}, "
+                  f"unknown {row['any_attack']['unknown_share']:.1%}")
     if args.out is not None:
         write_json(args.out / "certify.json", {**result, "command": command_line()})
         print(f"results: {args.out}/certify.json")
