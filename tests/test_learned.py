@@ -164,5 +164,27 @@ def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path,
         capsys, ["evaluate", str(other), *CART, "--episodes", "1", "--attack", f"learned:{adv}", "--eps", "0.1"])
     assert "already holds a run" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",
                                                     "8", "--out", str(adv)])
+    assert "--reward horizon needs" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",
+                                                       "8", "--reward", "horizon", "--out", str(tmp_path / "h")])
+    assert not (tmp_path / "h").exists()  # a refused run leaves no folder behind
     assert "attacks a model file" in _error(capsys, ["attack-train", "baseline:faster", "--eps", "0.1", "--steps",
                                                      "8", "--out", str(tmp_path / "b")])
+
+
+@pytest.mark.parametrize("horizon", [10, 25])
+def test_horizon_reward_sums_to_the_horizon_minus_the_victims_return(horizon: int) -> None:
+    env = AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon", horizon=horizon)
+    env.reset(seed=0)
+    total, victim, done = 0.0, 0.0, False
+    while not done:
+        _, reward, terminated, truncated, info = env.step(np.zeros(20, dtype=np.float32))
+        total, victim, done = total + reward, victim + info["victim_reward"], terminated or truncated
+    # the toy ends after 10 steps: with horizon 25 the 15 steps it cut off count as steps of reward 0
+    assert total == pytest.approx(horizon - victim) and env.victim_returns == [pytest.approx(victim)]
+
+
+def test_horizon_reward_needs_a_known_horizon() -> None:
+    from zodrive.errors import ZodriveError
+
+    with pytest.raises(ZodriveError, match="horizon"):
+        AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon")

@@ -321,6 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="train against the defended system (stateless defenses only)")
     atk.add_argument("--victim-action", action="store_true",
                      help="the adversary also observes the victim's clean action (1 query per step at attack time)")
+    atk.add_argument("--reward", choices=["minus", "horizon"], default="minus",
+                     help="minus: -(victim's reward); horizon: 1 - reward per step and the steps a crash cuts off "
+                          "at once (the same objective, credited when the crash happens)")
     atk.add_argument("--preset")
     atk.add_argument("--env-id", metavar="ID", help="any gymnasium environment with a Box observation, instead of --preset")
     atk.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH", help="with --env-id: the observation range")
@@ -629,7 +632,8 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
 
     preset = _preset_of(args)
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
-                        victim_action=args.victim_action, force=args.force, progress_bar=not args.no_progress)
+                        victim_action=args.victim_action, reward=args.reward, force=args.force,
+                        progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     print(f"{train['total_timesteps']} steps, {train['episodes']} episodes in {train['wall_time_s']} s; victim "
           f"queries {train['victim_queries']} ({train['queries_per_step']:.2f}/step); victim return over the first / "

@@ -33,8 +33,14 @@ from zodrive.errors import ZodriveError
 log = logging.getLogger(__name__)
 
 PPO_DEFAULTS = {"n_steps": 1024, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
-                "gae_lambda": 0.95, "ent_coef": 0.0}
-"""SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions)."""
+                "gae_lambda": 0.95, "ent_coef": 0.0, "use_sde": True, "sde_sample_freq": 128}
+"""SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions) and gSDE
+exploration (Raffin et al., CoRL 2021) whose noise is redrawn every 128 steps: a perturbation
+that must be held for many steps to make the victim crash is tried as a whole, where
+independent per-step noise averages out."""
+REWARDS = ("minus", "horizon")
+"""The adversary's reward (`AdversaryEnv._reward`): minus the victim's reward, or the same
+objective over the fixed horizon with a crash credited at once."""
 LOG_STD_INIT = -1.0
 """Initial log std of the Gaussian (SB3's default 0: std 1, whose samples are clipped to the
 box's vertices whatever the mean, so the mean the attack acts on would learn little)."""
@@ -51,9 +57,18 @@ class AdversaryEnv(gym.Env):
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, env: gym.Env, victim: Victim, threat: ThreatModel, *, victim_action: bool = False) -> None:
+    def __init__(self, env: gym.Env, victim: Victim, threat: ThreatModel, *, victim_action: bool = False,
+                 reward: str = "minus", horizon: int | None = None) -> None:
+        if reward not in REWARDS:
+            raise ZodriveError(f"reward must be one of {', '.join(REWARDS)}, not {reward!r}")
+        if reward == "horizon" and not (isinstance(horizon, int) and horizon >= 1):
+            raise ZodriveError("reward horizon needs the episode's horizon (a preset whose per-step reward is at most "
+                               "1 and whose length is known); use reward minus")
         self.env, self.victim, self.threat = env, victim, threat
-        self.victim_action = victim_action
+        self.victim_action, self.reward, self.horizon = victim_action, reward, horizon
+        self.t = 0
+        self.episode_return = 0.0
+        self.victim_returns: list[float] = []  # the victim's return of every finished episode
         self.oracle = QueryOracle(victim)  # no budget: counts every victim call of training
         shape = tuple(env.observation_space.shape)
         self.obs_shape = shape
@@ -81,6 +96,7 @@ class AdversaryEnv(gym.Env):
         super().reset(seed=seed)
         obs, info = self.env.reset(seed=seed, options=options)
         self.oracle.begin_episode()
+        self.t, self.episode_return = 0, 0.0
         return self._observe(obs), info
 
     def step(self, action: np.ndarray):  # type: ignore[override]
@@ -99,7 +115,21 @@ class AdversaryEnv(gym.Env):
         info = dict(info)
         info["victim_reward"] = float(reward)
         info["linf"] = float(np.abs(fed[0] - self._obs).max())
-        return self._observe(obs), -float(reward), terminated, truncated, info
+        self.t += 1
+        self.episode_return += float(reward)
+        if terminated or truncated:
+            self.victim_returns.append(self.episode_return)
+        return self._observe(obs), self._reward(float(reward), terminated), terminated, truncated, info
+
+    def _reward(self, reward: float, terminated: bool) -> float:
+        """`minus`: -r. `horizon`: 1 - r, and when the episode ends before the horizon T (a crash),
+        T - t at once: the T - t steps the victim no longer drives count as steps of reward 0.
+        The episode's sum is then T - (the victim's return): the same objective, credited when
+        the crash happens instead of only through the discounted absence of later rewards."""
+        if self.reward == "minus":
+            return -reward
+        assert self.horizon is not None
+        return 1.0 - reward + (max(self.horizon - self.t, 0) if terminated else 0.0)
 
     def close(self) -> None:
         self.env.close()
@@ -112,7 +142,10 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"# Learned adversary: {meta['victim']} at L-inf eps {meta['eps']:g}", "",
         "SA-RL's learned optimal adversary (Zhang et al., ICLR 2021): an SB3 PPO policy whose action "
         "a in [-1, 1]^d is the perturbation eps * a on the perturbable features (presence frozen), "
-        "projected like every zodrive attack. Reward: minus the victim's environment reward.", "",
+        "projected like every zodrive attack. Reward: "
+        + ("minus the victim's environment reward." if meta["reward"] == "minus" else
+           f"1 - the victim's reward per step, and at a crash the {meta['horizon']} - t steps left at once "
+           "(sum: horizon - the victim's return)."), "",
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..)"
         + (f" behind defense `{meta['defense']}`" if meta["defense"] else ""),
         f"- preset: {meta['preset'].get('name')}; observes the true observation"
@@ -139,6 +172,7 @@ def attack_train(
     seed: int = 0,
     defense: str | None = None,
     victim_action: bool = False,
+    reward: str = "minus",
     force: bool = False,
     progress_bar: bool = True,
 ) -> Path:
@@ -177,17 +211,26 @@ def attack_train(
     ppo = dict(PPO_DEFAULTS)
     ppo["n_steps"] = min(ppo["n_steps"], max(steps, 8))  # a tiny run (tests) still completes its rollouts
     ppo["batch_size"] = min(ppo["batch_size"], ppo["n_steps"])
+    horizon = None
+    if reward == "horizon":
+        from zodrive.envs import scenario
+
+        max_return = scenario(preset).max_return  # known where every step earns at most 1 (normalized highway-env)
+        if max_return is None:
+            raise ZodriveError(f"--reward horizon needs a preset whose steps earn at most 1 and whose length is "
+                               f"known; {preset.get('name')!r} is not one: use --reward minus")
+        horizon = int(max_return)
     meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
             "preset": preset, "defense": defense, "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen),
             "victim_action": bool(victim_action), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
-            "action_dim": 0, "reward": "minus the victim's environment reward"}
-    inner = AdversaryEnv(make_env(preset), victim, threat, victim_action=victim_action)
+            "action_dim": 0, "reward": reward, "horizon": horizon}
+    inner = AdversaryEnv(make_env(preset), victim, threat, victim_action=victim_action, reward=reward, horizon=horizon)
     meta["action_dim"] = int(inner.action_space.shape[0])
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("model.zip", META_FILE, "train.json", "CARD.md", "monitor.monitor.csv"):
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
-                         "steps": steps, "victim_action": bool(victim_action), "algo": "ppo", "ppo": ppo,
+                         "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
                          "log_std_init": LOG_STD_INIT}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))
     venv = DummyVecEnv([lambda: env])
@@ -198,7 +241,7 @@ def attack_train(
     agent.learn(total_timesteps=steps, progress_bar=progress_bar)
     wall = time.perf_counter() - start
     agent.save(out / "model.zip")
-    returns = [-r for r in env.get_episode_rewards()]  # the victim's return per training episode
+    returns = list(inner.victim_returns)  # the victim's return per training episode
     done = int(agent.num_timesteps)
     train = {"algo": "ppo", "kind": "learned adversary (SA-RL, Zhang et al. ICLR 2021)", "victim": str(model),
              "defense": defense, "eps": float(eps), "total_timesteps": done, "requested_steps": steps, "seed": seed,
@@ -207,7 +250,7 @@ def attack_train(
              "episodes": len(returns),
              "victim_return_first10": float(np.mean(returns[:10])) if returns else None,
              "victim_return_last10": float(np.mean(returns[-10:])) if returns else None,
-             "reward": meta["reward"]}
+             "reward": reward, "horizon": horizon}
     write_json(out / "train.json", train)
     write_atomic(out / META_FILE, json.dumps(meta, indent=2) + "\n")
     write_atomic(out / "CARD.md", _card(out, meta, train))
