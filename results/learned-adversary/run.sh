@@ -1,0 +1,22 @@
+#!/bin/sh
+# The evaluations of results/learned-adversary/README.md, one at a time (2 shared cores).
+# The random-search and PGD cells start from the committed 10-episode cells of
+# results/robustness-curve/cells (same settings: patience 10, seeds 100000+) and add episodes 10-29.
+set -e
+Z="python -m zodrive"
+C=results/learned-adversary/cells
+for e in 0.05 0.02; do
+  $Z evaluate models/dqn-driver --attack learned:results/learned-adversary/adv-dqn-driver-eps$e-horizon --eps $e \
+     --episodes 30 --no-progress --out $C/dqn-driver-learned-eps$e > $C/dqn-driver-learned-eps$e.txt 2>&1
+done
+for e in 0.05 0.02; do
+  $Z evaluate models/dqn-driver --attack uniform-noise --eps $e --episodes 30 --no-progress \
+     --out $C/dqn-driver-uniform-noise-eps$e > $C/dqn-driver-uniform-noise-eps$e.txt 2>&1
+done
+for b in faster slower; do
+  $Z evaluate baseline:$b --episodes 30 --no-progress --out $C/baseline-$b-none > $C/baseline-$b-none.txt 2>&1
+done
+for a in pgd random-search; do for e in 0.05 0.02; do
+  $Z evaluate models/dqn-driver --attack $a --eps $e --patience 10 --episodes 30 --no-progress \
+     --out $C/dqn-driver-$a-eps$e > $C/dqn-driver-$a-eps$e.txt 2>&1
+done; done
