@@ -5,8 +5,9 @@ the true observation (and, with `victim_action`, the victim's clean action), its
 a in [-1, 1]^d becomes the perturbation eps * a on the d perturbable coordinates, projected
 by the same threat model as every attack (`zodrive.attacks.learned.apply_action`); the fixed
 victim acts on the perturbed observation, the real environment steps, and the adversary's
-reward is minus the victim's environment reward (no shaping: a crash ends the episode, so it
-is paid by the rewards the victim no longer collects). Every victim call goes through a
+reward is minus the victim's environment reward (`reward="minus"`: a crash ends the episode,
+so it is paid by the rewards the victim no longer collects) or the same objective over the
+fixed horizon with a crash credited at once (`reward="horizon"`). Every victim call goes through a
 `QueryOracle` and is counted in train.json. The folder it writes (model.zip, adversary.json,
 config.yaml, run.json, train.json, CARD.md) is read back by `--attack learned:DIR` through
 the safe loader (PPO's Gaussian mean, clipped to [-1, 1]; nothing unpickled).
