@@ -162,6 +162,9 @@ def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path,
     other = _victim(tmp_path, seed=5)
     assert "train one against this model" in _error(
         capsys, ["evaluate", str(other), *CART, "--episodes", "1", "--attack", f"learned:{adv}", "--eps", "0.1"])
+    assert "adversary" in _error(  # trained on another preset and against a model file, not a baseline
+        capsys, ["evaluate", "baseline:rules", "--preset", "discrete", "--episodes", "1", "--attack",
+                 f"learned:{adv}", "--eps", "0.1"])
     assert "already holds a run" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",
                                                     "8", "--out", str(adv)])
     assert "--reward horizon needs" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",

@@ -20,3 +20,7 @@ for a in pgd random-search; do for e in 0.05 0.02; do
   $Z evaluate models/dqn-driver --attack $a --eps $e --patience 10 --episodes 30 --no-progress \
      --out $C/dqn-driver-$a-eps$e > $C/dqn-driver-$a-eps$e.txt 2>&1
 done; done
+# against the shielded driver (the adversary trained with --defense shield@0.02, 50 000 steps)
+$Z evaluate models/dqn-driver --defense shield@0.02 --attack learned:results/learned-adversary/adv-dqn-driver+shield@0.02-eps0.02-horizon \
+   --eps 0.02 --episodes 30 --no-progress --out "$C/dqn-driver+shield@0.02-learned-eps0.02" > "$C/dqn-driver+shield@0.02-learned-eps0.02.txt" 2>&1
+$Z evaluate models/dqn-driver --defense shield@0.02 --episodes 30 --no-progress --out "$C/dqn-driver+shield@0.02-none" > "$C/dqn-driver+shield@0.02-none.txt" 2>&1

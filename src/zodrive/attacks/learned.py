@@ -102,7 +102,7 @@ def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, An
     from zodrive.agents.safe_load import sha256
 
     meta = read_meta(folder)
-    if Path(model_file).is_file() and sha256(Path(model_file)) != meta["victim_sha256"]:
+    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
         raise ZodriveError(f"adversary {folder} was trained against {meta.get('victim', '?')} (SHA-256 "
                            f"{meta['victim_sha256'][:12]}..), not {model_file}: train one against this model")
     if meta["preset"] != preset:
