@@ -24,3 +24,9 @@ done; done
 $Z evaluate models/dqn-driver --defense shield@0.02 --attack learned:results/learned-adversary/adv-dqn-driver+shield@0.02-eps0.02-horizon \
    --eps 0.02 --episodes 30 --no-progress --out "$C/dqn-driver+shield@0.02-learned-eps0.02" > "$C/dqn-driver+shield@0.02-learned-eps0.02.txt" 2>&1
 $Z evaluate models/dqn-driver --defense shield@0.02 --episodes 30 --no-progress --out "$C/dqn-driver+shield@0.02-none" > "$C/dqn-driver+shield@0.02-none.txt" 2>&1
+# 100 episodes (seeds 100000-100099) against the shield: the 30-episode cells above, extended
+cp -r "$C/dqn-driver+shield@0.02-learned-eps0.02" "$C/dqn-driver+shield@0.02-learned-eps0.02-100"
+$Z evaluate models/dqn-driver --defense shield@0.02 --attack learned:results/learned-adversary/adv-dqn-driver+shield@0.02-eps0.02-horizon \
+   --eps 0.02 --episodes 100 --no-progress --out "$C/dqn-driver+shield@0.02-learned-eps0.02-100" > "$C/dqn-driver+shield@0.02-learned-eps0.02-100.txt" 2>&1
+cp -r "$C/dqn-driver+shield@0.02-none" "$C/dqn-driver+shield@0.02-none-100"
+$Z evaluate models/dqn-driver --defense shield@0.02 --episodes 100 --no-progress --out "$C/dqn-driver+shield@0.02-none-100" > "$C/dqn-driver+shield@0.02-none-100.txt" 2>&1
