@@ -34,7 +34,8 @@ COMMON = {
     "--seed": NUMBERS, "--episodes": ["1", "2", "0", "-3", "x"],
 }
 ATTACK = {
-    "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise"], "--eps": EPS,
+    "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise", "learned", "learned:{tmp}"],
+    "--eps": EPS,
     "--norm": ["linf", "l2", "l3"], "--mode": ["budgeted", "paper", "x"], "--steps": ["1", "2", "0", "x"],
     "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9"],
     "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
@@ -57,6 +58,9 @@ COMMANDS = {
     "adv-train": ({"--attack": ["zo-signsgd", "nope"], "--no-attack": [None], "--steps": NUMBERS,
                    "--out": ["{tmp}/a"], "--warmup": NUMBERS, "--trust-model": [None],
                    "--attack-set": ["eps=0.1", "early_stop=nope"]}, True),
+    "attack-train": ({"--eps": EPS, "--steps": NUMBERS, "--out": ["{tmp}/at", "/proc/at"], "--seed": NUMBERS,
+                      "--defense": ["kinematic", "shield", "shield@0.05", "x"], "--victim-action": [None],
+                      "--preset": COMMON["--preset"], "--force": [None]}, True),
     "robust-train": ({"--method": ["sa", "at", "distill", "x"], "--eps": EPS, "--steps": NUMBERS,
                       "--out": ["{tmp}/rt"], "--kappa": NUMBERS, "--epochs": NUMBERS,
                       "--teacher": ["baseline:rules", "baseline:slower"], "--pgd-steps": NUMBERS}, True),
@@ -98,6 +102,7 @@ def argv(draw) -> list[str]:  # noqa: ANN001
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(args=argv())
 def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) -> None:
+    import zodrive.agents.adversary as adversary
     import zodrive.agents.training as training
     import zodrive.defense.adversarial as adversarial
     import zodrive.defense.robust as robust
@@ -106,7 +111,7 @@ def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) 
     import zodrive.experiments.select as select
     from zodrive.cli import main
 
-    for module, name in ((training, "train"), (adversarial, "adversarial_train"), (robust, "robust_train"),
+    for module, name in ((training, "train"), (adversary, "attack_train"), (adversarial, "adversarial_train"), (robust, "robust_train"),
                          (compare, "compare"), (reproduce, "reproduce"), (select, "select_checkpoint")):
         monkeypatch.setattr(module, name, _stub)
     with tempfile.TemporaryDirectory() as tmp:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import os
@@ -309,6 +310,27 @@ def build_parser() -> argparse.ArgumentParser:
                           "from the file); needed for any model but the shipped ones")
     adv.add_argument("--no-progress", action="store_true")
 
+    atk = sub.add_parser("attack-train", help="train a learned optimal adversary (SA-RL, Zhang et al. ICLR 2021) "
+                                              "against a model; use it with --attack learned:DIR")
+    atk.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
+    atk.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
+    atk.add_argument("--steps", type=_positive_int, required=True, help="environment steps of PPO training")
+    atk.add_argument("--out", type=Path, required=True, help="the adversary's model folder")
+    atk.add_argument("--seed", type=_seed, default=0, help="training seed (PPO and the environment)")
+    atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]",
+                     help="train against the defended system (stateless defenses only)")
+    atk.add_argument("--victim-action", action="store_true",
+                     help="the adversary also observes the victim's clean action (1 query per step at attack time)")
+    atk.add_argument("--reward", choices=["minus", "horizon"], default="minus",
+                     help="minus: -(victim's reward); horizon: 1 - reward per step and the steps a crash cuts off "
+                          "at once (the same objective, credited when the crash happens)")
+    atk.add_argument("--preset")
+    atk.add_argument("--env-id", metavar="ID", help="any gymnasium environment with a Box observation, instead of --preset")
+    atk.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH", help="with --env-id: the observation range")
+    atk.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    atk.add_argument("--force", action="store_true", help="overwrite an adversary already in --out")
+    atk.add_argument("--no-progress", action="store_true")
+
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
     rep.add_argument("--out", type=Path, required=True)
     rep.add_argument("--episodes", type=_positive_int, help="episodes per cell [100]")
@@ -393,7 +415,8 @@ def _backend_flags(parser: argparse.ArgumentParser) -> None:
 
 def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("attack (black-box unless the name says otherwise)")
-    group.add_argument("--attack", help="attack config name/YAML or registry name")
+    group.add_argument("--attack", help="attack config name/YAML, registry name, or learned:DIR (an adversary "
+                                        "trained by attack-train)")
     group.add_argument("--eps", type=float)
     group.add_argument("--norm", choices=["linf", "l2"])
     group.add_argument("--mode", choices=["budgeted", "paper"])
@@ -607,6 +630,21 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_attack_train(args: argparse.Namespace) -> int:
+    from zodrive.agents.adversary import attack_train
+
+    preset = _preset_of(args)
+    path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
+                        victim_action=args.victim_action, reward=args.reward, force=args.force,
+                        progress_bar=not args.no_progress)
+    train = json.loads((path / "train.json").read_text())
+    print(f"{train['total_timesteps']} steps, {train['episodes']} episodes in {train['wall_time_s']} s; victim "
+          f"queries {train['victim_queries']} ({train['queries_per_step']:.2f}/step); victim return over the first / "
+          f"last 10 training episodes: {train['victim_return_first10']} / {train['victim_return_last10']}")
+    print(f"saved {path} (use: --attack learned:{path} --eps {args.eps:g})")
+    return 0
+
+
 def cmd_robust_train(args: argparse.Namespace) -> int:
     from zodrive.defense.robust import robust_train
 
@@ -777,7 +815,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
+            "adv-train": cmd_adv_train, "attack-train": cmd_attack_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves, "certify": cmd_certify}
 
 
@@ -823,6 +861,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         command = argv[0] if argv else ""
         hint = {"train": "run the same command with --resume to continue from the newest checkpoint",
                 "adv-train": "the run folder is incomplete: rerun with --force",
+                "attack-train": "the adversary folder is incomplete: rerun with --force",
                 "robust-train": "the run folder is incomplete: rerun with --force"}.get(
             command, "run the same command again to resume")
         print(f"zodrive: interrupted; results written so far are kept ({hint})", file=sys.stderr)

@@ -55,6 +55,7 @@ class AttackOptions(_Strict):
     access: Literal["score", "decision"] = "score"
     query_budget: Optional[StrictInt] = Field(None, ge=1)
     seed: StrictInt = Field(0, ge=0)
+    adversary: Optional[str] = None
 
     @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "timing", "max_change",
                      mode="before")

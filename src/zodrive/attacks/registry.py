@@ -22,10 +22,22 @@ ATTACKS: dict[str, type[Attack]] = {
 }
 
 
+KNOWN = (*ATTACKS, "learned:DIR")
+"""Every attack name: the search attacks above and the learned adversary (`learned`, read from
+a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has no place in the
+registry of attacks that run from nothing but their options."""
+
+
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
-    """Build a registered attack by name with validated hyperparameters."""
+    """Build an attack by name with validated hyperparameters (`learned` needs `adversary`)."""
+    from zodrive.attacks.learned import NAME, LearnedAdversary
+
+    if name == NAME:
+        return LearnedAdversary(threat, **hyper)
+    if hyper.pop("adversary", None) is not None:
+        raise ZodriveError(f"adversary (a trained adversary's folder) applies to attack learned, not {name}")
     try:
         cls = ATTACKS[name]
     except KeyError:
-        raise ZodriveError(f"unknown attack {name!r} (known: {', '.join(ATTACKS)})") from None
+        raise ZodriveError(f"unknown attack {name!r} (known: {', '.join(KNOWN)})") from None
     return cls(threat, **hyper)

@@ -11,13 +11,14 @@ from zodrive.attacks.victim import Victim, decision_only
 from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack
 from zodrive.attacks.objectives import Objective, make_objective
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.registry import ATTACKS, make_attack
+from zodrive.attacks.registry import ATTACKS, KNOWN, make_attack
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
 
 log = logging.getLogger(__name__)
 
+LEARNED = "learned"
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 DEFAULT_FROZEN = ("presence",)
 
@@ -52,6 +53,7 @@ class AttackSpec:
     access: str = "score"                 # what a query returns: score (Q-values / action) | decision (action only)
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
+    adversary: str | None = None          # learned: the trained adversary's folder (`zodrive attack-train`)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
@@ -60,8 +62,8 @@ class AttackSpec:
         from zodrive.schema import validate_attack
 
         values = validate_attack({k: v for k, v in data.items() if k not in ("name", "description")}, context)
-        if values["attack"] not in ATTACKS:
-            raise ZodriveError(f"unknown attack {values['attack']!r} (known: {', '.join(ATTACKS)})")
+        if values["attack"] not in ATTACKS and values["attack"] != LEARNED:
+            raise ZodriveError(f"unknown attack {values['attack']!r} (known: {', '.join(KNOWN)})")
         if isinstance(values["target"], list):
             values["target"] = tuple(values["target"])
         return cls(**values)
@@ -106,12 +108,20 @@ class AttackSpec:
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
                            restarts=self.restarts, timing=self.timing, max_change=self.max_change,
-                           seed=self.seed)
+                           seed=self.seed, **({} if self.adversary is None else {"adversary": self.adversary}))
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
         self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=()),  # type: ignore[arg-type]
                                        self.steps))
+
+    def _check_learned(self) -> None:
+        """A learned adversary chooses its own perturbation: an objective option would be ignored."""
+        default = AttackSpec()
+        for option in ("target", "loss", "weight", "kappa", "tol", "mu", "step_size"):
+            if getattr(self, option) != getattr(default, option):
+                raise ZodriveError(f"attack learned: {option} has no effect (the adversary was trained to lower "
+                                   "the victim's return; it has no per-step objective)")
 
     def _check_budgets(self, attack: Attack) -> None:
         one = attack.first_iteration_cost()
@@ -135,15 +145,20 @@ class AttackSpec:
             if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
                 raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
             victim = decision_only(victim)
+        if self.attack == LEARNED:
+            self._check_learned()
         threat = self.threat(features, bounds)
         width = threat.high - threat.low
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps, threat.low, threat.high)
         attack = self._make(threat, self.steps)
+        if self.attack == LEARNED:
+            attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)
         objective = make_objective(
-            victim.kind, self.resolved_target(victim.kind, action_names), loss=self.loss, weight=self.weight,
+            victim.kind, None if self.attack == LEARNED else self.resolved_target(victim.kind, action_names),
+            loss=self.loss, weight=self.weight,
             kappa=self.kappa, tol=self.tol, n_actions=n_actions, action_names=action_names,
             action_bounds=action_bounds,
         )
@@ -155,9 +170,18 @@ class AttackSpec:
 
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
-    """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too."""
+    """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
+    and `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`)."""
     from zodrive.config import available
 
+    if name.startswith(LEARNED + ":") or name == LEARNED:
+        folder = name.partition(":")[2]
+        data: dict[str, Any] = {"attack": LEARNED, "adversary": folder or None}
+        for text in overrides or []:
+            from zodrive.config import deep_merge, parse_override
+
+            data = deep_merge(data, parse_override(text))
+        return AttackSpec.from_mapping(data, f"attack {name!r}")
     if name in ATTACKS and name not in available("attacks"):
         data: dict[str, Any] = {"attack": name}
         for text in overrides or []:

@@ -66,6 +66,8 @@ class EvalJob:
             model = "sha256:" + sha256(Path(self.model))
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
+        if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
+            key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
             key["defense"] = self.defense
         return key
@@ -236,6 +238,12 @@ def evaluate(
     if envs < 1:
         raise ZodriveError(f"envs must be >= 1, not {envs}")
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
+    if job.attack is not None and job.attack.get("attack") == "learned":
+        from zodrive.attacks.learned import check_adversary
+
+        if job.attack.get("adversary") is None:
+            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
+        check_adversary(job.attack["adversary"], model_file=job.model, preset=job.preset, defense=job.defense)
     done: dict[int, dict[str, Any]] = {}
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -365,6 +373,7 @@ def summarize(
         steps_total = sum(r["attacked_steps"] for r in records)
         applicable = sum(r["applicable"] for r in records)
         successes = sum(r["successes"] for r in records)
+        learned = job.attack["attack"] == "learned"  # no per-step goal: no success rate, no base rate
         summary.update(
             attack=job.attack["attack"],
             # paper mode is unconstrained: eps sets no budget (it only sizes random starting points)
@@ -372,9 +381,10 @@ def summarize(
             norm=job.attack["norm"],
             mode=job.attack["mode"],
             target=job.attack["target"],
-            attack_success_rate=successes / applicable if applicable else float("nan"),
-            attack_success_ci95=list(ratio_ci([r["successes"] for r in records], [r["applicable"] for r in records])),
-            target_base_rate=1.0 - applicable / steps_total if steps_total else float("nan"),
+            attack_success_rate=None if learned else successes / applicable if applicable else float("nan"),
+            attack_success_ci95=None if learned else list(ratio_ci([r["successes"] for r in records],
+                                                                   [r["applicable"] for r in records])),
+            target_base_rate=None if learned else 1.0 - applicable / steps_total if steps_total else float("nan"),
             queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
             max_linf=float(max(r["max_linf"] for r in records)),
             attack_config=job.attack,

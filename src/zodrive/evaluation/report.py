@@ -30,13 +30,18 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"attack: {summary['attack']} ("
             + (f"{summary['norm']}, eps={summary['eps']}, budgeted" if summary.get("eps") is not None
                else "unconstrained: paper mode, no budget")
-            + f", target={summary['target']})" + _options(summary.get("attack_config") or {})
+            + (f", adversary {(summary.get('attack_config') or {}).get('adversary')})" if summary["attack"] == "learned"
+               else f", target={summary['target']})") + _options(summary.get("attack_config") or {})
         )
-        lines.append(
-            f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
-            f"missed the target (base rate {summary['target_base_rate']:.1%}); "
-            f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
-        )
+        if summary["attack_success_rate"] is None:  # a learned adversary: no per-step goal
+            lines.append(f"attack success: n/a (the adversary lowers the return over the episode, no per-step "
+                         f"target); {summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}")
+        else:
+            lines.append(
+                f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
+                f"missed the target (base rate {summary['target_base_rate']:.1%}); "
+                f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
+            )
     return "\n".join(lines)
 
 
@@ -44,7 +49,7 @@ def _options(config: dict) -> str:
     """The attack's options that differ from AttackSpec's defaults (e.g. max_change=0.01)."""
     from zodrive.attacks.spec import AttackSpec
 
-    shown = {"attack", "eps", "norm", "mode", "target", "seed", "frozen"}
+    shown = {"attack", "eps", "norm", "mode", "target", "seed", "frozen", "adversary"}
     default = AttackSpec().to_dict()
     changed = [f"{k}={v}" for k, v in config.items() if k not in shown and k in default and v != default[k]]
     return f" {', '.join(changed)}" if changed else ""

@@ -105,7 +105,8 @@ def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:
 def _black_box(attack: str, attack_set: list[str] | None) -> bool:
     from zodrive.attacks.registry import ATTACKS
 
-    return ATTACKS[load_attack(attack, attack_set).attack].black_box
+    name = load_attack(attack, attack_set).attack
+    return name not in ATTACKS or ATTACKS[name].black_box  # the learned adversary only sees observations
 
 
 def _label(attack: str) -> str:

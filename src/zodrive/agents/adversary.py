@@ -1,0 +1,259 @@
+"""Train a learned optimal adversary (`zodrive attack-train`): SA-RL, Zhang et al., ICLR 2021.
+
+The attacker is an SB3 PPO agent in an environment of its own (`AdversaryEnv`): it observes
+the true observation (and, with `victim_action`, the victim's clean action), its action
+a in [-1, 1]^d becomes the perturbation eps * a on the d perturbable coordinates, projected
+by the same threat model as every attack (`zodrive.attacks.learned.apply_action`); the fixed
+victim acts on the perturbed observation, the real environment steps, and the adversary's
+reward is minus the victim's environment reward (`reward="minus"`: a crash ends the episode,
+so it is paid by the rewards the victim no longer collects) or the same objective over the
+fixed horizon with a crash credited at once (`reward="horizon"`). Every victim call goes through a
+`QueryOracle` and is counted in train.json. The folder it writes (model.zip, adversary.json,
+config.yaml, run.json, train.json, CARD.md) is read back by `--attack learned:DIR` through
+the safe loader (PPO's Gaussian mean, clipped to [-1, 1]; nothing unpickled).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from zodrive.attacks.learned import FORMAT, META_FILE, adversary_input, apply_action, free_coordinates
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.threat import ThreatModel
+from zodrive.attacks.victim import Victim
+from zodrive.compute import one_torch_thread
+from zodrive.errors import ZodriveError
+
+log = logging.getLogger(__name__)
+
+PPO_DEFAULTS = {"n_steps": 1024, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
+                "gae_lambda": 0.95, "ent_coef": 0.0, "use_sde": True, "sde_sample_freq": 128}
+"""SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions) and gSDE
+exploration (Raffin et al., CoRL 2021) whose noise is redrawn every 128 steps: a perturbation
+that must be held for many steps to make the victim crash is tried as a whole, where
+independent per-step noise averages out."""
+REWARDS = ("minus", "horizon")
+"""The adversary's reward (`AdversaryEnv._reward`): minus the victim's reward, or the same
+objective over the fixed horizon with a crash credited at once."""
+LOG_STD_INIT = -1.0
+"""Initial log std of the Gaussian (SB3's default 0: std 1, whose samples are clipped to the
+box's vertices whatever the mean, so the mean the attack acts on would learn little)."""
+
+
+class AdversaryEnv(gym.Env):
+    """The adversary's MDP around a fixed victim and the preset's environment.
+
+    Observation: the flattened true observation (+ the victim's encoded clean action with
+    `victim_action`, one counted query). Action: a in [-1, 1]^d, d = perturbable coordinates.
+    Step: the victim acts on `apply_action(threat, obs, a)` (one counted query), the
+    environment steps, and the reward is minus the victim's reward (`info["victim_reward"]`).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, env: gym.Env, victim: Victim, threat: ThreatModel, *, victim_action: bool = False,
+                 reward: str = "minus", horizon: int | None = None) -> None:
+        if reward not in REWARDS:
+            raise ZodriveError(f"reward must be one of {', '.join(REWARDS)}, not {reward!r}")
+        if reward == "horizon" and not (isinstance(horizon, int) and horizon >= 1):
+            raise ZodriveError("reward horizon needs the episode's horizon (a preset whose per-step reward is at most "
+                               "1 and whose length is known); use reward minus")
+        self.env, self.victim, self.threat = env, victim, threat
+        self.victim_action, self.reward, self.horizon = victim_action, reward, horizon
+        self.t = 0
+        self.episode_return = 0.0
+        self.victim_returns: list[float] = []  # the victim's return of every finished episode
+        self.oracle = QueryOracle(victim)  # no budget: counts every victim call of training
+        shape = tuple(env.observation_space.shape)
+        self.obs_shape = shape
+        self.free = free_coordinates(threat, shape)
+        if len(self.free) == 0:
+            raise ZodriveError("the threat model leaves no coordinate to perturb")
+        width = int(np.prod(shape)) + (self._outputs() if victim_action else 0)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (width,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (len(self.free),), np.float32)
+        self._obs: np.ndarray | None = None
+
+    def _outputs(self) -> int:
+        probe = np.zeros((1, *self.obs_shape), dtype=np.float32)
+        return int(np.asarray(self.victim.query(probe)).shape[-1])  # a shape probe on zeros, not an observation
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        self._obs = np.asarray(obs, dtype=np.float32)
+        clean = None
+        if self.victim_action:
+            self.oracle.begin_step(1)
+            clean = self.oracle(self._obs[None])
+        return adversary_input(self._obs[None], clean, self.victim.kind)[0]
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):  # type: ignore[override]
+        super().reset(seed=seed)
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.oracle.begin_episode()
+        self.t, self.episode_return = 0, 0.0
+        return self._observe(obs), info
+
+    def step(self, action: np.ndarray):  # type: ignore[override]
+        if self._obs is None:
+            raise ZodriveError("AdversaryEnv.step before reset")
+        fed = apply_action(self.threat, self._obs[None], np.asarray(action, dtype=np.float32)[None], self.free)
+        self.oracle.begin_step(1)
+        out = self.oracle(fed)
+        chosen = self.victim.actions(out)[0]
+        if self.victim.kind == "discrete":
+            chosen = int(chosen)
+        else:
+            space = self.env.action_space
+            chosen = np.clip(chosen, space.low, space.high) if isinstance(space, gym.spaces.Box) else np.clip(chosen, -1, 1)
+        obs, reward, terminated, truncated, info = self.env.step(chosen)
+        info = dict(info)
+        info["victim_reward"] = float(reward)
+        info["linf"] = float(np.abs(fed[0] - self._obs).max())
+        self.t += 1
+        self.episode_return += float(reward)
+        if terminated or truncated:
+            self.victim_returns.append(self.episode_return)
+        return self._observe(obs), self._reward(float(reward), terminated), terminated, truncated, info
+
+    def _reward(self, reward: float, terminated: bool) -> float:
+        """`minus`: -r. `horizon`: 1 - r, and when the episode ends before the horizon T (a crash),
+        T - t at once: the T - t steps the victim no longer drives count as steps of reward 0.
+        The episode's sum is then T - (the victim's return): the same objective, credited when
+        the crash happens instead of only through the discounted absence of later rewards."""
+        if self.reward == "minus":
+            return -reward
+        assert self.horizon is not None
+        return 1.0 - reward + (max(self.horizon - self.t, 0) if terminated else 0.0)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
+    """CARD.md of a trained adversary: what it attacks, how it was trained, what it cost."""
+    first, last = train["victim_return_first10"], train["victim_return_last10"]
+    return "\n".join([
+        f"# Learned adversary: {meta['victim']} at L-inf eps {meta['eps']:g}", "",
+        "SA-RL's learned optimal adversary (Zhang et al., ICLR 2021): an SB3 PPO policy whose action "
+        "a in [-1, 1]^d is the perturbation eps * a on the perturbable features (presence frozen), "
+        "projected like every zodrive attack. Reward: "
+        + ("minus the victim's environment reward." if meta["reward"] == "minus" else
+           f"1 - the victim's reward per step, and at a crash the {meta['horizon']} - t steps left at once "
+           "(sum: horizon - the victim's return)."), "",
+        f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..)"
+        + (f" behind defense `{meta['defense']}`" if meta["defense"] else ""),
+        f"- preset: {meta['preset'].get('name')}; observes the true observation"
+        + (" and the victim's clean action (1 query per step at attack time)" if meta["victim_action"]
+           else " only (0 queries per step at attack time)"),
+        f"- training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
+        f"{train['wall_time_s']} s ({train['steps_per_s']} steps/s); victim queries {train['victim_queries']} "
+        f"({train['queries_per_step']:.2f} per step)",
+        f"- victim return per training episode: first 10 {first if first is None else round(first, 2)}, "
+        f"last 10 {last if last is None else round(last, 2)} (exploring adversary: not an evaluation)",
+        "", "Use: `zodrive evaluate " + meta["victim"] + f" --attack learned:{out} --eps {meta['eps']:g}`"
+        + (f" --defense {meta['defense']}" if meta["defense"] else ""), "",
+    ])
+
+
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
+def attack_train(
+    model: str,
+    preset: dict[str, Any],
+    eps: float,
+    steps: int,
+    out: Path,
+    *,
+    seed: int = 0,
+    defense: str | None = None,
+    victim_action: bool = False,
+    reward: str = "minus",
+    force: bool = False,
+    progress_bar: bool = True,
+) -> Path:
+    """Train a learned adversary against `model` (behind `defense`) at L-inf `eps` for `steps`
+    environment steps; write the model folder `out` and return it."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from zodrive.agents.policies import is_sb3_zip, load_policy, policy_ref
+    from zodrive.agents.safe_load import sha256
+    from zodrive.agents.training import check_run_folder
+    from zodrive.attacks.spec import AttackSpec
+    from zodrive.envs import attack_context, make_env
+    from zodrive.runinfo import write_atomic, write_json, write_run_info
+
+    if not (isinstance(steps, int) and steps >= 1):
+        raise ZodriveError(f"steps must be an integer >= 1, not {steps}")
+    if not (np.isfinite(eps) and eps > 0):
+        raise ZodriveError(f"eps must be > 0, not {eps}")
+    if not is_sb3_zip(model):
+        raise ZodriveError("attack-train attacks a model file (SB3 zip or model folder): an adversary is tied "
+                           "to the file it was trained against by its SHA-256")
+    if defense is not None:
+        from zodrive.defense import keeps_state
+
+        if keeps_state(defense):
+            raise ZodriveError(f"the {defense} defense keeps state over an episode; attack-train supports "
+                               "stateless defenses (shield[@EPS])")
+    check_run_folder(out, resume=False, force=force, resumable=False)
+    victim = load_policy(model, preset, defense)  # safe loader; the defended system if a defense is named
+    context = attack_context(preset)
+    spec = AttackSpec(attack="learned", eps=float(eps))
+    threat = spec.threat(context["features"], context["bounds"])
+    file = Path(policy_ref(model))
+    ppo = dict(PPO_DEFAULTS)
+    ppo["n_steps"] = min(ppo["n_steps"], max(steps, 8))  # a tiny run (tests) still completes its rollouts
+    ppo["batch_size"] = min(ppo["batch_size"], ppo["n_steps"])
+    horizon = None
+    if reward == "horizon":
+        from zodrive.envs import scenario
+
+        max_return = scenario(preset).max_return  # known where every step earns at most 1 (normalized highway-env)
+        if max_return is None:
+            raise ZodriveError(f"--reward horizon needs a preset whose steps earn at most 1 and whose length is "
+                               f"known; {preset.get('name')!r} is not one: use --reward minus")
+        horizon = int(max_return)
+    meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
+            "preset": preset, "defense": defense, "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen),
+            "victim_action": bool(victim_action), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
+            "action_dim": 0, "reward": reward, "horizon": horizon}
+    inner = AdversaryEnv(make_env(preset), victim, threat, victim_action=victim_action, reward=reward, horizon=horizon)
+    meta["action_dim"] = int(inner.action_space.shape[0])
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in ("model.zip", META_FILE, "train.json", "CARD.md", "monitor.monitor.csv"):
+        (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
+    write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
+                         "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
+                         "log_std_init": LOG_STD_INIT}, seed)
+    env = Monitor(inner, filename=str(out / "monitor"))
+    venv = DummyVecEnv([lambda: env])
+    venv.seed(seed)
+    agent = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0,
+                policy_kwargs={"log_std_init": LOG_STD_INIT}, **ppo)
+    start = time.perf_counter()
+    agent.learn(total_timesteps=steps, progress_bar=progress_bar)
+    wall = time.perf_counter() - start
+    agent.save(out / "model.zip")
+    returns = list(inner.victim_returns)  # the victim's return per training episode
+    done = int(agent.num_timesteps)
+    train = {"algo": "ppo", "kind": "learned adversary (SA-RL, Zhang et al. ICLR 2021)", "victim": str(model),
+             "defense": defense, "eps": float(eps), "total_timesteps": done, "requested_steps": steps, "seed": seed,
+             "wall_time_s": round(wall, 1), "steps_per_s": round(done / wall, 1),
+             "victim_queries": int(inner.oracle.total_queries), "queries_per_step": inner.oracle.total_queries / done,
+             "episodes": len(returns),
+             "victim_return_first10": float(np.mean(returns[:10])) if returns else None,
+             "victim_return_last10": float(np.mean(returns[-10:])) if returns else None,
+             "reward": reward, "horizon": horizon}
+    write_json(out / "train.json", train)
+    write_atomic(out / META_FILE, json.dumps(meta, indent=2) + "\n")
+    write_atomic(out / "CARD.md", _card(out, meta, train))
+    venv.close()
+    return out

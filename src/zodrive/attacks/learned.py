@@ -1,0 +1,209 @@
+"""A learned optimal adversary: an RL policy that maps the observation to the perturbation.
+
+Zhang, Chen, Boning, Hsieh. "Robust Deep Reinforcement Learning against Adversarial
+Perturbations on State Observations" (SA-MDP, NeurIPS 2020) and "Robust Reinforcement
+Learning on State Observations with Learned Optimal Adversary" (SA-RL, ICLR 2021); cf. PA-AD
+(Sun et al., ICLR 2022). The attacker is itself an agent, trained (`zodrive attack-train`,
+`zodrive.agents.adversary`) to minimize the victim's return over the whole episode instead
+of pushing it toward one action now: its action a in [-1, 1]^d becomes the perturbation
+delta = eps * a on the d perturbable coordinates, projected by the same `ThreatModel` as
+every other attack (mask, eps-ball, observation box).
+
+At attack time the adversary's deterministic action (its Gaussian mean, clipped to [-1, 1],
+rebuilt by the safe loader: nothing in the folder is unpickled) is computed row by row, so N
+episodes in lockstep get bit for bit what N one-episode runs get. It keeps no state.
+
+Queries per environment step: 0, or 1 (the victim's output on the clean observation) for an
+adversary trained with `--victim-action`, which also observes the victim's clean action. It
+has no per-step goal (it maximizes the victim's loss over the episode), so no per-step
+success is reported: judge it by the return.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from zodrive.attacks.base import Attack, AttackResult
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.threat import ThreatModel, distortion
+from zodrive.errors import ZodriveError
+
+NAME = "learned"
+META_FILE = "adversary.json"
+FORMAT = 1  # bumped if what adversary.json means changes
+
+# what a learned attack accepts of the search attacks' options: their defaults (anything else
+# would be ignored, which is an error)
+_SEARCH_DEFAULTS = {"steps": 100, "n_directions": 20, "l2_weight": 0.0, "early_stop": True, "patience": None,
+                    "warm_start": False, "on_failure": "best", "restarts": 0, "timing": None, "max_change": None,
+                    "seed": 0}
+
+
+def free_coordinates(threat: ThreatModel, obs_shape: tuple[int, ...]) -> np.ndarray:
+    """Indices of the flattened observation the attacker may write (the threat model's mask)."""
+    return np.flatnonzero(threat.mask(obs_shape).reshape(-1) > 0)
+
+
+def apply_action(threat: ThreatModel, x0: np.ndarray, action: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Observations (N, *obs) fed to the victim for adversary actions (N, len(free)): delta =
+    eps * clip(action, -1, 1) on the free coordinates, then the threat model's projection (so
+    the result is inside the eps-ball, the mask and the box whatever the action)."""
+    n = len(x0)
+    flat0 = np.asarray(x0, dtype=np.float32).reshape(n, -1)
+    delta = np.zeros_like(flat0)
+    delta[:, free] = np.float32(threat.eps) * np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)
+    return threat.project((flat0 + delta).reshape(x0.shape), np.asarray(x0, dtype=np.float32)).astype(x0.dtype)
+
+
+def encode_outputs(outputs: np.ndarray, kind: str) -> np.ndarray:
+    """What an adversary with `victim_action` sees of the victim (N, k): the chosen action
+    one-hot (discrete; so score and decision-only access give the same input) or the action."""
+    outputs = np.asarray(outputs, dtype=np.float32)
+    if kind == "discrete":
+        return np.eye(outputs.shape[-1], dtype=np.float32)[outputs.argmax(axis=-1)]
+    return outputs
+
+
+def adversary_input(x0: np.ndarray, clean: np.ndarray | None, kind: str) -> np.ndarray:
+    """The adversary's observation (N, D [+ k]): the flattened true observation, and the
+    victim's encoded clean output when it was trained with it."""
+    flat = np.asarray(x0, dtype=np.float32).reshape(len(x0), -1)
+    return flat if clean is None else np.concatenate([flat, encode_outputs(clean, kind)], axis=1)
+
+
+def read_meta(folder: str | Path) -> dict[str, Any]:
+    """A trained adversary's `adversary.json`, or a one-line error saying what is missing."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise ZodriveError(f"adversary folder not found: {path} (train one with `zodrive attack-train`)")
+    for name in (META_FILE, "model.zip"):
+        if not (path / name).is_file():
+            raise ZodriveError(f"{path} is not a trained adversary (no {name}; train one with `zodrive attack-train`)")
+    try:
+        meta = json.loads((path / META_FILE).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ZodriveError(f"{path / META_FILE} is not valid JSON") from None
+    keys = ("format", "eps", "norm", "frozen", "victim_action", "kind", "obs_shape", "action_dim", "victim_sha256",
+            "preset", "defense")
+    if not isinstance(meta, dict) or any(k not in meta for k in keys) or meta["format"] != FORMAT:
+        raise ZodriveError(f"{path / META_FILE} is not an adversary description zodrive {FORMAT} reads")
+    return meta
+
+
+def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
+    """Refuse to run an adversary against another system than the one it was trained on
+    (another model file, preset or defense): one line saying which."""
+    from zodrive.agents.safe_load import sha256
+
+    meta = read_meta(folder)
+    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
+        raise ZodriveError(f"adversary {folder} was trained against {meta.get('victim', '?')} (SHA-256 "
+                           f"{meta['victim_sha256'][:12]}..), not {model_file}: train one against this model")
+    if meta["preset"] != preset:
+        raise ZodriveError(f"adversary {folder} was trained on preset {meta['preset'].get('name')!r} with other "
+                           "settings than this evaluation's: train one for this preset")
+    if meta["defense"] != defense:
+        raise ZodriveError(f"adversary {folder} was trained against the victim with defense "
+                           f"{meta['defense'] or 'none'}, not {defense or 'none'}: train one against this system")
+
+
+class LearnedAdversary(Attack):
+    """SA-RL's learned optimal adversary (Zhang et al., ICLR 2021) read from a trained folder.
+
+    Queries per environment step: 0, or 1 with `victim_action` (the clean observation)."""
+
+    name = NAME
+    reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
+
+    def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
+        super().__init__(threat, **kwargs)
+        for option, default in _SEARCH_DEFAULTS.items():
+            if getattr(self, option) != default:
+                raise ZodriveError(f"attack learned: {option} has no effect (the perturbation is the trained "
+                                   "adversary's output, not a search)")
+        if adversary is None:
+            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR "
+                               "(a folder written by `zodrive attack-train`)")
+        from zodrive.agents.loading import load_network
+
+        self.folder = str(adversary)
+        self.meta = read_meta(self.folder)
+        if threat.mode != "budgeted":
+            raise ZodriveError("attack learned: mode paper has no budget; the adversary acts inside the eps-ball "
+                               "it was trained with")
+        if float(threat.eps) != float(self.meta["eps"]) or threat.norm != self.meta["norm"]:
+            raise ZodriveError(f"adversary {self.folder} was trained at {self.meta['norm']} eps "
+                               f"{self.meta['eps']:g}, not {threat.norm} eps {threat.eps:g}: pass --eps "
+                               f"{self.meta['eps']:g} or train one at this eps")
+        self.victim_action = bool(self.meta["victim_action"])
+        network = load_network(self.folder)  # the safe loader: rebuilt from plain data, nothing unpickled
+        if network.kind != "continuous" or network.n_outputs != int(self.meta["action_dim"]):
+            raise ZodriveError(f"{self.folder}/model.zip is not the adversary its {META_FILE} describes")
+        self.net = network.net
+
+    def check_mask(self, threat: ThreatModel) -> None:
+        """The features it may write are the ones it was trained to write."""
+        if list(threat.frozen) != list(self.meta["frozen"]):
+            raise ZodriveError(f"adversary {self.folder} was trained with frozen features "
+                               f"{self.meta['frozen'] or 'none'}, not {list(threat.frozen) or 'none'}")
+
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return int(self.victim_action)
+
+    def queries_per_step(self) -> int:
+        return int(self.victim_action)
+
+    def first_iteration_cost(self) -> int:
+        return int(self.victim_action)
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        raise AssertionError("a learned adversary takes no search step")  # perturb is its own
+
+    def actions(self, inputs: np.ndarray) -> np.ndarray:
+        """The adversary's deterministic actions (N, d), one row per forward pass (a row's
+        action does not depend on the batch it came in)."""
+        with torch.no_grad():
+            return np.concatenate([self.net(torch.from_numpy(row[None])).numpy() for row in inputs]).astype(np.float32)
+
+    def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
+                ) -> AttackResult:
+        """delta = eps * pi(observation [, victim's clean action]) on the free coordinates,
+        projected; a row whose episode budget cannot pay the one query is left clean."""
+        n, shape = len(x0), tuple(x0.shape[1:])
+        if tuple(self.meta["obs_shape"]) != shape:
+            raise ZodriveError(f"adversary {self.folder} was trained on observations of shape "
+                               f"{tuple(self.meta['obs_shape'])}, not {shape}")
+        free = free_coordinates(self.threat, shape)
+        if len(free) != int(self.meta["action_dim"]):
+            raise ZodriveError(f"adversary {self.folder} perturbs {self.meta['action_dim']} coordinates; this "
+                               f"threat model frees {len(free)}")
+        oracle.begin_step(rows=n)
+        x0 = np.asarray(x0, dtype=np.float32)
+        live = np.ones(n, dtype=bool)
+        clean = None
+        k = 0
+        if self.victim_action:
+            live = oracle.remaining(np.arange(n)) >= 1
+            asked = np.flatnonzero(live)
+            if asked.size:
+                answered = np.asarray(oracle(x0[asked], asked), dtype=np.float32)
+                k = answered.shape[1]
+                clean = np.full((n, k), np.nan, dtype=np.float32)
+                clean[asked] = answered
+        x_adv = x0.copy()
+        rows = np.flatnonzero(live)
+        if rows.size:
+            inputs = adversary_input(x0[rows], None if clean is None else clean[rows], self.meta["kind"])
+            x_adv[rows] = apply_action(self.threat, x0[rows], self.actions(inputs), free)
+        linf, l2 = distortion(x_adv, x0)
+        nothing = np.zeros(n, dtype=bool)
+        outputs = np.full((n, k), np.nan, dtype=np.float32) if clean is None else clean
+        return AttackResult(x_adv=x_adv, success=nothing, already=np.ones(n, dtype=bool),  # no per-step goal
+                            iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
+                            adv_outputs=np.full_like(outputs, np.nan), clean_outputs=outputs)

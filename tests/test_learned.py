@@ -1,0 +1,193 @@
+"""The learned adversary (SA-RL): its environment, its folder and `--attack learned:DIR`.
+
+No highway-env training: a toy environment for the adversary's MDP, CartPole and tiny
+models for the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from toys import FEATURES, linear_victim, observations
+from zodrive.agents.adversary import AdversaryEnv
+from zodrive.attacks import AttackSpec, ThreatModel
+from zodrive.attacks.learned import apply_action, free_coordinates
+from zodrive.cli import main
+
+
+class ToyRoad(gym.Env):
+    """(5, 5) observations in [-1, 1] (presence first), 5 actions; the reward depends on the
+    action the victim takes, so the adversary's reward tells whether it is the victim's."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (5, 5), np.float32)
+    action_space = gym.spaces.Discrete(5)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return self._obs(), {}
+
+    def _obs(self) -> np.ndarray:
+        return observations(1, seed=int(self.np_random.integers(1 << 30)))[0]
+
+    def step(self, action):
+        self.t += 1
+        return self._obs(), 0.1 * (int(action) + 1), self.t >= 10, False, {"action": int(action)}
+
+
+def _threat(eps: float = 0.05) -> ThreatModel:
+    return AttackSpec(attack="learned", eps=eps).threat(FEATURES, (-1.0, 1.0))
+
+
+def test_the_perturbation_stays_in_the_ball_the_mask_and_the_box() -> None:
+    threat = _threat(0.05)
+    x0 = observations(64)
+    x0[:3, 1:, 1] = 0.99  # near the box's edge
+    free = free_coordinates(threat, x0.shape[1:])
+    assert len(free) == 20  # presence (one column of five rows) is frozen
+    rng = np.random.default_rng(0)
+    for scale in (0.5, 1.0, 10.0):  # actions beyond [-1, 1] are clipped, never amplified
+        x = apply_action(threat, x0, scale * rng.standard_normal((64, len(free))), free)
+        assert np.abs(x - x0).max() <= 0.05 + 1e-7
+        assert np.array_equal(x[:, :, 0], x0[:, :, 0])  # presence untouched
+        assert x.max() <= 1.0 and x.min() >= -1.0
+
+
+@pytest.mark.parametrize("victim_action", [False, True])
+def test_adversary_env_reward_is_minus_the_victims_and_queries_are_counted(victim_action: bool) -> None:
+    victim = linear_victim()
+    env = AdversaryEnv(ToyRoad(), victim, _threat(), victim_action=victim_action)
+    obs, _ = env.reset(seed=3)
+    assert obs.shape == (25 + 5 * victim_action,) and env.action_space.shape == (20,)
+    steps = 0
+    done = False
+    rng = np.random.default_rng(1)
+    while not done:
+        before = env._obs.copy()
+        action = rng.uniform(-1, 1, 20).astype(np.float32)
+        fed = apply_action(env.threat, before[None], action[None], env.free)
+        expected = int(victim.query(fed).argmax())  # what the victim does on the perturbed observation
+        obs, reward, terminated, truncated, info = env.step(action)
+        steps += 1
+        assert info["action"] == expected and reward == -info["victim_reward"] == pytest.approx(-0.1 * (expected + 1))
+        assert info["linf"] <= 0.05 + 1e-7
+        done = terminated or truncated
+    # one query per step for the victim's decision, one more per observation with victim_action
+    assert env.oracle.total_queries == steps + victim_action * (steps + 1)
+
+
+def _victim(tmp_path: Path, seed: int = 0) -> Path:
+    from stable_baselines3 import DQN
+
+    model = DQN("MlpPolicy", gym.make("CartPole-v1"), seed=seed, device="cpu", buffer_size=1000,
+                learning_starts=50).learn(100)
+    path = tmp_path / f"victim{seed}.zip"
+    model.save(path)
+    return path
+
+
+CART = ["--env-id", "CartPole-v1", "--obs-bounds=-5,5"]
+
+
+def _error(capsys, args: list[str]) -> str:
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> tuple[Path, Path, Path]:
+    """A victim, an adversary trained against it (observation only) and one with its action."""
+    tmp = tmp_path_factory.mktemp("learned")
+    victim = _victim(tmp)
+    for name, extra in (("adv", []), ("adv-action", ["--victim-action"])):
+        assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "64", "--out", str(tmp / name),
+                     "--seed", "1", "--no-progress", *extra]) == 0
+    return victim, tmp / "adv", tmp / "adv-action"
+
+
+def test_attack_train_writes_a_model_folder(trained) -> None:
+    victim, adv, _ = trained
+    for name in ("model.zip", "adversary.json", "train.json", "config.yaml", "run.json", "CARD.md"):
+        assert (adv / name).is_file(), name
+    train = json.loads((adv / "train.json").read_text())
+    meta = json.loads((adv / "adversary.json").read_text())
+    assert train["victim_queries"] == train["total_timesteps"] >= 64 and train["queries_per_step"] == 1.0
+    assert meta["eps"] == 0.1 and meta["action_dim"] == 4 and meta["victim_action"] is False
+    assert "--attack learned:" in (adv / "CARD.md").read_text()
+
+
+def test_attack_learned_reads_it_in_the_ball_deterministic_and_lockstep_equal(trained, tmp_path: Path, capsys,
+                                                                             monkeypatch) -> None:
+    from stable_baselines3 import PPO
+
+    victim, adv, adv_action = trained
+    monkeypatch.setattr(PPO, "load", lambda *a, **k: pytest.fail("the adversary must be read by the safe loader"))
+    records = {}
+    for adversary, envs in ((adv, 1), (adv, 3), (adv_action, 1), (adv_action, 3)):
+        out = tmp_path / f"{adversary.name}-{envs}"
+        assert main(["evaluate", str(victim), *CART, "--attack", f"learned:{adversary}", "--eps", "0.1",
+                     "--episodes", "3", "--envs", str(envs), "--out", str(out), "--no-progress"]) == 0, \
+            capsys.readouterr().err
+        assert "n/a" in capsys.readouterr().out
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["max_linf"] <= 0.1 + 1e-6 and summary["attack_success_rate"] is None
+        assert summary["queries_per_step"] == (1.0 if adversary == adv_action else 0.0)
+        records[out.name] = [{k: v for k, v in json.loads(line).items()}
+                             for line in (out / "episodes.jsonl").read_text().splitlines()]
+        steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
+        assert max(s["linf"] for s in steps) <= 0.1 + 1e-6
+    for name in ("adv", "adv-action"):  # N episodes side by side = N one-episode runs, bit for bit
+        one = sorted(records[f"{name}-1"], key=lambda r: r["episode"])
+        three = sorted(records[f"{name}-3"], key=lambda r: r["episode"])
+        assert one == three
+
+
+def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path, capsys) -> None:
+    victim, adv, _ = trained
+    base = ["evaluate", str(victim), *CART, "--episodes", "1", "--no-progress"]
+    assert "trained at linf eps 0.1" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.2"])
+    assert "not found" in _error(capsys, [*base, "--attack", f"learned:{tmp_path / 'nope'}", "--eps", "0.1"])
+    (tmp_path / "empty").mkdir()
+    assert "not a trained adversary" in _error(capsys, [*base, "--attack", f"learned:{tmp_path / 'empty'}"])
+    assert "needs a trained adversary" in _error(capsys, [*base, "--attack", "learned", "--eps", "0.1"])
+    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--target", "1"])
+    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--restarts", "2"])
+    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--attack-seed", "3"])
+    other = _victim(tmp_path, seed=5)
+    assert "train one against this model" in _error(
+        capsys, ["evaluate", str(other), *CART, "--episodes", "1", "--attack", f"learned:{adv}", "--eps", "0.1"])
+    assert "adversary" in _error(  # trained on another preset and against a model file, not a baseline
+        capsys, ["evaluate", "baseline:rules", "--preset", "discrete", "--episodes", "1", "--attack",
+                 f"learned:{adv}", "--eps", "0.1"])
+    assert "already holds a run" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",
+                                                    "8", "--out", str(adv)])
+    assert "--reward horizon needs" in _error(capsys, ["attack-train", str(victim), *CART, "--eps", "0.1", "--steps",
+                                                       "8", "--reward", "horizon", "--out", str(tmp_path / "h")])
+    assert not (tmp_path / "h").exists()  # a refused run leaves no folder behind
+    assert "attacks a model file" in _error(capsys, ["attack-train", "baseline:faster", "--eps", "0.1", "--steps",
+                                                     "8", "--out", str(tmp_path / "b")])
+
+
+@pytest.mark.parametrize("horizon", [10, 25])
+def test_horizon_reward_sums_to_the_horizon_minus_the_victims_return(horizon: int) -> None:
+    env = AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon", horizon=horizon)
+    env.reset(seed=0)
+    total, victim, done = 0.0, 0.0, False
+    while not done:
+        _, reward, terminated, truncated, info = env.step(np.zeros(20, dtype=np.float32))
+        total, victim, done = total + reward, victim + info["victim_reward"], terminated or truncated
+    # the toy ends after 10 steps: with horizon 25 the 15 steps it cut off count as steps of reward 0
+    assert total == pytest.approx(horizon - victim) and env.victim_returns == [pytest.approx(victim)]
+
+
+def test_horizon_reward_needs_a_known_horizon() -> None:
+    from zodrive.errors import ZodriveError
+
+    with pytest.raises(ZodriveError, match="horizon"):
+        AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon")
