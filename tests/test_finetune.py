@@ -127,4 +127,25 @@ def test_init_options_with_defaults() -> None:
     assert check_init({"algo": "dqn"}, "r") is None
     assert check_init({"algo": "dqn", "init": "m"}, "r") is None
     assert check_init({"algo": "dqn", "init": "m", "calibrate": {"episodes": 3}}, "r") == {
-        "episodes": 3, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1}
+        "episodes": 3, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}
+
+
+def test_td_policy_evaluation_keeps_the_greedy_policy_and_syncs_the_target() -> None:
+    from stable_baselines3.common.logger import configure
+
+    from zodrive.agents.finetune import evaluate_td
+
+    model = _dqn(0, [32, 32], n_steps=3, gamma=0.9, learning_rate=1e-3)
+    model.set_logger(configure(None, []))
+    obs = _fill(model, 300)
+    calibrate(model)
+    x = th.as_tensor(obs)
+    with th.no_grad():
+        before = model.q_net(x)
+    stats = evaluate_td(model, 1000, 32, margin=0.8, weight=1.0, sync_every=100)
+    with th.no_grad():
+        after = model.q_net(x)
+    assert stats["greedy_agreement"] > 0.9 and float((after.argmax(1) == before.argmax(1)).float().mean()) > 0.9
+    assert stats["td_loss_last"] < stats["td_loss_first"]
+    for online, target in zip(model.q_net.parameters(), model.q_net_target.parameters()):
+        assert th.equal(online, target)

@@ -18,6 +18,11 @@ their values mean nothing to a TD target. Three steps turn it into a DQN startin
    those of the calibration, and the RL updates change the policy only where the TD errors show
    an action better than the clone's (cf. DQfD's pre-training, Hester et al., AAAI 2018, which
    starts from demonstrations instead of a trained policy).
+4. `evaluate_td` (optional, recipe `calibrate.td_steps`): the linear fit on frozen features
+   leaves large TD errors, whose gradients reshape the hidden layers once RL starts. A few
+   thousand TD updates of the whole network then continue the policy evaluation (next action:
+   the frozen clone's argmax) with DQfD's large-margin loss on the clone's own actions, so the
+   values fit better while the greedy policy stays the clone's.
 """
 
 from __future__ import annotations
@@ -156,3 +161,48 @@ def calibrate(model: Any, ridge: float = 1e-3, min_scale: float = 0.1) -> dict[s
             "mean_n_step_return": round(float(reward.mean()), 4),
             "mean_abs_td_error_before": round(before, 4), "mean_abs_td_error_after": round(after, 4),
             "greedy_agreement": float((f_new.argmax(dim=1) == greedy_before).float().mean())}
+
+
+def evaluate_td(model: Any, steps: int, batch_size: int, margin: float = 0.8, weight: float = 1.0,
+                sync_every: int = 1000) -> dict[str, Any]:
+    """`steps` TD updates of policy evaluation on the replay buffer: target r + gamma^n Q'(s', pi(s')),
+    pi the argmax of a frozen copy of the current network (the calibrated clone), plus `weight` times
+    the large-margin loss (Hester et al. 2018) on pi's actions; the target network copies the online
+    one every `sync_every` updates and at the end. Uses the model's optimizer, learning rate and
+    gradient clipping. Returns the losses and the greedy agreement with pi on the buffer's states."""
+    import copy
+
+    from torch.nn import functional as F
+
+    frozen = copy.deepcopy(model.q_net).requires_grad_(False)
+    model.policy.set_training_mode(True)
+    td_losses, margins = [], []
+    for step in range(steps):
+        data = model.replay_buffer.sample(batch_size)
+        discounts = data.discounts if data.discounts is not None else model.gamma
+        with th.no_grad():
+            nxt = frozen(data.next_observations).argmax(dim=1, keepdim=True)
+            target = data.rewards + (1 - data.dones) * discounts * model.q_net_target(data.next_observations).gather(1, nxt)
+            labels = frozen(data.observations).argmax(dim=1, keepdim=True)
+        q = model.q_net(data.observations)
+        td = F.smooth_l1_loss(q.gather(1, data.actions.long()), target)
+        bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
+        large_margin = ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
+        loss = td + weight * large_margin
+        model.policy.optimizer.zero_grad()
+        loss.backward()
+        th.nn.utils.clip_grad_norm_(model.policy.parameters(), model.max_grad_norm)
+        model.policy.optimizer.step()
+        td_losses.append(td.item())
+        margins.append(large_margin.item())
+        if (step + 1) % sync_every == 0:
+            model.q_net_target.load_state_dict(model.q_net.state_dict())
+    model.q_net_target.load_state_dict(model.q_net.state_dict())
+    data = _buffer_samples(model)
+    with th.no_grad():
+        agreement = float((model.q_net(data.observations).argmax(dim=1)
+                           == frozen(data.observations).argmax(dim=1)).float().mean())
+    tail = max(1, steps // 10)
+    return {"td_steps": steps, "td_loss_first": round(float(np.mean(td_losses[:tail])), 4),
+            "td_loss_last": round(float(np.mean(td_losses[-tail:])), 4),
+            "margin_loss_last": round(float(np.mean(margins[-tail:])), 4), "greedy_agreement": round(agreement, 4)}

@@ -34,7 +34,7 @@ RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "
                "double_q", "guide", "init", "calibrate"}
 GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
 DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
-CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1}  # recipe `calibrate:` defaults
+CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -99,9 +99,10 @@ def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
     if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in settings.values()):
         raise ZodriveError(f"{context}: calibrate values must be numbers, not {spec!r}")
     if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1 and 0 <= settings["epsilon"] <= 1
-            and settings["ridge"] > 0 and settings["min_scale"] > 0):
-        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 (integer), epsilon in [0, 1], ridge > 0 "
-                           "and min_scale > 0")
+            and settings["ridge"] > 0 and settings["min_scale"] > 0
+            and isinstance(settings["td_steps"], int) and settings["td_steps"] >= 0):
+        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 (integer), epsilon in [0, 1], ridge > 0, "
+                           "min_scale > 0 and td_steps >= 0 (integer)")
     return settings
 
 
@@ -121,6 +122,9 @@ def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any],
                                            float(settings["epsilon"]))
         env.close()
         done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
+        if settings["td_steps"]:
+            margin = float((recipe.get("guide") or {}).get("margin", 0.8))
+            done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
         done["wall_time_s"] = round(time.perf_counter() - start, 1)
         log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
     return done
