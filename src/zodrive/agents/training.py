@@ -31,9 +31,10 @@ ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
 KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
 ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
-               "double_q", "guide"}
+               "double_q", "guide", "init", "calibrate"}
 GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
 DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
+CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -69,7 +70,64 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     steps = recipe.get("total_timesteps")
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
+    check_init(recipe, f"recipe {name!r}")
     return recipe
+
+
+def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
+    """Check a recipe's `init: MODEL` and `calibrate: {episodes, epsilon, ridge, min_scale}`
+    (start a DQN from a cloned network, then evaluate its policy; `finetune`); returns the
+    calibration settings with defaults, or None. Options that would be ignored are errors."""
+    init, spec = recipe.get("init"), recipe.get("calibrate")
+    if init is None:
+        if spec is not None:
+            raise ZodriveError(f"{context}: calibrate needs init: MODEL (it calibrates the values of an initial network)")
+        return None
+    if recipe["algo"] != "dqn" or recipe.get("double_q"):
+        raise ZodriveError(f"{context}: init applies to dqn recipes without double_q only")
+    if not isinstance(init, str) or not init:
+        raise ZodriveError(f"{context}: init must be a model path (a DQN zip or model folder), not {init!r}")
+    guide = recipe.get("guide") or {}
+    if isinstance(guide, dict) and (guide.get("demonstrations") or guide.get("pretrain_steps")):
+        raise ZodriveError(f"{context}: init with guide demonstrations/pretrain_steps is not supported "
+                           "(the calibration replaces DQfD's pre-training)")
+    if spec is None:
+        return None
+    if not isinstance(spec, dict) or set(spec) - set(CALIBRATE_KEYS):
+        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(CALIBRATE_KEYS)}}}, not {spec!r}")
+    settings = {**CALIBRATE_KEYS, **spec}
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in settings.values()):
+        raise ZodriveError(f"{context}: calibrate values must be numbers, not {spec!r}")
+    if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1 and 0 <= settings["epsilon"] <= 1
+            and settings["ridge"] > 0 and settings["min_scale"] > 0
+            and isinstance(settings["td_steps"], int) and settings["td_steps"] >= 0):
+        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 (integer), epsilon in [0, 1], ridge > 0, "
+                           "min_scale > 0 and td_steps >= 0 (integer)")
+    return settings
+
+
+def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
+    """Load `init` into the online and target networks; with `calibrate`, let it drive and
+    evaluate its policy (`finetune.collect`, `finetune.calibrate`). Returns what was done."""
+    if recipe.get("init") is None:
+        return None
+    from zodrive.agents import finetune
+
+    done: dict[str, Any] = {"init": finetune.init_from_model(model, recipe["init"])}
+    settings = check_init(recipe, "recipe")
+    if settings is not None:
+        start = time.perf_counter()
+        env = make_env(preset)
+        done["collect"] = finetune.collect(model, env, int(settings["episodes"]), DEMO_SEEDS + 1000 * seed,
+                                           float(settings["epsilon"]))
+        env.close()
+        done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
+        if settings["td_steps"]:
+            margin = float((recipe.get("guide") or {}).get("margin", 0.8))
+            done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
+        done["wall_time_s"] = round(time.perf_counter() - start, 1)
+        log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
+    return done
 
 
 def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
@@ -246,8 +304,12 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if recipe.get("guide"):
         _configure_guide(model, recipe, preset)
     model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
+    initial = _start_from_init(model, recipe, preset, seed) if checkpoint is None else None
     demonstrations = _pretrain_from_guide(model, recipe, preset, seed) if checkpoint is None else None
     every = int(recipe.get("checkpoint_every", 0) or 0)
+    if initial and every:  # the calibrated start is a checkpoint too: the curve's first point, a candidate
+        (out / "checkpoints").mkdir(exist_ok=True)
+        model.save(out / "checkpoints" / f"{algo}_0_steps.zip")
     callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
                                   save_replay_buffer=True) if every else None
     start = time.perf_counter()
@@ -267,7 +329,8 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         out / "train.json",
         {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
          "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1),
-         **({"demonstrations": demonstrations} if demonstrations else {})},
+         **({"demonstrations": demonstrations} if demonstrations else {}),
+         **({"initial": initial} if initial else {})},
     )
     env.close()
     log.info("trained %s for %d steps in %.0f s", algo, recipe["total_timesteps"], wall)
