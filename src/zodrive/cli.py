@@ -324,10 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--reward", choices=["minus", "horizon"], default="minus",
                      help="minus: -(victim's reward); horizon: 1 - reward per step and the steps a crash cuts off "
                           "at once (the same objective, credited when the crash happens)")
-    atk.add_argument("--preset")
-    atk.add_argument("--env-id", metavar="ID", help="any gymnasium environment with a Box observation, instead of --preset")
-    atk.add_argument("--obs-bounds", type=_bounds, metavar="LOW,HIGH", help="with --env-id: the observation range")
-    atk.add_argument("--env-set", action="append", default=[], metavar="KEY=VALUE", help="preset override")
+    _scenario_flags(atk, trust=False)
     atk.add_argument("--force", action="store_true", help="overwrite an adversary already in --out")
     atk.add_argument("--no-progress", action="store_true")
 
