@@ -326,3 +326,12 @@ def test_projecting_around_rows_is_projecting_each_candidate(threat: ThreatModel
         for m in range(7):
             alone = threat.project(cand[r, m].reshape(1, 5, 5), x0[r:r + 1]).reshape(25)
             assert np.array_equal(got[i, m], alone)
+
+
+@pytest.mark.parametrize("name", ["pgd", "fgsm"])
+def test_white_box_attacks_leave_a_zero_gradient(name: str) -> None:
+    """Untargeted on a continuous policy the objective (distance to the clean action) has a zero
+    gradient at the clean point: a signed-gradient attack started there must still move."""
+    x0 = observations(8)
+    result, _, _ = _attack(name, linear_victim(kind="continuous"), x0, eps=0.2, target="none", tol=0.01, steps=20)
+    assert result.linf.min() > 0 and result.success.mean() > 0.5

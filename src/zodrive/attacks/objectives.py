@@ -10,7 +10,7 @@ attack loop, which owns the observations.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, ClassVar, Sequence
 
 import torch
 
@@ -31,6 +31,9 @@ class Objective:
 
     weight: float = 1.0  # the paper's constant `a`
     targeted: bool = True
+    flat_at_clean: ClassVar[bool] = False
+    """True where the loss is stationary at the clean observation (its gradient there is zero), so a
+    gradient step from the clean point never moves (`PGD` then steps randomly)."""
 
     def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
@@ -133,6 +136,7 @@ class ContinuousUntargeted(Objective):
     """Push a continuous victim's action away from its clean action (Eq. 6, maximized)."""
 
     targeted: bool = False
+    flat_at_clean: ClassVar[bool] = True  # the distance to the clean action is minimal there
     tol: float = 0.2
 
     def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:

@@ -19,13 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.attacks.base import Attack
+from zodrive.attacks.base import Attack, AttackResult
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
 
 
 class PGD(Attack):
     name = "pgd"
     black_box = False
     reference = "Madry et al., ICLR 2018 (white-box)"
+    _unstick = False  # set per call from the objective (`Objective.flat_at_clean`)
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return steps or self.steps
@@ -37,7 +40,17 @@ class PGD(Attack):
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         x = cand[:, 0]
         full = grad + 2 * self.l2_weight * (x - self._x0[rows])
-        return x - self._step() * np.sign(full) * self._mask
+        direction = np.sign(full) * self._mask
+        flat = ~direction.any(axis=1) if self._unstick else np.zeros(len(rows), dtype=bool)
+        if flat.any():  # the objective's zero gradient at the clean point would never move: a random signed
+            # step instead, as Madry et al.'s random start does
+            direction[flat] = self.draw(rows[flat], lambda g: g.choice((-1.0, 1.0), size=x.shape[1])) * self._mask
+        return x - self._step() * direction
+
+    def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
+                ) -> AttackResult:
+        self._unstick = objective.flat_at_clean
+        return super().perturb(x0, oracle, objective, trace=trace)
 
     def _step(self) -> float:
         return self.step_size
