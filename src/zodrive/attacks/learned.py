@@ -21,6 +21,7 @@ success is reported: judge it by the return.
 
 from __future__ import annotations
 
+import inspect
 import json
 from pathlib import Path
 from typing import Any
@@ -38,11 +39,10 @@ NAME = "learned"
 META_FILE = "adversary.json"
 FORMAT = 1  # bumped if what adversary.json means changes
 
-# what a learned attack accepts of the search attacks' options: their defaults (anything else
-# would be ignored, which is an error)
-_SEARCH_DEFAULTS = {"steps": 100, "n_directions": 20, "l2_weight": 0.0, "early_stop": True, "patience": None,
-                    "warm_start": False, "on_failure": "best", "restarts": 0, "timing": None, "max_change": None,
-                    "seed": 0}
+# what a learned attack accepts of the search attacks' options: their defaults, read from `Attack`
+# itself (anything else would be ignored, which is an error); mu and step_size are never read here
+_SEARCH_DEFAULTS = {name: p.default for name, p in inspect.signature(Attack.__init__).parameters.items()
+                    if p.kind is p.KEYWORD_ONLY and name not in ("mu", "step_size")}
 
 
 def free_coordinates(threat: ThreatModel, obs_shape: tuple[int, ...]) -> np.ndarray:
