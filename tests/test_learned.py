@@ -16,6 +16,7 @@ from toys import FEATURES, linear_victim, observations
 from zodrive.agents.adversary import AdversaryEnv
 from zodrive.attacks import AttackSpec, ThreatModel
 from zodrive.attacks.learned import apply_action, free_coordinates
+from zodrive.errors import ZodriveError
 from zodrive.cli import main
 
 
@@ -174,6 +175,26 @@ def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path,
                                                      "8", "--out", str(tmp_path / "b")])
 
 
+def test_an_adversary_trained_against_another_shield_version_is_refused(trained, tmp_path: Path) -> None:
+    import shutil
+
+    from zodrive.attacks.learned import check_adversary
+    from zodrive.defense.shield import VERSION
+
+    victim, adv, _ = trained
+    meta = json.loads((adv / "adversary.json").read_text())
+    assert meta["defense"] is None and meta["defense_version"] is None
+    old = tmp_path / "old"
+    shutil.copytree(adv, old)
+    for version, refused in ((VERSION - 1, True), (None, True), (VERSION, False)):
+        (old / "adversary.json").write_text(json.dumps({**meta, "defense": "shield@0.02", "defense_version": version}))
+        if refused:
+            with pytest.raises(ZodriveError, match=f"this zodrive's is version {VERSION}"):
+                check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02")
+        else:
+            check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02")
+
+
 @pytest.mark.parametrize("horizon", [10, 25])
 def test_horizon_reward_sums_to_the_horizon_minus_the_victims_return(horizon: int) -> None:
     env = AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon", horizon=horizon)
@@ -187,7 +208,5 @@ def test_horizon_reward_sums_to_the_horizon_minus_the_victims_return(horizon: in
 
 
 def test_horizon_reward_needs_a_known_horizon() -> None:
-    from zodrive.errors import ZodriveError
-
     with pytest.raises(ZodriveError, match="horizon"):
         AdversaryEnv(ToyRoad(), linear_victim(), _threat(), reward="horizon")

@@ -70,15 +70,27 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box() -> None:
         truth = _truths(2000, rng)
         safe_truth = truth_test.safe_actions(truth)
         passed = vetoed = 0
+        escaped = 0
+        true_rooms = truth_test._rooms(truth)
         for _ in range(8):
             seen = truth.copy()  # every row, the ego's too (its lateral position picks the lanes)
             seen[:, :, 1:] += rng.choice([-eps, eps], size=(len(truth), 5, 4)).astype(np.float32)
             proposed = rng.integers(0, 5, len(truth))
             final = shield.decide(seen, proposed)
-            assert safe_truth[np.arange(len(truth)), final].all()
+            unsafe = ~shield.safe(seen)[np.arange(len(truth)), final]
+            escape = unsafe & (final == shield.rules.escapes(seen))   # taken although the test rejects it
+            assert not (unsafe & ~escape).any()
+            assert safe_truth[np.arange(len(truth)), final][~escape].all()
+            # an escape: the own lane too close for IDLE in the worst case, and the target lane's
+            # true room at least that worst case (never worse than staying)
+            own_worst = shield.rules._rooms(seen)["own"]
+            target = np.where(final == LANE_RIGHT, true_rooms["right"], true_rooms["left"])
+            assert (own_worst[escape] < 0).all() and (target[escape] >= own_worst[escape] - 1e-3).all()  # float32 seen
+            escaped += int(escape.sum())
             passed += int(((final == proposed) & (proposed != SLOWER)).sum())
             vetoed += int((final != proposed).sum())
         assert passed > 500 and vetoed > 500                 # neither a brake nor a pass-through
+        assert escaped > 0 if eps == 0.02 else escaped == 0  # at 0.05 the ego may always be mid-change
     # the guarantee is the shield's, not the test's: the plain rules (eps 0) as a shield fail it
     plain = Shield.__new__(Shield)
     plain.rules, plain.eps = ObservationRules(PRESET, 0.0), 0.0
@@ -96,9 +108,74 @@ def test_the_fallback_is_always_safe_and_plain_rules_decisions_are_unchanged() -
     assert ObservationRules(PRESET).safe_actions(seen)[np.arange(len(seen)), act].all()
     for eps in (0.02, 0.05):
         shield = Shield(PRESET, eps)
-        assert shield.safe(seen)[np.arange(len(seen)), shield.fallback(seen)].all()
+        fallback = shield.fallback(seen)
+        safe = shield.safe(seen)[np.arange(len(seen)), fallback]
+        assert (safe | (fallback == shield.rules.escapes(seen))).all()   # safe, or the escape (test above)
     free, close = _road()
     assert ObservationRules(PRESET).actions(np.concatenate([free, close])).tolist() == [LANE_RIGHT, LANE_LEFT]
+
+
+def _lane_change_scene(vy: float, beyond: float | None) -> np.ndarray:
+    """Seed 100014 of the learned adversary's run, step 58: the ego, in lane 1, has just started
+    a change to the right (0.28 m off its lane centre, moving right at `vy` m/s); a car 5 m
+    ahead seen `beyond` m to the right (truly 7.4 m: in lane 3; None: no car), the lane in
+    between free far ahead."""
+    obs = np.zeros((1, 5, 5), np.float32)
+    obs[0, 0] = [1, 1.0, 4.28 / 100, 19.9 / 20, vy / 20]
+    obs[0, 1] = [1, 85.0 / 100, -0.28 / 100, 0.1 / 20, 0]        # far ahead in the own lane
+    if beyond is not None:
+        obs[0, 2] = [1, 5.1 / 100, beyond / 100, -2.3 / 20, 0]
+    return obs
+
+
+def test_no_second_lane_change_towards_a_car_while_the_first_is_under_way() -> None:
+    """A second LANE_RIGHT during a change aims one lane beyond the target (highway-env: target
+    lane + 1): the test checks that lane too while the ego may be mid-change. Before (v2), the
+    shield accepted it and the ego drove into the car in lane 3 (seeds 100014 and 100098, where
+    the attacker showed that car 2 m further right)."""
+    plain = ObservationRules(PRESET)
+    assert plain.safe_actions(_lane_change_scene(0.0, 7.4))[0, LANE_RIGHT]       # at rest: lane 2 is free
+    assert not plain.safe_actions(_lane_change_scene(2.26, 7.4))[0, LANE_RIGHT]  # moving: lane 3 counts
+    assert plain.safe_actions(_lane_change_scene(2.26, None))[0, LANE_RIGHT]
+    shield = Shield(PRESET, 0.02)
+    assert not shield.safe(_lane_change_scene(0.0, 7.4))[0, LANE_RIGHT]          # it may be in lane 2
+    assert shield.safe(_lane_change_scene(0.0, 9.4))[0, LANE_RIGHT]              # shown 2 m further: not
+    assert shield.decide(_lane_change_scene(2.26, 9.4), np.array([LANE_RIGHT]))[0] != LANE_RIGHT  # ... mid-change
+
+
+def _trapped(right_car: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Seed 100013's trap: the ego centred in the leftmost lane, a car 41 m ahead closing at
+    10 m/s; the attacker shows it 2 m to the right (it may then be in the right lane too).
+    Returns the true and the seen observation; `right_car`: a car truly 20 m ahead on the right."""
+    truth = np.zeros((1, 5, 5), np.float32)
+    truth[0, 0] = [1, 1.0, 0.0, 1.0, 0.0]
+    truth[0, 1] = [1, 0.41, 0.0, -0.5, 0.0]
+    if right_car:
+        truth[0, 2] = [1, 0.20, 0.045, 0.0, 0.0]
+    seen = truth.copy()
+    seen[0, 1, 2] += 0.02
+    return truth, seen
+
+
+def test_the_shield_escapes_a_lane_the_attacker_would_keep_it_braking_in() -> None:
+    """SLOWER never takes the ego below 20 m/s: behind a slower car, braking is no refuge. The
+    attacker (v2: 4 crashes in 100 episodes under the learned adversary) made the car ahead look
+    as if it might be in the free lane beside, so every lane change was vetoed; v3 counts a car
+    that may be in both lanes as the danger it is in either, and leaves."""
+    shield = Shield(PRESET, 0.02)
+    truth, seen = _trapped(right_car=False)
+    assert not shield.safe(seen)[0, LANE_RIGHT]                  # the right lane looks occupied ...
+    assert ObservationRules(PRESET).safe_actions(truth)[0, LANE_RIGHT]   # ... and is free
+    assert shield.decide(seen, np.array([FASTER]))[0] == LANE_RIGHT
+    assert shield.decide(seen, np.array([LANE_RIGHT]))[0] == LANE_RIGHT
+    _, seen = _trapped(right_car=True)                           # a car truly there: no escape
+    assert shield.decide(seen, np.array([FASTER]))[0] == SLOWER
+    calm = seen.copy()
+    calm[0, 1, 1], calm[0, 2, 1] = 0.9, 0.9                      # the own lane not too close: no escape
+    assert shield.rules.escapes(calm)[0] == -1
+    moving = _trapped(right_car=False)[1]
+    moving[0, 0, 4] = 0.1                                        # mid-change (2 m/s sideways): no escape
+    assert shield.rules.escapes(moving)[0] == -1
 
 
 def test_defended_outputs_pick_the_shielded_action_and_pgd_gets_gradients() -> None:
@@ -123,12 +200,26 @@ def test_defended_outputs_pick_the_shielded_action_and_pgd_gets_gradients() -> N
     kept = safe.copy()
     kept[np.nonzero(vetoed)[0], final[vetoed]] = False           # the fallback is lifted above the row
     np.testing.assert_allclose(out[kept], scores[kept], rtol=1e-6)   # allowed actions keep the driver's scores
-    assert (out[~safe] < scores.min(-1, keepdims=True).repeat(5, 1)[~safe]).all()  # vetoed ones sink below all
+    sunk = ~safe
+    sunk[np.nonzero(vetoed)[0], final[vetoed]] = False              # ... even an escape the test rejects
+    assert (out[sunk] < scores.min(-1, keepdims=True).repeat(5, 1)[sunk]).all()  # vetoed ones sink below all
     x = torch.tensor(obs, requires_grad=True)
     value = defended.differentiable(x)
     np.testing.assert_allclose(value.detach().numpy(), out, rtol=1e-6)
     value[:, FASTER].sum().backward()
     assert x.grad is not None and x.grad.abs().sum() > 0                # BPDA: the driver network's gradient
+
+
+def test_results_and_adversaries_are_keyed_on_the_shields_version() -> None:
+    from zodrive.defense import defense_version
+    from zodrive.defense.shield import VERSION
+    from zodrive.evaluation.evaluate import EvalJob
+
+    assert defense_version("shield") == defense_version("shield@0.05") == VERSION >= 3
+    assert defense_version("kinematic") is None
+    key = EvalJob(model="baseline:rules", preset=PRESET, defense="shield@0.02").key()
+    assert key["defense"] == "shield@0.02" and key["defense_version"] == VERSION
+    assert "defense_version" not in EvalJob(model="baseline:rules", preset=PRESET, defense="kinematic").key()
 
 
 def test_names_budgets_and_presets() -> None:

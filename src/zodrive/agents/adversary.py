@@ -29,6 +29,7 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
 from zodrive.attacks.victim import Victim
 from zodrive.compute import one_torch_thread
+from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
 
 log = logging.getLogger(__name__)
@@ -222,8 +223,8 @@ def attack_train(
                                f"known; {preset.get('name')!r} is not one: use --reward minus")
         horizon = int(max_return)
     meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
-            "preset": preset, "defense": defense, "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen),
-            "victim_action": bool(victim_action), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
+            "preset": preset, "defense": defense, "defense_version": defense and defense_version(defense),
+            "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "victim_action": bool(victim_action), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
             "action_dim": 0, "reward": reward, "horizon": horizon}
     inner = AdversaryEnv(make_env(preset), victim, threat, victim_action=victim_action, reward=reward, horizon=horizon)
     meta["action_dim"] = int(inner.action_space.shape[0])

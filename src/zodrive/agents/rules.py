@@ -52,6 +52,10 @@ S0, HEADWAY = 10.0, 1.0          # [m], [s] highway-env's IDM distance and time 
 A_MAX, B_COMF = 3.0, 5.0         # [m/s^2] IDM's comfort acceleration and deceleration
 MARGIN = 15.0          # [m] extra gap asked of a lane before moving into it or speeding up
 BESIDE = 8.0           # [m] |dx| within which a vehicle beside the ego blocks a lane change
+MID_CHANGE_VY = 0.9    # [m/s] |lateral speed| from which the ego may be in the first half of a lane change
+"""highway-env's lane change moves the ego sideways at >= 1.0 m/s until it crosses into the
+target lane (tests/test_slow_shield.py measures it on the real env); a second LANE_RIGHT then
+aims one lane beyond the target, i.e. two lanes from where the ego is."""
 
 
 class ObservationRules:
@@ -75,8 +79,10 @@ class ObservationRules:
 
     def _rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
-        right; -inf where the lane does not exist), whether a vehicle may be beside the ego on the
-        left / right, and whether the ego is centred in its lane; pessimistic within eps."""
+        right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
+        may be beside the ego there, the same counting only vehicles that cannot be in the own
+        lane (`*_only`), whether the ego is centred and whether it may be mid-change;
+        pessimistic within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5
@@ -84,33 +90,50 @@ class ObservationRules:
         lane = np.clip(np.rint(ego[:, 2] / LANE_WIDTH), 0, self.lanes - 1)
         centred = (np.abs(ego[:, 2] - lane * LANE_WIDTH) < 0.5) & (np.abs(ego[:, 4]) < 0.3)
 
-        _, sx, sy, svx, _ = self.slack
+        _, sx, sy, svx, svy = self.slack
+        closing = np.maximum(-dvx + svx, 0.0)
+        safe = S0 + ASSUMED_SPEED * HEADWAY + ASSUMED_SPEED * closing / (2 * np.sqrt(A_MAX * B_COMF))
+        slack = dx - sx - CAR_LENGTH - safe   # per vehicle: its gap beyond the safe gap, if ahead
+        rows = np.arange(len(dx))
 
-        def room(offset: int) -> tuple[np.ndarray, np.ndarray]:
-            """Gap ahead minus the safe gap, and whether a vehicle is beside, in lane `offset`
-            (pessimistic within the attacker's budget when eps > 0: see the module docstring)."""
-            inside = present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2 + sy)
-            ahead = inside & (dx + sx > 0)
-            closing = np.maximum(-dvx + svx, 0.0)
-            safe = S0 + ASSUMED_SPEED * HEADWAY + ASSUMED_SPEED * closing / (2 * np.sqrt(A_MAX * B_COMF))
-            slack = np.where(ahead, dx - sx - CAR_LENGTH - safe, np.inf)
+        def inside(offset: int) -> np.ndarray:
+            """The vehicles that may be in lane `offset` (pessimistic within the budget when eps > 0)."""
+            return present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2 + sy)
+
+        def room(within: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """Gap ahead minus the safe gap over the vehicles `within`, and whether one is beside
+            (see the module docstring)."""
+            ahead = within & (dx + sx > 0)
+            gaps = np.where(ahead, slack, np.inf)
             if self.eps > 0:  # every vehicle that may be ahead in the lane counts
-                value = slack.min(axis=1)
+                value = gaps.min(axis=1)
             else:  # the nearest one, as tuned
-                value = slack[np.arange(len(dx)), np.where(ahead, dx, np.inf).argmin(axis=1)]
-            beside = (inside & (np.abs(dx) < BESIDE + sx)).any(axis=1)
-            exists = (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
-            return np.where(exists, value, -np.inf), beside | ~exists
+                value = gaps[rows, np.where(ahead, dx, np.inf).argmin(axis=1)]
+            return value, (within & (np.abs(dx) < BESIDE + sx)).any(axis=1)
 
-        own, _ = room(0)
-        left, left_blocked = room(-1)
-        right, right_blocked = room(+1)
+        def exists(offset: int) -> np.ndarray:
+            return (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
+
+        own_lane = inside(0)
+        out: dict[str, np.ndarray] = {"own": np.where(exists(0), room(own_lane)[0], -np.inf)}
+        for side, sign in (("left", -1), ("right", +1)):
+            value, beside = room(inside(sign))
+            out[side], out[f"{side}_blocked"] = np.where(exists(sign), value, -np.inf), beside | ~exists(sign)
+            value, beside = room(inside(2 * sign))
+            out[f"{side}2"], out[f"{side}2_blocked"] = value, beside
+            # the vehicles that may be there but not in the own lane; one that may be in both
+            # lanes blocks only if it may overlap the ego (as far ahead as it may be, it is the
+            # own lane's danger too)
+            only = inside(sign) & ~own_lane
+            value, beside = room(only)
+            overlap = (inside(sign) & own_lane & (dx - sx < CAR_LENGTH)).any(axis=1)
+            out[f"{side}_only"], out[f"{side}_only_blocked"] = value, beside | overlap
         # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
         lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
         lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)
-        return {"own": own, "left": left, "left_blocked": left_blocked, "right": right,
-                "right_blocked": right_blocked, "centred": centred,
-                "left_exists": lane_lo - 1 >= 0, "right_exists": lane_hi + 1 <= self.lanes - 1}
+        out.update(centred=centred, moving=np.abs(ego[:, 4]) + svy >= MID_CHANGE_VY,
+                   left_exists=lane_lo - 1 >= 0, right_exists=lane_hi + 1 <= self.lanes - 1)
+        return out
 
     def actions(self, batch: np.ndarray) -> np.ndarray:
         r = self._rooms(batch)
@@ -133,7 +156,9 @@ class ObservationRules:
         before speeding up); IDLE: the own lane not too close (the rules keep speed there);
         LANE_LEFT / LANE_RIGHT: the target lane exists, nothing may be beside the ego there, and
         its room exceeds MARGIN (as the rules ask before any change; the "centred" test is left
-        out: it decides when to ask, not whether the target lane is free); SLOWER: always.
+        out: it decides when to ask, not whether the target lane is free) and, where the ego may
+        be in the first half of a lane change (a second change aims one lane further), the same
+        of the lane beyond; SLOWER: always.
         With eps > 0 every test is the pessimistic one, so an action accepted on an observation
         is accepted by the same test on every true state within eps of it. The rules' own
         choice is always accepted."""
@@ -141,10 +166,29 @@ class ObservationRules:
         safe = np.zeros((len(r["own"]), 5), dtype=bool)
         safe[:, FASTER] = r["own"] > MARGIN
         safe[:, IDLE] = r["own"] >= 0
-        safe[:, LANE_LEFT] = ~r["left_blocked"] & (r["left"] > MARGIN) & r["left_exists"]
-        safe[:, LANE_RIGHT] = ~r["right_blocked"] & (r["right"] > MARGIN) & r["right_exists"]
+        for side, action in (("left", LANE_LEFT), ("right", LANE_RIGHT)):
+            beyond = ~r["moving"] | (~r[f"{side}2_blocked"] & (r[f"{side}2"] > MARGIN))
+            safe[:, action] = ~r[f"{side}_blocked"] & (r[side] > MARGIN) & r[f"{side}_exists"] & beyond
         safe[:, SLOWER] = True
         return safe
+
+    def escapes(self, batch: np.ndarray) -> np.ndarray:
+        """(B,) the lane change that leaves an own lane the room test rejects even for IDLE, or
+        -1: SLOWER cannot always save the ego there (a meta-action never slows it below the
+        preset's lowest target speed, 20 m/s, and the car ahead may be slower). A side qualifies
+        if it exists wherever the ego may be, the ego is not mid-change, and the vehicles that
+        may be there *but not in the own lane* leave room >= 0 and none may be beside; a vehicle
+        that may be in both lanes counts only if it may overlap the ego. So the target lane's
+        true room is at least the own lane's worst case: an escape is never worse than staying.
+        The side with more such room; -1 where none qualifies or the own lane's room is >= 0."""
+        r = self._rooms(batch)
+        room = {}
+        for side in ("left", "right"):
+            ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0))
+            room[side] = np.where(ok, r[f"{side}_only"], -np.inf)
+        pick = np.where(room["right"] >= room["left"], LANE_RIGHT, LANE_LEFT)
+        found = np.maximum(room["left"], room["right"]) > -np.inf
+        return np.where(found & (r["own"] < 0), pick, -1)
 
 
 def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0) -> Victim:

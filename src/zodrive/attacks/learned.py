@@ -33,6 +33,7 @@ from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
+from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
 
 NAME = "learned"
@@ -111,6 +112,10 @@ def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, An
     if meta["defense"] != defense:
         raise ZodriveError(f"adversary {folder} was trained against the victim with defense "
                            f"{meta['defense'] or 'none'}, not {defense or 'none'}: train one against this system")
+    if defense is not None and meta.get("defense_version") != defense_version(defense):
+        raise ZodriveError(f"adversary {folder} was trained against {defense} version "
+                           f"{meta.get('defense_version') or 'before versions'}, this zodrive's is version "
+                           f"{defense_version(defense)}: train one against this system")
 
 
 class LearnedAdversary(Attack):

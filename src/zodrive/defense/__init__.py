@@ -37,6 +37,15 @@ def keeps_state(name: str) -> bool:
     return parse_defense(name) == "kinematic"
 
 
+def defense_version(name: str) -> int | None:
+    """The version of the defense's behaviour, recorded in result keys and adversaries, so that
+    a folder or an adversary made against an earlier shield is not taken for this one (None:
+    unversioned, unchanged since it was built)."""
+    from zodrive.defense.shield import VERSION
+
+    return VERSION if parse_defense(name).startswith("shield@") else None
+
+
 def make_defense(name: str, preset: dict[str, Any]) -> KinematicFilter | Shield:
     """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`)."""
     from zodrive.defense.shield import Shield, parse_shield

@@ -4,19 +4,27 @@ pessimistic rules veto.
 Each step the driver proposes its action (argmax of its scores). If the robust rules'
 room test at budget EPS (`ObservationRules.safe_actions`, the code `baseline:robust-rules@EPS`
 decides with, plus: a lane change only towards a lane that exists wherever the ego may truly
-be) does not accept that action on the observation, the shield takes the robust rules' own
-choice instead (SLOWER, IDLE, or a lane change they find room for; SLOWER if the test rejects it).
+be, and, while the ego may be mid-change, only if the lane beyond is free too, since a second
+change aims there) does not accept that action on the observation, the shield takes the robust
+rules' own choice instead (IDLE, FASTER or a lane change they find room for); where that is
+SLOWER and the own lane is too close even to keep speed, a lane change that is no worse than
+staying (`ObservationRules.escapes`); else SLOWER.
 
 Guarantee: the room test at EPS is pessimistic over every true state within L-inf EPS of the
 observation (every observed vehicle possibly anywhere its true state may be: closer, closing
 faster, in every lane it may overlap). So under any attack of budget <= EPS on the other
-vehicles' rows, every action the shielded car takes is one the plain rules' test (eps 0) accepts
-on the *true* observation: no FASTER or IDLE into an own-lane gap below the rules' safe gap, no
-lane change into a lane whose gap is too small or where a listed vehicle is beside. What it
-cannot cover: the ego row beyond the lane-existence test (an attacker may shift the ego's
-perceived lateral position and speed; the test assumes an own speed of 25 m/s, and the ego can
-drive faster), vehicles the observation does not list (behind the
-ego, or beyond the nearest four), attacks larger than EPS, and crashes the rules' test does not
+vehicles' rows, every action the shielded car takes, escapes aside, is one the plain rules'
+test (eps 0) accepts on the *true* observation: no FASTER or IDLE into an own-lane gap below the
+rules' safe gap, no lane change into a lane whose gap is too small or where a listed vehicle is
+beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
+state, and its lane's true room is at least the own lane's worst case (a vehicle that may be in
+both lanes is the same danger whichever the ego picks): the attacker can still make the car
+careful, but no longer keep it braking behind a car slower than it can go (the meta-actions
+never slow it below 20 m/s) by making every car ahead look as if it might be in the lane beside.
+What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
+may shift the ego's perceived lateral position and speed; the test assumes an own speed of
+25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
+or beyond the nearest four), attacks larger than EPS, and crashes the rules' test does not
 foresee (e.g. a vehicle cutting in, or the safe gap at the assumed 25 m/s being too short).
 
 The shield keeps no state between steps: it is a function of the observation, so the defended
@@ -32,6 +40,12 @@ import numpy as np
 from zodrive.agents.rules import SLOWER, ObservationRules
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
+
+VERSION = 3
+"""The shield's behaviour, part of every result key that names it: v1 the robust rules' room
+test, v2 + a lane change only towards a lane that exists for every ego position, v3 + the lane
+beyond checked while the ego may be mid-change, and the escape from an own lane too close to
+stay in (the fallback). Folders made by an earlier version are not resumed with this one."""
 
 DEFAULT_EPS = 0.02
 """`--defense shield` = `shield@0.02`: a defense is one fixed system (its clean and attacked cells
@@ -90,11 +104,14 @@ class Shield:
         return out
 
     def fallback(self, batch: np.ndarray) -> np.ndarray:
-        """The robust rules' choice where the test accepts it, else SLOWER (their lane change
-        may target a lane that exists only for some ego positions within eps)."""
+        """The robust rules' choice where the test accepts it and it is not SLOWER; else a lane
+        change out of an own lane the test rejects even for IDLE, where one is no worse than
+        staying (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
+        behind a slower car is no refuge); else SLOWER."""
         act = self.rules.actions(batch)
-        ok = self.safe(batch)[np.arange(len(batch)), act]
-        return np.where(ok, act, SLOWER)
+        ok = self.safe(batch)[np.arange(len(batch)), act] & (act != SLOWER)
+        escape = self.rules.escapes(batch)
+        return np.where(ok, act, np.where(escape >= 0, escape, SLOWER))
 
     def outputs(self, batch: np.ndarray, scores: np.ndarray) -> np.ndarray:
         """The defended system's scores (B, 5) given the driver's (B, 5): the driver's scores on

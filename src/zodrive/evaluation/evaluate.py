@@ -69,7 +69,11 @@ class EvalJob:
         if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
             key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
+            from zodrive.defense import defense_version
+
             key["defense"] = self.defense
+            if defense_version(self.defense) is not None:
+                key["defense_version"] = defense_version(self.defense)
         return key
 
 
@@ -310,7 +314,8 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
         return
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
     what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
-            "attack": "the attack settings or the attack engine's version", "seed": "the first seed"}
+            "attack": "the attack settings or the attack engine's version", "seed": "the first seed",
+            "defense_version": "the defense's version"}
     names = [what.get(k, k) for k in differs]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
     raise ZodriveError(f"{out} holds a different evaluation ({listed} "

@@ -1,0 +1,23 @@
+#!/bin/bash
+# The shield v3 (`zodrive.defense.shield.VERSION`: the lane beyond checked while the ego may be
+# mid-change, and the escape from an own lane too close to stay in), 100 episodes per cell on
+# seeds 100000-100099, into cells-v3/; one process, one cell at a time. The learned adversary is
+# retrained against v3 (one trained against v2 is refused: its version differs).
+set -u
+cd "$(dirname "$0")/../.."
+. .venv/bin/activate
+C=results/shield/cells-v3
+A="results/learned-adversary/adv-dqn-driver+shield@0.02-v3-eps0.02-horizon"
+mkdir -p $C
+ev() {
+  name=$1; shift
+  echo "\$ zodrive evaluate $* --episodes 100 --seed 100000 --workers 1 --out $C/$name" > $C/$name.txt
+  zodrive evaluate "$@" --episodes 100 --seed 100000 --workers 1 --out $C/$name --no-progress >> $C/$name.txt 2>&1
+}
+[ -f "$A/model.zip" ] || zodrive attack-train models/dqn-driver --eps 0.02 --steps 50000 --reward horizon \
+  --defense shield@0.02 --out "$A" --no-progress > "$C/attack-train.txt" 2>&1
+ev dqn-driver+shield@0.02-learned-eps0.02 models/dqn-driver --defense shield@0.02 --attack "learned:$A" --eps 0.02
+ev dqn-driver+shield@0.02-none models/dqn-driver --defense shield@0.02
+ev dqn-driver+shield@0.02-pgd-eps0.02 models/dqn-driver --defense shield@0.02 --attack pgd --eps 0.02
+ev dqn-driver+shield@0.05-none models/dqn-driver --defense shield@0.05
+ev dqn-driver+shield@0.05-pgd-eps0.05 models/dqn-driver --defense shield@0.05 --attack pgd --eps 0.05
