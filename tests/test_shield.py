@@ -178,6 +178,30 @@ def test_the_shield_escapes_a_lane_the_attacker_would_keep_it_braking_in() -> No
     assert shield.rules.escapes(moving)[0] == -1
 
 
+def _seen(rows: list[list[float]]) -> np.ndarray:
+    """An observation from physical units (presence, x, y, vx, vy per row; the ego's x, y absolute)."""
+    return (np.asarray(rows, np.float64) / ObservationRules(PRESET).scale).astype(np.float32)[None]
+
+
+def test_an_escape_minds_a_car_centred_in_its_target_lane_and_cut_ins_from_beyond() -> None:
+    """v3's escapes caused both crashes of 100 episodes under PGD at eps 0.02: into a lane whose
+    car, seen at its centre 7 m ahead, also counted as possibly in the own lane and was left out
+    (seed 100055, step 98), and beside slow cars one lane further that then cut in (seed 100044,
+    step 12; the seen observations of those steps, rounded). v4 does neither."""
+    shield = Shield(PRESET, 0.02)
+    centred = _seen([[1, 98, 10, 19.6, -0.4], [1, -8.14, -14, -6.86, -0.4], [1, 7.19, -4, -7.46, 0],
+                     [1, 37.35, -8, -6.84, 0], [1, 73.07, 0, -7.53, -0.4]])
+    beyond = _seen([[1, 98, 10, 19.6, -0.4], [1, 11.84, -10, -10.87, -0.4], [1, 37.67, -10, -7.13, -0.4],
+                    [1, 60.76, -2, -5.54, -0.4], [1, 82.66, -10, -6.7, -0.4]])
+    for seen in (centred, beyond):
+        assert shield.rules._rooms(seen)["own"][0] < 0         # an escape is asked for ...
+        assert shield.rules.escapes(seen)[0] == -1             # ... and refused
+        assert shield.decide(seen, np.array([LANE_LEFT]))[0] == SLOWER
+    clear = beyond.copy()
+    clear[0, 1:3, 1] = 0.9                                     # the cars one lane further 90 m ahead
+    assert shield.rules.escapes(clear)[0] == LANE_LEFT
+
+
 def test_defended_outputs_pick_the_shielded_action_and_pgd_gets_gradients() -> None:
     torch.manual_seed(0)
     net = torch.nn.Sequential(torch.nn.Flatten(), torch.nn.Linear(25, 5))

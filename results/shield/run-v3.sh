@@ -1,5 +1,5 @@
 #!/bin/bash
-# The shield v3 (`zodrive.defense.shield.VERSION`: the lane beyond checked while the ego may be
+# The shield v3 (superseded by v4, run-v4.sh; `zodrive.defense.shield.VERSION` 3: the lane beyond checked while the ego may be
 # mid-change, and the escape from an own lane too close to stay in), 100 episodes per cell on
 # seeds 100000-100099, into cells-v3/; one process, one cell at a time. The learned adversary is
 # retrained against v3 (one trained against v2 is refused: its version differs).
@@ -19,5 +19,3 @@ ev() {
 ev dqn-driver+shield@0.02-learned-eps0.02 models/dqn-driver --defense shield@0.02 --attack "learned:$A" --eps 0.02
 ev dqn-driver+shield@0.02-none models/dqn-driver --defense shield@0.02
 ev dqn-driver+shield@0.02-pgd-eps0.02 models/dqn-driver --defense shield@0.02 --attack pgd --eps 0.02
-ev dqn-driver+shield@0.05-none models/dqn-driver --defense shield@0.05
-ev dqn-driver+shield@0.05-pgd-eps0.05 models/dqn-driver --defense shield@0.05 --attack pgd --eps 0.05

@@ -121,13 +121,15 @@ class ObservationRules:
             out[side], out[f"{side}_blocked"] = np.where(exists(sign), value, -np.inf), beside | ~exists(sign)
             value, beside = room(inside(2 * sign))
             out[f"{side}2"], out[f"{side}2_blocked"] = value, beside
-            # the vehicles that may be there but not in the own lane; one that may be in both
-            # lanes blocks only if it may overlap the ego (as far ahead as it may be, it is the
-            # own lane's danger too)
-            only = inside(sign) & ~own_lane
-            value, beside = room(only)
-            overlap = (inside(sign) & own_lane & (dx - sx < CAR_LENGTH)).any(axis=1)
+            # for an escape: the vehicles that may be there, except one that may be in the own
+            # lane too and is seen nearer the own lane's centre (the same danger whichever lane
+            # the ego picks) unless it may overlap the ego; and, as cut-in risks, the lane beyond
+            shared = inside(sign) & own_lane & (np.abs(dy) <= np.abs(dy - sign * LANE_WIDTH))
+            value, beside = room(inside(sign) & ~shared)
+            overlap = (shared & (dx - sx < CAR_LENGTH)).any(axis=1)
             out[f"{side}_only"], out[f"{side}_only_blocked"] = value, beside | overlap
+            value, beside = room(inside(2 * sign) & ~own_lane)
+            out[f"{side}2_only"], out[f"{side}2_only_blocked"] = value, beside
         # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
         lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
         lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)
@@ -176,15 +178,18 @@ class ObservationRules:
         """(B,) the lane change that leaves an own lane the room test rejects even for IDLE, or
         -1: SLOWER cannot always save the ego there (a meta-action never slows it below the
         preset's lowest target speed, 20 m/s, and the car ahead may be slower). A side qualifies
-        if it exists wherever the ego may be, the ego is not mid-change, and the vehicles that
-        may be there *but not in the own lane* leave room >= 0 and none may be beside; a vehicle
-        that may be in both lanes counts only if it may overlap the ego. So the target lane's
-        true room is at least the own lane's worst case: an escape is never worse than staying.
-        The side with more such room; -1 where none qualifies or the own lane's room is >= 0."""
+        if it exists wherever the ego may be, the ego is not mid-change, the vehicles that may be
+        there leave room >= 0 and none may be beside, and so do those that may be in the lane
+        beyond (they may cut in). A vehicle that may be in both the own and the target lane and
+        is seen nearer the own lane's centre is left out unless it may overlap the ego: it is
+        the own lane's worst case too, so its room is at least that (the attacker's trick of
+        showing the car ahead half a lane aside does not pin the ego behind it). The side with
+        more room; -1 where none qualifies or the own lane's room is >= 0."""
         r = self._rooms(batch)
         room = {}
         for side in ("left", "right"):
-            ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0))
+            ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0)
+                  & ~r[f"{side}2_only_blocked"] & (r[f"{side}2_only"] >= 0))
             room[side] = np.where(ok, r[f"{side}_only"], -np.inf)
         pick = np.where(room["right"] >= room["left"], LANE_RIGHT, LANE_LEFT)
         found = np.maximum(room["left"], room["right"]) > -np.inf

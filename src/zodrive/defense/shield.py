@@ -41,11 +41,13 @@ from zodrive.agents.rules import SLOWER, ObservationRules
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
-VERSION = 3
+VERSION = 4
 """The shield's behaviour, part of every result key that names it: v1 the robust rules' room
 test, v2 + a lane change only towards a lane that exists for every ego position, v3 + the lane
 beyond checked while the ego may be mid-change, and the escape from an own lane too close to
-stay in (the fallback). Folders made by an earlier version are not resumed with this one."""
+stay in (the fallback), v4 + an escape minds the lane beyond its target (cut-ins) and leaves out
+only a shared vehicle seen nearer the own lane. Folders made by an earlier version are not
+resumed with this one."""
 
 DEFAULT_EPS = 0.02
 """`--defense shield` = `shield@0.02`: a defense is one fixed system (its clean and attacked cells
