@@ -80,9 +80,9 @@ class ObservationRules:
     def _rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
         right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
-        may be beside the ego there, the same counting only vehicles that cannot be in the own
-        lane (`*_only`), whether the ego is centred and whether it may be mid-change;
-        pessimistic within eps."""
+        may be beside the ego there, the same as an escape counts them (`*_only`, see
+        `escapes`), whether the ego is centred and whether it may be mid-change; pessimistic
+        within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5

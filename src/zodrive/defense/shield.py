@@ -18,7 +18,8 @@ test (eps 0) accepts on the *true* observation: no FASTER or IDLE into an own-la
 rules' safe gap, no lane change into a lane whose gap is too small or where a listed vehicle is
 beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
 state, and its lane's true room is at least the own lane's worst case (a vehicle that may be in
-both lanes is the same danger whichever the ego picks): the attacker can still make the car
+both lanes and is seen nearer the own one is the same danger whichever the ego picks), with the
+lane beyond it clear enough that no car there is about to cut in: the attacker can still make the car
 careful, but no longer keep it braking behind a car slower than it can go (the meta-actions
 never slow it below 20 m/s) by making every car ahead look as if it might be in the lane beside.
 What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
