@@ -1,7 +1,7 @@
 """What limits behaviour cloning of `baseline:idm-mobil` into the DDPG driver's actor?
 
 Fits on fixed data (the teacher's own states on the `continuous` preset: `--train` on seeds
-1000+, `--heldout` on seeds 26000+, labelled as it drives) and prints, per variant, the RMSE of
+1000+, `--heldout` on seeds `--heldout-seed`+ (26000), labelled as it drives) and prints, per variant, the RMSE of
 acceleration and steering on the training and the held-out states, the same on the held-out
 "calm" states (no label beyond +-0.2: no lane change, no hard braking) beside the labels' std
 there (what a constant scores), and the share of held-out states where the student steers
@@ -10,6 +10,7 @@ fresh initialization, the loss (`scaled_mse` or plain MSE), epochs, data, the in
 One torch thread, one process.
 
     python benchmarks/imitation_fit_continuous.py > results/imitation-continuous/ablation.txt
+    python benchmarks/imitation_fit_continuous.py --train 40000 --heldout-seed 60000 > results/imitation-continuous/ablation-40000.txt
 """
 
 from __future__ import annotations
@@ -33,18 +34,24 @@ NAMES = ("acceleration", "steering")
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--train", type=int, default=10000, help="teacher's states on seeds 1000+")
-    parser.add_argument("--heldout", type=int, default=3000, help="teacher's states on seeds 26000+")
+    parser.add_argument("--heldout", type=int, default=3000, help="teacher's states on seeds --heldout-seed+")
+    parser.add_argument("--heldout-seed", type=int, default=26000, help="after every training seed (1000 + --train)")
     parser.add_argument("--model", default="models/ddpg-driver", help="source of the actor")
     args = parser.parse_args()
     torch.set_num_threads(1)
     teacher, env = make_policy_env("baseline:idm-mobil", load_preset("continuous"))
     train = labelled_rollout(env, teacher, teacher, 1.0, 1000, args.train, np.random.default_rng(0))
-    held = labelled_rollout(env, teacher, teacher, 1.0, 26000, args.heldout, np.random.default_rng(0))
+    if args.heldout_seed < 1000 + args.train:
+        parser.error("--heldout-seed must come after the training seeds (1000 + --train)")
+    held = labelled_rollout(env, teacher, teacher, 1.0, args.heldout_seed, args.heldout, np.random.default_rng(0))
     x, y = (torch.as_tensor(a.reshape(len(a), -1), dtype=torch.float32) for a in (train[0], held[0]))
     ty, hy = (torch.as_tensor(a, dtype=torch.float32) for a in (train[1], held[1]))
     calm = hy.abs().max(dim=1).values < 0.2
-    print(f"train {len(x)} states (seeds 1000+), held-out {len(y)} (seeds 26000+), calm held-out {int(calm.sum())}; "
+    print(f"train {len(x)} states (seeds 1000+), held-out {len(y)} (seeds {args.heldout_seed}+), calm held-out {int(calm.sum())}; "
           f"teacher steers beyond 0.2 on {float((hy[:, 1].abs() > 0.2).float().mean()):.3f} of held-out states")
+    for i, name in enumerate(NAMES):
+        q = np.quantile(train[1][:, i], [0.0, 0.05, 0.5, 0.95, 1.0])
+        print(f"teacher's {name} on the training states: min / 5 % / median / 95 % / max " + " / ".join(f"{v:.4f}" for v in q))
     ego_vx = train[0][:, 0, 3]  # the ego's speed feature: vx / 20 m/s, clipped to [-1, 1]
     print(f"the ego's vx feature is at its clip (1.0, i.e. >= 20 m/s) on {float((ego_vx >= 1.0).mean()):.3f} of the "
           f"training states: the speed IDM's acceleration depends on is not observed above 20 m/s")
