@@ -6,7 +6,8 @@ acceleration and steering on the training and the held-out states, the same on t
 "calm" states (no label beyond +-0.2: no lane change, no hard braking) beside the labels' std
 there (what a constant scores), and the share of held-out states where the student steers
 beyond +-0.2 (and how often the teacher does), and how often the ego's speed feature is clipped. Variants: the source actor's weights or a
-fresh initialization, the loss (`scaled_mse` or plain MSE), epochs, data, the input std floor.
+fresh initialization, the loss (`scaled_mse` or plain MSE), epochs, data, the input std floor,
+the ego's row alone.
 One torch thread, one process.
 
     python benchmarks/imitation_fit_continuous.py > results/imitation-continuous/ablation.txt
@@ -63,17 +64,22 @@ def main() -> None:
                 ("fresh, 50 epochs, input std floor 0", dict(epochs=50, floor=0.0)),
                 ("fresh, 20 epochs", dict(epochs=20)),
                 ("fresh, 10 epochs", dict(epochs=10)),
-                ("fresh, 10 epochs, plain MSE", dict(epochs=10, plain=True))]
+                ("fresh, 10 epochs, plain MSE", dict(epochs=10, plain=True)),
+                ("fresh, 10 epochs, ego row only", dict(epochs=10, ego_only=True)),
+                ("fresh, 50 epochs, ego row only", dict(epochs=50, ego_only=True))]
     for name, options in variants:
         run(name, source, x, ty, y, hy, calm, **options)
 
 
 def run(name: str, source: torch.nn.Sequential, x: torch.Tensor, ty: torch.Tensor, hx: torch.Tensor,
         hy: torch.Tensor, calm: torch.Tensor, *, epochs: int, n: int | None = None, fresh: bool = True,
-        plain: bool = False, floor: float = 0.05) -> None:
-    """Fit one variant on the first `n` training states and print its errors."""
+        plain: bool = False, floor: float = 0.05, ego_only: bool = False) -> None:
+    """Fit one variant on the first `n` training states and print its errors; `ego_only`: the
+    other vehicles' rows set to 0 (is the teacher's action a function of the ego's own row?)."""
     torch.manual_seed(0)
     x, ty = x[:n], ty[:n]
+    if ego_only:
+        x, hx = (torch.cat([a[:, :5], torch.zeros_like(a[:, 5:])], dim=1) for a in (x, hx))
     net = standardized(reinitialized(source) if fresh else source)
     restandardize(net, x, floor)
     start = time.perf_counter()
