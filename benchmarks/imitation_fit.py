@@ -141,18 +141,23 @@ def main() -> None:
 
 
 def print_rounds(path: str) -> None:
-    """The agreement table of a `--dagger` run's train.json, one block per round."""
+    """The agreement table of a `--dagger` run's train.json, one block per round (a continuous
+    student's: RMSE / MAE per action dimension beside the labels' std)."""
     import json
 
     t = json.loads(open(path).read())
     m = t["method"]
     print(f"{path}: {m['rounds']} rounds of {m['states']} states, {m['epochs']} epochs per refit, jitter {m['jitter']}, "
-          f"kappa {m['kappa']}; held-out seeds {t['heldout_seeds']}; {t['wall_time_s']} s")
+          f"kappa {m['kappa']}{', beta ' + str(m['beta']) if 'beta' in m else ''}; held-out seeds {t['heldout_seeds']}; {t['wall_time_s']} s")
     for r in t["rounds"]:
         print(f"round {r['round']} ({r['driver']} drives, seeds {r['seeds'][0]}-{r['seeds'][1]}), aggregate "
               f"{r['aggregate']}, loss {r['loss_per_epoch'][0]} -> {r['loss_per_epoch'][-1]}")
         for key in ("train", "heldout_teacher_states", "heldout_student_states"):
             a = r[key]
+            if "per_dim" in a:
+                print(f"   {key:<24} " + "  ".join(f"{n} rmse {v['rmse']:.4f} mae {v['mae']:.4f} (label std "
+                                                     f"{v['label_std']:.4f})" for n, v in a["per_dim"].items()))
+                continue
             print(f"   {key:<24} {a['all']:.4f}  " + " ".join(f"{SHORT[['LANE_LEFT', 'IDLE', 'LANE_RIGHT', 'FASTER', 'SLOWER'].index(n)]} "
                                                           f"{v[0]:.3f}/{v[1]}" for n, v in a["per_class"].items()))
 

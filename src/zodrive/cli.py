@@ -268,10 +268,12 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--trust-model", action="store_true")
     rob.add_argument("--epochs", type=_positive_int, help="distill: passes over the collected states [20]")
     rob.add_argument("--teacher", metavar="baseline:NAME",
-                     help="distill: an observation-reading baseline that drives and labels (default: the model itself)")
+                     help="distill: an observation-reading baseline that drives and labels (default: the model itself); "
+                          "with --dagger also baseline:idm-mobil, the teacher of a DDPG/TD3 actor (continuous presets)")
     rob.add_argument("--dagger", type=_nonnegative_int, metavar="ROUNDS",
                      help="distill: behaviour cloning with DAgger (Ross et al. 2011): after the teacher's --steps states, "
-                          "ROUNDS rounds of --steps states the student drives into, labelled by the teacher; "
+                          "ROUNDS rounds of --steps states the student drives into (a DDPG/TD3 student: with the "
+                          "teacher's action with probability 0.5 ** round), labelled by the teacher; "
                           "--epochs per refit")
     rob.add_argument("--no-progress", action="store_true")
 

@@ -152,12 +152,18 @@ class IdmMobilDriver:
     get meta-actions (a lane change first, else FASTER/SLOWER when IDM wants to accelerate or
     brake by more than 0.5 m/s^2, else IDLE); continuous presets get [acceleration, steering]
     normalized to the preset's ranges.
+
+    `replan` (for labelling another driver's states, `defense.distill`): where the ego is in a
+    lane it neither chose nor started from (another policy drove it there), that lane becomes
+    its target, as if it had arrived by its own decision; otherwise it would steer hard back to
+    a lane the state does not show. When it drives itself this never happens, so its driving
+    is the same with or without it.
     """
 
-    def __init__(self, env, kind: str, target_speed: float = IDM_TARGET_SPEED):
-        self.env, self.kind, self.target_speed = env, kind, target_speed
+    def __init__(self, env, kind: str, target_speed: float = IDM_TARGET_SPEED, *, replan: bool = False):
+        self.env, self.kind, self.target_speed, self.replan = env, kind, target_speed, replan
         self._ego = None
-        self._target_lane = None
+        self._target_lane = self._origin_lane = None
         self._since_decision = 0
 
     def _config(self) -> dict[str, Any]:
@@ -169,9 +175,12 @@ class IdmMobilDriver:
         ego = self.env.unwrapped.vehicle
         if ego is not self._ego:  # a new episode: the environment made a new ego vehicle
             self._ego, self._target_lane, self._since_decision = ego, ego.lane_index, 10**9
+            self._origin_lane = ego.lane_index
         road = ego.road
         if self.kind == "discrete":
             self._target_lane = ego.target_lane_index
+        elif self.replan and ego.lane_index not in (self._target_lane, self._origin_lane):
+            self._target_lane = self._origin_lane = ego.lane_index
         shadow = IDMVehicle(road, ego.position, heading=ego.heading, speed=ego.speed,
                             target_lane_index=self._target_lane, target_speed=self.target_speed)
         slot = road.vehicles.index(ego)
@@ -204,7 +213,7 @@ class IdmMobilDriver:
                 continue
             direction = int(np.sign(lane[2] - ego.lane_index[2]))
             if mobil_gain(shadow, lane) > shadow.LANE_CHANGE_MIN_ACC_GAIN - KEEP_RIGHT_BIAS * direction:
-                self._target_lane = lane
+                self._origin_lane, self._target_lane = ego.lane_index, lane
                 return direction
         return 0
 

@@ -6,8 +6,9 @@
   (`agents.dqn_variants.SADQN`) or SA-DDPG (`agents.state_adversarial.SADDPG`).
 - `distill`: adversarially robust distillation of the model's own decisions (or of a
   `--teacher` baseline's) on the states the teacher visits (`defense.distill`); `steps` is the
-  number of states collected, DQN only; with `dagger` (rounds), behaviour cloning with DAgger
-  (`defense.distill.dagger_distill`), `steps` states per round.
+  number of states collected; with `dagger` (rounds), behaviour cloning with DAgger
+  (`defense.distill.dagger_distill`), `steps` states per round: into a DQN's Q-network, or
+  into a DDPG/TD3 actor from a `--teacher` that may read the simulator (`baseline:idm-mobil`).
 `at` and `sa` continue from the model's weights with the same warm-buffer start as Algorithm 2;
 `distill` starts its student from them.
 """

@@ -44,7 +44,11 @@ class EpisodeRecord:
 def act(victim: Victim, obs: np.ndarray, space: gym.Space | None = None) -> Any:
     """The victim's deterministic action on one observation (not an attack query); a
     continuous action is kept inside the action space's box (default [-1, 1])."""
-    out = victim.query(obs[None])
+    return to_action(victim, victim.query(obs[None]), space)
+
+
+def to_action(victim: Victim, out: np.ndarray, space: gym.Space | None = None) -> Any:
+    """`act`'s action from the victim's outputs `out` on one observation (a batch of one)."""
     action = victim.actions(out)[0]
     if victim.kind == "discrete":
         return int(action)
