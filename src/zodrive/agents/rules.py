@@ -117,19 +117,18 @@ class ObservationRules:
         own_lane = inside(0)
         out: dict[str, np.ndarray] = {"own": np.where(exists(0), room(own_lane)[0], -np.inf)}
         for side, sign in (("left", -1), ("right", +1)):
-            value, beside = room(inside(sign))
+            near, beyond = inside(sign), inside(2 * sign)
+            value, beside = room(near)
             out[side], out[f"{side}_blocked"] = np.where(exists(sign), value, -np.inf), beside | ~exists(sign)
-            value, beside = room(inside(2 * sign))
-            out[f"{side}2"], out[f"{side}2_blocked"] = value, beside
+            out[f"{side}2"], out[f"{side}2_blocked"] = room(beyond)
             # for an escape: the vehicles that may be there, except one that may be in the own
             # lane too and is seen nearer the own lane's centre (the same danger whichever lane
             # the ego picks) unless it may overlap the ego; and, as cut-in risks, the lane beyond
-            shared = inside(sign) & own_lane & (np.abs(dy) <= np.abs(dy - sign * LANE_WIDTH))
-            value, beside = room(inside(sign) & ~shared)
+            shared = near & own_lane & (np.abs(dy) <= np.abs(dy - sign * LANE_WIDTH))
+            value, beside = room(near & ~shared)
             overlap = (shared & (dx - sx < CAR_LENGTH)).any(axis=1)
             out[f"{side}_only"], out[f"{side}_only_blocked"] = value, beside | overlap
-            value, beside = room(inside(2 * sign) & ~own_lane)
-            out[f"{side}2_only"], out[f"{side}2_only_blocked"] = value, beside
+            out[f"{side}2_only"], out[f"{side}2_only_blocked"] = room(beyond & ~own_lane)
         # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
         lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
         lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)
@@ -137,8 +136,8 @@ class ObservationRules:
                    left_exists=lane_lo - 1 >= 0, right_exists=lane_hi + 1 <= self.lanes - 1)
         return out
 
-    def actions(self, batch: np.ndarray) -> np.ndarray:
-        r = self._rooms(batch)
+    def actions(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         own, left, right, centred = r["own"], r["left"], r["right"], r["centred"]
         left_blocked, right_blocked = r["left_blocked"], r["right_blocked"]
         act = np.full(len(own), IDLE)
@@ -152,7 +151,7 @@ class ObservationRules:
         act[go_left], act[go_right] = LANE_LEFT, LANE_RIGHT
         return act
 
-    def safe_actions(self, batch: np.ndarray) -> np.ndarray:
+    def safe_actions(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """(B, 5) booleans: the meta-actions these rules' room test accepts on each observation,
         whatever the rules would choose. FASTER: the own lane free by MARGIN (as the rules ask
         before speeding up); IDLE: the own lane not too close (the rules keep speed there);
@@ -164,7 +163,7 @@ class ObservationRules:
         With eps > 0 every test is the pessimistic one, so an action accepted on an observation
         is accepted by the same test on every true state within eps of it. The rules' own
         choice is always accepted."""
-        r = self._rooms(batch)
+        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         safe = np.zeros((len(r["own"]), 5), dtype=bool)
         safe[:, FASTER] = r["own"] > MARGIN
         safe[:, IDLE] = r["own"] >= 0
@@ -174,7 +173,7 @@ class ObservationRules:
         safe[:, SLOWER] = True
         return safe
 
-    def escapes(self, batch: np.ndarray) -> np.ndarray:
+    def escapes(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """(B,) the lane change that leaves an own lane the room test rejects even for IDLE, or
         -1: SLOWER cannot always save the ego there (a meta-action never slows it below the
         preset's lowest target speed, 20 m/s, and the car ahead may be slower). A side qualifies
@@ -185,7 +184,7 @@ class ObservationRules:
         the own lane's worst case too, so its room is at least that (the attacker's trick of
         showing the car ahead half a lane aside does not pin the ego behind it). The side with
         more room; -1 where none qualifies or the own lane's room is >= 0."""
-        r = self._rooms(batch)
+        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         room = {}
         for side in ("left", "right"):
             ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0)

@@ -91,29 +91,31 @@ class Shield:
             raise ZodriveError(f"the shield reads what the rules read: {exc}") from None
         self.eps = float(eps)
 
-    def safe(self, batch: np.ndarray) -> np.ndarray:
+    def safe(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """(B, 5) booleans: the actions safe for every true state within eps of each observation."""
-        return self.rules.safe_actions(np.asarray(batch))
+        return self.rules.safe_actions(np.asarray(batch), rooms)
 
     def decide(self, batch: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """Final actions (B,): `proposed` where safe, the robust rules' choice where not."""
         batch = np.asarray(batch)
         proposed = np.asarray(proposed, dtype=np.int64)
-        ok = self.safe(batch)[np.arange(len(batch)), proposed]
+        r = self.rules._rooms(batch)
+        ok = self.safe(batch, r)[np.arange(len(batch)), proposed]
         if ok.all():
             return proposed
         out = proposed.copy()
-        out[~ok] = self.fallback(batch[~ok])
+        out[~ok] = self.fallback(batch[~ok], _rows_of(r, ~ok))
         return out
 
-    def fallback(self, batch: np.ndarray) -> np.ndarray:
+    def fallback(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """The robust rules' choice where the test accepts it and it is not SLOWER; else a lane
         change out of an own lane the test rejects even for IDLE, where one is no worse than
         staying (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
         behind a slower car is no refuge); else SLOWER."""
-        act = self.rules.actions(batch)
-        ok = self.safe(batch)[np.arange(len(batch)), act] & (act != SLOWER)
-        escape = self.rules.escapes(batch)
+        r = self.rules._rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
+        act = self.rules.actions(batch, r)
+        ok = self.safe(batch, r)[np.arange(len(batch)), act] & (act != SLOWER)
+        escape = self.rules.escapes(batch, r)
         return np.where(ok, act, np.where(escape >= 0, escape, SLOWER))
 
     def outputs(self, batch: np.ndarray, scores: np.ndarray) -> np.ndarray:
@@ -123,15 +125,21 @@ class Shield:
         row's max + 1. The argmax is the shielded decision."""
         batch = np.asarray(batch)
         scores = np.asarray(scores, dtype=np.float32)
-        safe = self.safe(batch)
+        r = self.rules._rooms(batch)  # every query of every attack step goes through here: computed once
+        safe = self.safe(batch, r)
         rows = np.arange(len(scores))
         proposed = scores.argmax(axis=-1)
         hi, lo = scores.max(axis=-1, keepdims=True), scores.min(axis=-1, keepdims=True)
         out = np.where(safe, scores, scores - (hi - lo) - 1.0).astype(np.float32)
         vetoed = ~safe[rows, proposed]
         if vetoed.any():
-            out[rows[vetoed], self.fallback(batch[vetoed])] = hi[vetoed, 0] + 1.0
+            out[rows[vetoed], self.fallback(batch[vetoed], _rows_of(r, vetoed))] = hi[vetoed, 0] + 1.0
         return out
+
+
+def _rows_of(rooms: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
+    """The room test's per-row figures of the selected rows."""
+    return {key: value[rows] for key, value in rooms.items()}
 
 
 def shielded_victim(victim: Victim, shield: Shield) -> Victim:
