@@ -9,6 +9,7 @@ from toys import CONTEXT, context, counting_victim, linear_victim, observations
 from zodrive.attacks.victim import Victim
 from zodrive.attacks import ATTACKS, AttackSpec, ThreatModel, make_attack
 from zodrive.attacks.base import GradientEstimateAttack
+from zodrive.attacks.oracle import PROBE_SIZES, stable_batch
 from zodrive.errors import ZodriveError
 
 ESTIMATORS = [name for name, cls in ATTACKS.items() if issubclass(cls, GradientEstimateAttack)]
@@ -165,27 +166,82 @@ def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
         assert calls[probes:probes + n + 2] == [1] * n + [n * 15, n * 16]  # iteration 0: probes only
 
 
-def test_rows_are_independent_of_each_other() -> None:
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_rows_are_independent_of_each_other(kind: str) -> None:
     """N rows with their own seeds give what N one-row runs give, bit for bit, for every
     attack, with per-step and per-episode budgets and the per-step state (warm start,
-    max_change) carried over two steps: what lockstep evaluation rests on."""
+    max_change) carried over two steps: what lockstep evaluation rests on. The continuous
+    victim's target is out of reach, so rows run until their budgets stop them, at
+    different iterations (a row whose base point is known spends one query less)."""
     x0 = observations(5)
     later = np.clip(x0 + 0.01, -1, 1).astype(np.float32)  # the next step's observations
     for name in ["zo-signsgd", "zo-sgd", "nes", "spsa", "coordinate-fd", "random-search", "uniform-noise",
                  "pgd", "fgsm"]:
-        options = dict(steps=6, n_directions=5, warm_start=True, max_change=0.05, restarts=1,
-                       query_budget=40, episode_query_budget=70, eps=0.1)
+        options = dict(steps=6 if kind == "discrete" else 12, n_directions=5, warm_start=True, max_change=0.05,
+                       restarts=1, query_budget=40, episode_query_budget=70, eps=0.1)
         spec = AttackSpec(attack=name, **options)
-        together = spec.build(linear_victim(), **CONTEXT)
+        together = spec.build(linear_victim(kind=kind), **context(kind))
         together[0].reseed([11, 12, 13, 14, 15])
         joint = [_step_of(together, x) for x in (x0, later)]
         for row in range(5):
-            alone = spec.build(linear_victim(), **CONTEXT)
+            alone = spec.build(linear_victim(kind=kind), **context(kind))
             alone[0].reseed(11 + row)
             single = [_step_of(alone, x[row:row + 1]) for x in (x0, later)]
             for a, b in zip(joint, single):
                 for field in ("x_adv", "success", "queries", "iterations"):
                     assert np.array_equal(getattr(a, field)[row], getattr(b, field)[0]), (name, row, field)
+
+
+def test_a_row_out_of_budget_stops_while_the_others_go_on() -> None:
+    """Rows spend their per-step budgets at different paces (a row where the victim ignores
+    the observation never moves, so its base point is known and costs no query): when one
+    cannot pay for an iteration, it stops and the others carry on with their own directions,
+    each as its one-row run (this raised a shape error in the gradient estimate before)."""
+    base = linear_victim(kind="continuous")
+
+    def query(x: np.ndarray) -> np.ndarray:
+        out = base.query(x)
+        out[np.asarray(x)[:, 1, 1] > 0] = 0.5  # rows whose second vehicle is ahead: a flat policy
+        return out
+
+    victim = Victim(query=query, kind="continuous", obs_shape=(5, 5))
+    x0 = observations(6)
+    x0[:3, 1, 1], x0[3:, 1, 1] = 0.5, -0.5
+    spec = AttackSpec(attack="zo-signsgd", steps=12, n_directions=5, query_budget=40, eps=0.1, target="1,1", tol=0.01)
+    together = spec.build(victim, **context("continuous"))
+    together[0].reseed(list(range(6)))
+    joint = _step_of(together, x0)
+    assert len(set(joint.iterations.tolist())) > 1  # the premise: rows stop at different iterations
+    for row in range(6):
+        alone = spec.build(victim, **context("continuous"))
+        alone[0].reseed(row)
+        single = _step_of(alone, x0[row:row + 1])
+        for field in ("x_adv", "queries", "iterations"):
+            assert np.array_equal(getattr(joint, field)[row], getattr(single, field)[0]), (row, field)
+
+
+def test_rows_are_not_mixed_where_a_row_s_place_in_a_batch_changes_its_outputs() -> None:
+    """A victim whose kernels round odd and even rows of a batch differently (as a matrix
+    product over (in, out) weights does on this machine) passes a check of batch sizes alone;
+    the oracle's calibration also moves the rows, finds it out and never mixes rows, so N
+    rows still give what N one-row runs give."""
+    base = linear_victim()
+
+    def query(x: np.ndarray) -> np.ndarray:
+        out = base.query(x)
+        return out + np.float32(1e-3) * (np.arange(len(out)) % 2)[:, None].astype(np.float32)
+
+    victim = Victim(query=query, kind="discrete", obs_shape=(5, 5))
+    assert stable_batch(query, (5, 5))[0] > PROBE_SIZES[-1]
+    x0 = observations(4)
+    spec = AttackSpec(attack="zo-sgd", steps=5, n_directions=5, early_stop=False)
+    together = spec.build(victim, **CONTEXT)
+    together[0].reseed([1, 2, 3, 4])
+    joint = _step_of(together, x0)
+    for row in range(4):
+        alone = spec.build(victim, **CONTEXT)
+        alone[0].reseed(row + 1)
+        assert np.array_equal(joint.x_adv[row], _step_of(alone, x0[row:row + 1]).x_adv[0]), row
 
 
 def _step_of(built, x):

@@ -20,11 +20,13 @@ def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Vi
     """A small tanh MLP over (5, 5) observations: 5 Q-values or a 2-d action in [-1, 1]."""
     gen = torch.Generator().manual_seed(seed)
     out = 5 if kind == "discrete" else 2
-    w1 = torch.randn(25, hidden, generator=gen) * 0.8
-    w2 = torch.randn(hidden, out, generator=gen) * 0.8
+    # weights laid out (out, in) as nn.Linear's: a row's outputs do not depend on where it sits in a batch
+    w1 = (torch.randn(25, hidden, generator=gen) * 0.8).T.contiguous()
+    w2 = (torch.randn(hidden, out, generator=gen) * 0.8).T.contiguous()
+    linear = torch.nn.functional.linear
 
     def forward(x: torch.Tensor) -> torch.Tensor:
-        y = torch.tanh(x.reshape(-1, 25).float() @ w1) @ w2
+        y = linear(torch.tanh(linear(x.reshape(-1, 25).float(), w1)), w2)
         return torch.tanh(y) if kind == "continuous" else y
 
     def query(x: np.ndarray) -> np.ndarray:

@@ -175,6 +175,14 @@ class Attack(abc.ABC):
         what N one-row runs draw."""
         return np.stack([sample(self._rngs[r]) for r in rows])
 
+    def normals(self, rows: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        """Standard normals (len(rows), *shape), float64, each row's from its own stream: what
+        `draw` with `standard_normal(shape)` returns, written in place (no per-row arrays)."""
+        out = np.empty((len(rows), *shape))
+        for i, r in enumerate(rows):
+            self._rngs[r].standard_normal(out=out[i])
+        return out
+
     def _streams(self, n: int) -> None:
         """One stream per row for a step of `n` rows; a caller that never seeded rows (a
         batch of states) gets row 0's stream from the attack's seed, row r's from (seed, r)."""
@@ -222,6 +230,10 @@ class Attack(abc.ABC):
         """Points (A, P, dim) to query around the base points x (A, dim) of `rows`."""
         return np.empty((len(x), 0, x.shape[1]), dtype=np.float32)
 
+    def keep_proposals(self, keep: np.ndarray) -> None:
+        """Only the proposals of rows `keep` (A,) bool go on to `step` (a row whose budget
+        cannot pay for its points stops): drop what `propose` kept for the others."""
+
     @abc.abstractmethod
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         """The next base points (A, dim) from the queried candidates (A, 1 + P, dim) (base
@@ -267,6 +279,7 @@ class Attack(abc.ABC):
             return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
 
         everyone = np.arange(n)
+        free = int(np.argmax(mask))  # a coordinate the attacker may change (any, if none)
         self._streams(n)
         # a row whose episode budget cannot pay for one iteration is left untouched this step
         live = np.ones(n, dtype=bool)
@@ -321,7 +334,7 @@ class Attack(abc.ABC):
                 rows = np.flatnonzero(active)
                 if rows.size == 0:
                     break
-                probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32), rows)
+                probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32, copy=False), rows)
                 cand = np.concatenate([x[rows, None], probes], axis=1)  # the base point is already projected
                 need = np.ones(cand.shape[:2], dtype=bool)
                 need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
@@ -329,17 +342,22 @@ class Attack(abc.ABC):
                 if not afford.all():  # a row's own budget is spent: that row stops, the others go on
                     active[rows[~afford]] = False
                     rows, cand, need = rows[afford], cand[afford], need[afford]
+                    self.keep_proposals(afford)
                     if rows.size == 0:
                         break
                 a, m = cand.shape[:2]
-                out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
-                out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
                 owners = np.repeat(rows, need.sum(axis=1))
                 grad = None
-                if self.black_box:
+                if self.black_box and owners.size == a * m:  # every point is new: one call, no gather
+                    out = oracle(cand.reshape(-1, *shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
+                elif self.black_box:
+                    out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+                    out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
                     if owners.size:
                         out[need] = oracle(cand[need].reshape(-1, *shape), owners)
                 else:
+                    out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+                    out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
                     grad = known_grad[rows].copy()
                     ask = need[:, 0]
                     if ask.any():
@@ -370,7 +388,9 @@ class Attack(abc.ABC):
                     break
                 x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
                 if self.black_box:  # a step onto a queried point (random search) costs no new query
-                    same = np.all(cand == x[rows, None], axis=2)
+                    same = cand[:, :, free] == x[rows, None, free]  # one coordinate first: most points differ there
+                    if same.any():
+                        same &= np.all(cand == x[rows, None], axis=2)
                     hit = same.any(axis=1)
                     col = same.argmax(axis=1)[hit]
                     known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
@@ -469,8 +489,12 @@ class GradientEstimateAttack(Attack):
 
     def propose(self, k: int, x: np.ndarray, rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._u = self.directions(rows, x.shape[1], mask).astype(np.float32)
-        signs = (1.0, -1.0) if self.antithetic else (1.0,)
-        return np.concatenate([x[:, None] + (s * self.mu) * self._u for s in signs], axis=1)
+        if not self.antithetic:
+            return x[:, None] + self.mu * self._u
+        return np.concatenate([x[:, None] + (s * self.mu) * self._u for s in (1.0, -1.0)], axis=1)
+
+    def keep_proposals(self, keep: np.ndarray) -> None:
+        self._u = self._u[keep]
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         return self.update(cand[:, 0], self.estimate(f, self._u, self._d_free), rows)
@@ -482,6 +506,9 @@ class GradientEstimateAttack(Attack):
 
 def unit_sphere(normal: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Directions (..., dim) uniform on the unit sphere of the unmasked subspace, from
-    standard normal draws of that shape (all rows normalized in one call)."""
-    u = normal * mask
-    return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+    standard normal draws of that shape (all rows normalized in one call; `normal`, float64,
+    is overwritten)."""
+    normal *= mask
+    norm = np.sqrt(np.add.reduce(normal * normal, axis=-1, keepdims=True))  # np.linalg.norm's arithmetic
+    normal /= np.maximum(norm, 1e-12)
+    return normal

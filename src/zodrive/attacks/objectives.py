@@ -64,7 +64,9 @@ class DiscreteTargeted(Objective):
         if self.kind == "paper":
             y = clean.argmax(dim=-1)[:, None, None].expand(*out.shape[:-1], 1)
             return self.weight * (q_t - out.gather(-1, y).squeeze(-1)).abs()
-        others = _others_max(out, torch.tensor(self.target))
+        t = self.target  # the largest of the other actions' scores (a max: exact in any order)
+        others = (torch.cat((out[..., :t], out[..., t + 1:]), dim=-1).amax(dim=-1) if out.shape[-1] > 1
+                  else _others_max(out, torch.tensor(t)))
         return self.weight * torch.clamp(others - q_t + self.kappa, min=0.0)
 
     def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:

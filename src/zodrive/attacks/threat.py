@@ -98,16 +98,21 @@ class Projector:
         self.low, self.high = np.minimum(threat.low, x0), np.maximum(threat.high, x0)  # never move a clean value
 
     def __call__(self, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        t, x0 = self.threat, self.x0[rows, None]
-        delta = (x - x0) * self.mask
+        t = self.threat
+        # rows are distinct indices: as many as there are clean rows means all of them, in order
+        every = len(rows) == len(self.x0)
+        x0, low, high = (self.x0, self.low, self.high) if every else (self.x0[rows], self.low[rows], self.high[rows])
+        x0 = x0[:, None]
+        delta = np.subtract(x, x0)
+        delta *= self.mask
         if t.mode == "budgeted":
             if t.norm == "linf":
                 delta = np.clip(delta, -t.eps, t.eps, out=delta)
             else:
                 norms = np.linalg.norm(delta, axis=-1, keepdims=True)
                 delta = delta * np.minimum(1.0, t.eps / np.maximum(norms, 1e-12))
-        out = x0 + delta
-        return np.clip(out, self.low[rows, None], self.high[rows, None], out=out)
+        delta += x0
+        return np.clip(delta, low[:, None], high[:, None], out=delta)
 
 
 def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

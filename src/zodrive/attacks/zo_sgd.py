@@ -22,7 +22,7 @@ class ZOSGD(GradientEstimateAttack):
     unit_directions = True
 
     def directions(self, rows: np.ndarray, dim: int, mask: np.ndarray) -> np.ndarray:
-        return unit_sphere(self.draw(rows, lambda g: g.standard_normal((self.n_directions, dim))), mask)
+        return unit_sphere(self.normals(rows, (self.n_directions, dim)), mask)
 
     def update(self, x: np.ndarray, g: np.ndarray, rows: np.ndarray) -> np.ndarray:
         return x - self.step_size * g
