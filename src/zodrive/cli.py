@@ -316,7 +316,16 @@ def build_parser() -> argparse.ArgumentParser:
                                               "against a model; use it with --attack learned:DIR")
     atk.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
     atk.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
-    atk.add_argument("--steps", type=_positive_int, required=True, help="environment steps of PPO training")
+    atk.add_argument("--steps", type=_nonnegative_int, required=True,
+                     help="environment steps of PPO training (0: the fitted start of --pretrain-rounds alone)")
+    atk.add_argument("--pretrain-rounds", type=_positive_int,
+                     help="first fit the adversary as an amortized transfer attack: rounds of driving under it, "
+                          "distilling a surrogate from counted victim queries, fitting the mean action to make the "
+                          "surrogate take the target action (zodrive.agents.amortized)")
+    atk.add_argument("--pretrain-episodes", type=_positive_int, help="episodes driven per round (default 10)")
+    atk.add_argument("--pretrain-margin", type=_nonnegative_float,
+                     help="the target action must win on the surrogate by this many of the victim's median decision "
+                          "gaps (default 1)")
     atk.add_argument("--out", type=Path, required=True, help="the adversary's model folder")
     atk.add_argument("--seed", type=_seed, default=0, help="training seed (PPO and the environment)")
     atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]",
@@ -633,13 +642,27 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     from zodrive.agents.adversary import attack_train
 
     preset = _preset_of(args)
+    from zodrive.agents.amortized import Pretrain, surrogate_fit
+
+    given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin))
+             if value is not None}
+    pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
+    if pretrain is None and given:
+        raise ZodriveError(f"--pretrain-{next(iter(given))} applies with --pretrain-rounds")
+    if pretrain is None and args.steps == 0:
+        raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
-                        victim_action=args.victim_action, reward=args.reward, force=args.force,
+                        victim_action=args.victim_action, reward=args.reward, pretrain=pretrain, force=args.force,
                         progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
-    print(f"{train['total_timesteps']} steps, {train['episodes']} episodes in {train['wall_time_s']} s; victim "
-          f"queries {train['victim_queries']} ({train['queries_per_step']:.2f}/step); victim return over the first / "
-          f"last 10 training episodes: {train['victim_return_first10']} / {train['victim_return_last10']}")
+    for r in (train["pretrain"] or {}).get("rounds", []):
+        print(f"pretrain round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
+              f"on {r['target_share']:.1%} of steps, {r['queries']} queries so far, {surrogate_fit(r)}; fitted: "
+              f"target on the surrogate on {r['surrogate_target_share']:.1%} of visited states")
+    if train["total_timesteps"]:
+        print(f"{train['total_timesteps']} steps, {train['episodes']} episodes in {train['wall_time_s']} s; victim "
+              f"queries {train['victim_queries']} ({train['queries_per_step']:.2f}/step); victim return over the "
+              f"first / last 10 training episodes: {train['victim_return_first10']} / {train['victim_return_last10']}")
     print(f"saved {path} (use: --attack learned:{path} --eps {args.eps:g})")
     return 0
 

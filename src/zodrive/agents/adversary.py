@@ -24,6 +24,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from zodrive.agents.amortized import Pretrain, surrogate_fit
 from zodrive.attacks.learned import FORMAT, META_FILE, adversary_input, apply_action, free_coordinates
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
@@ -153,14 +154,27 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"- preset: {meta['preset'].get('name')}; observes the true observation"
         + (" and the victim's clean action (1 query per step at attack time)" if meta["victim_action"]
            else " only (0 queries per step at attack time)"),
-        f"- training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
-        f"{train['wall_time_s']} s ({train['steps_per_s']} steps/s); victim queries {train['victim_queries']} "
-        f"({train['queries_per_step']:.2f} per step)",
+        *_pretrain_lines(train.get("pretrain")),
+        f"- PPO training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
+        f"{train['wall_time_s']} s; victim queries {train['victim_queries']}",
         f"- victim return per training episode: first 10 {first if first is None else round(first, 2)}, "
         f"last 10 {last if last is None else round(last, 2)} (exploring adversary: not an evaluation)",
         "", "Use: `zodrive evaluate " + meta["victim"] + f" --attack learned:{out} --eps {meta['eps']:g}`"
         + (f" --defense {meta['defense']}" if meta["defense"] else ""), "",
     ])
+
+
+def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
+    """The card's lines on the amortized start (`zodrive.agents.amortized`), one per round."""
+    if not fitted:
+        return []
+    lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
+             f"victim queries, the mean action fitted to make it take the target action by a margin of "
+             f"{fitted['margin']:.3g}; {fitted['wall_time_s']} s. Per round (driving with the previous round's fit):"]
+    for r in fitted["rounds"]:
+        lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
+                     f"taken on {r['target_share']:.1%} of steps; {surrogate_fit(r)}")
+    return lines
 
 
 @one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
@@ -175,11 +189,14 @@ def attack_train(
     defense: str | None = None,
     victim_action: bool = False,
     reward: str = "minus",
+    pretrain: Pretrain | None = None,
     force: bool = False,
     progress_bar: bool = True,
 ) -> Path:
     """Train a learned adversary against `model` (behind `defense`) at L-inf `eps` for `steps`
-    environment steps; write the model folder `out` and return it."""
+    environment steps of PPO (0 allowed after `pretrain`: the fitted start alone), first fitting
+    its mean action as an amortized transfer attack with `pretrain` (`zodrive.agents.amortized`);
+    write the model folder `out` and return it."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -191,8 +208,10 @@ def attack_train(
     from zodrive.envs import attack_context, make_env
     from zodrive.runinfo import write_atomic, write_json, write_run_info
 
-    if not (isinstance(steps, int) and steps >= 1):
-        raise ZodriveError(f"steps must be an integer >= 1, not {steps}")
+    if not (isinstance(steps, int) and steps >= (0 if pretrain else 1)):
+        raise ZodriveError(f"steps must be an integer >= 1 (>= 0 with a pretrained start), not {steps}")
+    if pretrain is not None and victim_action:
+        raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
         raise ZodriveError(f"eps must be > 0, not {eps}")
     if not is_sb3_zip(model):
@@ -209,6 +228,16 @@ def attack_train(
     context = attack_context(preset)
     spec = AttackSpec(attack="learned", eps=float(eps))
     threat = spec.threat(context["features"], context["bounds"])
+    objective = None
+    if pretrain is not None:  # the per-step target the start is fitted to (the paper's, as every attack's default)
+        from zodrive.attacks.objectives import make_objective
+
+        from zodrive.agents.amortized import check
+
+        objective = make_objective(victim.kind, spec.resolved_target(victim.kind, context.get("action_names")),
+                                   n_actions=context["n_actions"], action_names=context.get("action_names"),
+                                   action_bounds=context.get("action_bounds"))
+        check(pretrain, victim.kind, objective)
     file = Path(policy_ref(model))
     ppo = dict(PPO_DEFAULTS)
     ppo["n_steps"] = min(ppo["n_steps"], max(steps, 8))  # a tiny run (tests) still completes its rollouts
@@ -233,22 +262,33 @@ def attack_train(
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
                          "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
-                         "log_std_init": LOG_STD_INIT}, seed)
+                         "log_std_init": LOG_STD_INIT, "pretrain": pretrain and pretrain.__dict__}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))
     venv = DummyVecEnv([lambda: env])
     venv.seed(seed)
     agent = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0,
                 policy_kwargs={"log_std_init": LOG_STD_INIT}, **ppo)
+    fitted = None
+    if pretrain is not None:
+        from zodrive.agents.amortized import pretrain as fit_start
+
+        start = time.perf_counter()
+        with_env = make_env(preset)
+        fitted = fit_start(agent.policy, with_env, victim, threat, objective, inner.free, pretrain, seed)
+        with_env.close()
+        fitted["wall_time_s"] = round(time.perf_counter() - start, 1)
     start = time.perf_counter()
-    agent.learn(total_timesteps=steps, progress_bar=progress_bar)
+    if steps:
+        agent.learn(total_timesteps=steps, progress_bar=progress_bar)
     wall = time.perf_counter() - start
     agent.save(out / "model.zip")
     returns = list(inner.victim_returns)  # the victim's return per training episode
     done = int(agent.num_timesteps)
     train = {"algo": "ppo", "kind": "learned adversary (SA-RL, Zhang et al. ICLR 2021)", "victim": str(model),
              "defense": defense, "eps": float(eps), "total_timesteps": done, "requested_steps": steps, "seed": seed,
-             "wall_time_s": round(wall, 1), "steps_per_s": round(done / wall, 1),
-             "victim_queries": int(inner.oracle.total_queries), "queries_per_step": inner.oracle.total_queries / done,
+             "wall_time_s": round(wall, 1), "steps_per_s": round(done / wall, 1) if done else None,
+             "victim_queries": int(inner.oracle.total_queries),
+             "queries_per_step": inner.oracle.total_queries / done if done else None, "pretrain": fitted,
              "episodes": len(returns),
              "victim_return_first10": float(np.mean(returns[:10])) if returns else None,
              "victim_return_last10": float(np.mean(returns[-10:])) if returns else None,
