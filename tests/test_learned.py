@@ -274,3 +274,16 @@ def test_pretraining_mistakes_are_one_line_errors(trained, tmp_path: Path, capsy
                                                      "--victim-action"])
     assert "do not have" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1"])  # CartPole: no FASTER
     assert not (tmp_path / "a").exists()  # refused before anything is written
+
+
+def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
+    from zodrive.agents.adversary import _pretrain_lines
+
+    rounds = [{"round": 0, "steps": 9, "victim_return": 1.5, "target_share": 0.25, "surrogate_agreement": 0.9}]
+    discrete = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds})
+    assert "by a margin of 0.3" in discrete[0] and "on 25.0% of steps" in discrete[1] and "90.0%" in discrete[1]
+    rounds = [{**rounds[0], "surrogate_rmse": 0.12}]
+    del rounds[0]["surrogate_agreement"]
+    continuous = _pretrain_lines({"queries": 45, "margin": None, "wall_time_s": 1.0, "rounds": rounds})
+    assert "margin" not in continuous[0] and "RMSE 0.120" in continuous[1]
+    assert _pretrain_lines(None) == []

@@ -168,9 +168,10 @@ def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
     """The card's lines on the amortized start (`zodrive.agents.amortized`), one per round."""
     if not fitted:
         return []
+    by = "" if fitted["margin"] is None else f" by a margin of {fitted['margin']:.3g}"
     lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
-             f"victim queries, the mean action fitted to make it take the target action by a margin of "
-             f"{fitted['margin']:.3g}; {fitted['wall_time_s']} s. Per round (driving with the previous round's fit):"]
+             f"victim queries, the mean action fitted to make it take the target action{by}; "
+             f"{fitted['wall_time_s']} s. Per round (driving with the previous round's fit):"]
     for r in fitted["rounds"]:
         lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
                      f"taken on {r['target_share']:.1%} of steps; {surrogate_fit(r)}")

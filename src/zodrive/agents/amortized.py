@@ -196,7 +196,8 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                        "queries": int(oracle.total_queries), "surrogate_mse": round(mse, 4),
                        ("surrogate_agreement" if discrete else "surrogate_rmse"): round(agree, 4),
                        "adversary_loss": round(fit, 4), "surrogate_target_share": round(won, 4)})
-    return {"rounds": rounds, "queries": int(oracle.total_queries), "margin": width, "settings": settings.__dict__}
+    kappa = None if width is None else (1.0 if settings.margin is None else settings.margin) * width
+    return {"rounds": rounds, "queries": int(oracle.total_queries), "margin": kappa, "settings": settings.__dict__}
 
 
 def surrogate_fit(round_: dict[str, Any]) -> str:
