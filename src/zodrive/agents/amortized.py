@@ -112,14 +112,14 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
     oracle = QueryOracle(victim)
     mask = threat.mask(shape).reshape(-1)
     eps = np.float32(threat.eps)
-    width = None
+    width = kappa = None
     surrogate: torch.nn.Module | None = None
     inputs: list[np.ndarray] = []   # every queried point (flattened) ...
     outputs: list[np.ndarray] = []  # ... and the victim's outputs there
     states: list[np.ndarray] = []   # every visited clean observation (flattened)
     rounds = []
     for r in range(settings.rounds):
-        visited, returns, hits, steps = 0, [], 0, 0
+        returns, hits, steps = [], 0, 0
         for e in range(settings.episodes):
             obs, _ = env.reset(seed=int(seed * 1000 + r * settings.episodes + e))
             done, total = False, 0.0
@@ -165,29 +165,28 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
         for p in surrogate.parameters():
             p.requires_grad_(False)
         # discrete: win by the victim's typical gap, so that the attack survives the surrogate's error
-        margin = replace(objective, kappa=(1.0 if settings.margin is None else settings.margin) * width) if discrete \
-            else objective
+        kappa = None if width is None else (1.0 if settings.margin is None else settings.margin) * width
+        margin = objective if kappa is None else replace(objective, kappa=kappa)
         net = _AdversaryMean(policy)
         low = torch.minimum(torch.tensor(threat.low), S)
         high = torch.maximum(torch.tensor(threat.high), S)
         free_t = torch.from_numpy(free)
 
-        def adversary_loss(i: torch.Tensor) -> torch.Tensor:
-            mean = net(S[i])
-            a = mean - (mean - mean.clamp(-1.0, 1.0)).detach()  # the clip the attack applies; gradients pass
+        def fed_to_surrogate(i: torch.Tensor | slice, a: torch.Tensor) -> torch.Tensor:
+            """`apply_action` in torch (an L-inf ball: eps * a is inside it) for the states S[i]."""
             delta = torch.zeros_like(S[i])
             delta[:, free_t] = float(eps) * a
-            x_adv = torch.maximum(torch.minimum(S[i] + delta, high[i]), low[i])
-            out = surrogate(x_adv)
-            outside = torch.relu(mean.abs() - 1.0)
+            return surrogate(torch.maximum(torch.minimum(S[i] + delta, high[i]), low[i]))
+
+        def adversary_loss(i: torch.Tensor) -> torch.Tensor:
+            mean = net(S[i])
+            out = fed_to_surrogate(i, mean - (mean - mean.clamp(-1.0, 1.0)).detach())  # the attack's clip; gradients pass
+            outside = torch.relu(mean.abs() - 1.0)  # ... and a penalty keeps the mean near [-1, 1]
             return margin.loss(out[:, None], out.detach())[:, 0].mean() + (outside ** 2).sum(1).mean()
 
         fit = _fit(net, adversary_loss, len(S), settings.epochs, gen)
         with torch.no_grad():  # on the surrogate, the share of visited states the fitted adversary wins
-            a = net(S).clamp(-1.0, 1.0)
-            delta = torch.zeros_like(S)
-            delta[:, free_t] = float(eps) * a
-            out = surrogate(torch.maximum(torch.minimum(S + delta, high), low))
+            out = fed_to_surrogate(slice(None), net(S).clamp(-1.0, 1.0))
             won = float(objective.success(out[:, None], out)[:, 0].float().mean())
         for p in surrogate.parameters():
             p.requires_grad_(True)
@@ -196,7 +195,6 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                        "queries": int(oracle.total_queries), "surrogate_mse": round(mse, 4),
                        ("surrogate_agreement" if discrete else "surrogate_rmse"): round(agree, 4),
                        "adversary_loss": round(fit, 4), "surrogate_target_share": round(won, 4)})
-    kappa = None if width is None else (1.0 if settings.margin is None else settings.margin) * width
     return {"rounds": rounds, "queries": int(oracle.total_queries), "margin": kappa, "settings": settings.__dict__}
 
 
