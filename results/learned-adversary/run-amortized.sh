@@ -34,3 +34,11 @@ for a in pgd random-search; do
   $Z evaluate models/ddpg-driver --attack $a --eps 0.05 --patience 10 --episodes 30 --workers 1 --no-progress \
      --out $C/ddpg-driver-$a-eps0.05 > $C/ddpg-driver-$a-eps0.05.txt 2>&1
 done
+# a defended model: models/dqn-robust (robust distillation at eps 0.02), 100 episodes, beside its committed
+# 100-episode cells in results/robustness-100 (PGD at eps 0.02, random search at eps 0.05)
+for e in 0.02 0.05; do
+  $Z attack-train models/dqn-robust --eps $e --steps 0 --pretrain-rounds 4 --pretrain-episodes 10 --reward horizon \
+     --out $A/amortized-dqn-robust-eps$e --no-progress > $A/amortized-dqn-robust-eps$e.txt 2>&1
+  $Z evaluate models/dqn-robust --attack learned:$A/amortized-dqn-robust-eps$e --eps $e --episodes 100 --workers 1 \
+     --no-progress --out $C/dqn-robust-amortized-eps$e-100 > $C/dqn-robust-amortized-eps$e-100.txt 2>&1
+done
