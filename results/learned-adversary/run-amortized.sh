@@ -42,3 +42,15 @@ for e in 0.02 0.05; do
   $Z evaluate models/dqn-robust --attack learned:$A/amortized-dqn-robust-eps$e --eps $e --episodes 100 --workers 1 \
      --no-progress --out $C/dqn-robust-amortized-eps$e-100 > $C/dqn-robust-amortized-eps$e-100.txt 2>&1
 done
+# two more defended models at eps 0.05 (SA-DQN and the paper's Algorithm 2), 30 episodes, beside PGD and random
+# search with patience 10 on the same seeds
+for m in dqn-sa dqn-at; do
+  $Z attack-train models/$m --eps 0.05 --steps 0 --pretrain-rounds 4 --pretrain-episodes 10 --reward horizon \
+     --out $A/amortized-$m-eps0.05 --no-progress > $A/amortized-$m-eps0.05.txt 2>&1
+  $Z evaluate models/$m --attack learned:$A/amortized-$m-eps0.05 --eps 0.05 --episodes 30 --workers 1 \
+     --no-progress --out $C/$m-amortized-eps0.05 > $C/$m-amortized-eps0.05.txt 2>&1
+  for a in pgd random-search; do
+    $Z evaluate models/$m --attack $a --eps 0.05 --patience 10 --episodes 30 --workers 1 --no-progress \
+       --out $C/$m-$a-eps0.05 > $C/$m-$a-eps0.05.txt 2>&1
+  done
+done
