@@ -40,3 +40,31 @@ def test_shipped_model_reproduces_its_card(name: str, tmp_path: Path) -> None:
                  "--out", str(tmp_path), "--no-progress"]) == 0
     mine = json.loads((tmp_path / "summary.json").read_text())
     assert mine["mean_return"] == pytest.approx(card["mean_return"], abs=1e-6)
+
+
+def test_the_committed_fitted_adversary_gives_its_committed_episodes(tmp_path: Path) -> None:
+    """`--attack learned:DIR` with the committed fitted adversary (results/learned-adversary, eps
+    0.05, 0 queries per step) replays the first episodes of its committed cell, number for number."""
+    adversary = ROOT / "results" / "learned-adversary" / "amortized-dqn-driver-eps0.05"
+    cell = ROOT / "results" / "learned-adversary" / "cells" / "dqn-driver-amortized-eps0.05"
+    committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
+    out = tmp_path / "cell"
+    assert main(["evaluate", str(ROOT / "models" / "dqn-driver"), "--attack", f"learned:{adversary}", "--eps", "0.05",
+                 "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    for row in map(json.loads, (out / "episodes.jsonl").read_text().splitlines()):
+        assert row["pct_of_max"] == committed[row["seed"]]["pct_of_max"] and row["queries"] == 0, row["seed"]
+
+
+def test_attack_train_with_a_fitted_start_on_highway(tmp_path: Path) -> None:
+    """The whole path on the real environment: a fitted start alone (`--steps 0`) is a usable
+    adversary folder whose training queries are counted (5 per step driven: the decision and 4
+    ball points)."""
+    short = ["--env-set", "max_episode_steps=15"]
+    adv = tmp_path / "adv"
+    assert main(["attack-train", str(ROOT / "models" / "dqn-driver"), "--eps", "0.05", "--steps", "0",
+                 "--pretrain-rounds", "2", "--pretrain-episodes", "2", "--out", str(adv), "--no-progress", *short]) == 0
+    fitted = json.loads((adv / "train.json").read_text())["pretrain"]
+    steps = sum(r["steps"] for r in fitted["rounds"])
+    assert fitted["queries"] == 5 * steps > 0 and "fitted before PPO" in (adv / "CARD.md").read_text()
+    assert main(["evaluate", str(ROOT / "models" / "dqn-driver"), "--attack", f"learned:{adv}", "--eps", "0.05",
+                 "--episodes", "2", "--out", str(tmp_path / "cell"), "--no-progress", *short]) == 0
