@@ -61,3 +61,12 @@ for e in 0.2 0.05; do
   $Z evaluate models/ddpg-driver --attack learned:$A/amortized-ddpg-driver-e30-eps$e --eps $e --episodes 30 --workers 1 \
      --no-progress --out $C/ddpg-driver-amortized-e30-eps$e > $C/ddpg-driver-amortized-e30-eps$e.txt 2>&1
 done
+# the defended DDPG (models/ddpg-robust) at eps 0.05, 30 episodes, beside PGD and random search (patience 10)
+$Z attack-train models/ddpg-robust --eps 0.05 --steps 0 --pretrain-rounds 4 --pretrain-episodes 10 --reward horizon \
+   --out $A/amortized-ddpg-robust-eps0.05 --no-progress > $A/amortized-ddpg-robust-eps0.05.txt 2>&1
+$Z evaluate models/ddpg-robust --attack learned:$A/amortized-ddpg-robust-eps0.05 --eps 0.05 --episodes 30 --workers 1 \
+   --no-progress --out $C/ddpg-robust-amortized-eps0.05 > $C/ddpg-robust-amortized-eps0.05.txt 2>&1
+for a in pgd random-search; do
+  $Z evaluate models/ddpg-robust --attack $a --eps 0.05 --patience 10 --episodes 30 --workers 1 --no-progress \
+     --out $C/ddpg-robust-$a-eps0.05 > $C/ddpg-robust-$a-eps0.05.txt 2>&1
+done
