@@ -70,3 +70,10 @@ for a in pgd random-search; do
   $Z evaluate models/ddpg-robust --attack $a --eps 0.05 --patience 10 --episodes 30 --workers 1 --no-progress \
      --out $C/ddpg-robust-$a-eps0.05 > $C/ddpg-robust-$a-eps0.05.txt 2>&1
 done
+# training seeds 1 and 2 beside seed 0 (above) for the DQN driver at eps 0.05 and 0.2, 100 episodes each
+for e in 0.05 0.2; do for s in 1 2; do
+  $Z attack-train models/dqn-driver --eps $e --steps 0 --pretrain-rounds 4 --pretrain-episodes 10 --reward horizon --seed $s \
+     --out $A/amortized-dqn-driver-eps$e-seed$s --no-progress > $A/amortized-dqn-driver-eps$e-seed$s.txt 2>&1
+  $Z evaluate models/dqn-driver --attack learned:$A/amortized-dqn-driver-eps$e-seed$s --eps $e --episodes 100 --workers 1 \
+     --no-progress --out $C/dqn-driver-amortized-eps$e-seed$s-100 > $C/dqn-driver-amortized-eps$e-seed$s-100.txt 2>&1
+done; done
