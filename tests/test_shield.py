@@ -71,7 +71,7 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box() -> None:
         safe_truth = truth_test.safe_actions(truth)
         passed = vetoed = 0
         escaped = 0
-        true_rooms = truth_test._rooms(truth)
+        true_rooms = truth_test.rooms(truth)
         for _ in range(8):
             seen = truth.copy()  # every row, the ego's too (its lateral position picks the lanes)
             seen[:, :, 1:] += rng.choice([-eps, eps], size=(len(truth), 5, 4)).astype(np.float32)
@@ -83,7 +83,7 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box() -> None:
             assert safe_truth[np.arange(len(truth)), final][~escape].all()
             # an escape: the own lane too close for IDLE in the worst case, and the target lane's
             # true room at least that worst case (never worse than staying)
-            own_worst = shield.rules._rooms(seen)["own"]
+            own_worst = shield.rules.rooms(seen)["own"]
             target = np.where(final == LANE_RIGHT, true_rooms["right"], true_rooms["left"])
             assert (own_worst[escape] < 0).all() and (target[escape] >= own_worst[escape] - 1e-3).all()  # float32 seen
             escaped += int(escape.sum())
@@ -194,7 +194,7 @@ def test_an_escape_minds_a_car_centred_in_its_target_lane_and_cut_ins_from_beyon
     beyond = _seen([[1, 98, 10, 19.6, -0.4], [1, 11.84, -10, -10.87, -0.4], [1, 37.67, -10, -7.13, -0.4],
                     [1, 60.76, -2, -5.54, -0.4], [1, 82.66, -10, -6.7, -0.4]])
     for seen in (centred, beyond):
-        assert shield.rules._rooms(seen)["own"][0] < 0         # an escape is asked for ...
+        assert shield.rules.rooms(seen)["own"][0] < 0         # an escape is asked for ...
         assert shield.rules.escapes(seen)[0] == -1             # ... and refused
         assert shield.decide(seen, np.array([LANE_LEFT]))[0] == SLOWER
     clear = beyond.copy()

@@ -58,7 +58,7 @@ def main() -> None:
         ego = env.unwrapped.vehicle
         front, _ = ego.road.neighbour_vehicles(ego, ego.lane_index)
         gap = front.position[0] - ego.position[0] if front else np.inf
-        rt, rs = shield.rules._rooms(true[None]), shield.rules._rooms(obs[None])
+        rt, rs = shield.rules.rooms(true[None]), shield.rules.rooms(obs[None])
         if t in a.show:
             np.set_printoptions(precision=2, suppress=True)
             print(f"t={t} true:\n{true * shield.rules.scale}\nseen:\n{obs * shield.rules.scale}")

@@ -640,10 +640,9 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
 
 def cmd_attack_train(args: argparse.Namespace) -> int:
     from zodrive.agents.adversary import attack_train
-
-    preset = _preset_of(args)
     from zodrive.agents.amortized import Pretrain, surrogate_fit
 
+    preset = _preset_of(args)
     given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin))
              if value is not None}
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None

@@ -24,7 +24,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from zodrive.agents.amortized import Pretrain, surrogate_fit
+from zodrive.agents.amortized import Pretrain, check, pretrain as fit_start, surrogate_fit
 from zodrive.attacks.learned import FORMAT, META_FILE, adversary_input, apply_action, free_coordinates
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
@@ -32,6 +32,7 @@ from zodrive.attacks.victim import Victim
 from zodrive.compute import one_torch_thread
 from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.rollout import to_action
 
 log = logging.getLogger(__name__)
 
@@ -107,13 +108,7 @@ class AdversaryEnv(gym.Env):
             raise ZodriveError("AdversaryEnv.step before reset")
         fed = apply_action(self.threat, self._obs[None], np.asarray(action, dtype=np.float32)[None], self.free)
         self.oracle.begin_step(1)
-        out = self.oracle(fed)
-        chosen = self.victim.actions(out)[0]
-        if self.victim.kind == "discrete":
-            chosen = int(chosen)
-        else:
-            space = self.env.action_space
-            chosen = np.clip(chosen, space.low, space.high) if isinstance(space, gym.spaces.Box) else np.clip(chosen, -1, 1)
+        chosen = to_action(self.victim, self.oracle(fed), self.env.action_space)
         obs, reward, terminated, truncated, info = self.env.step(chosen)
         info = dict(info)
         info["victim_reward"] = float(reward)
@@ -230,14 +225,9 @@ def attack_train(
     spec = AttackSpec(attack="learned", eps=float(eps))
     threat = spec.threat(context["features"], context["bounds"])
     objective = None
-    if pretrain is not None:  # the per-step target the start is fitted to (the paper's, as every attack's default)
-        from zodrive.attacks.objectives import make_objective
-
-        from zodrive.agents.amortized import check
-
-        objective = make_objective(victim.kind, spec.resolved_target(victim.kind, context.get("action_names")),
-                                   n_actions=context["n_actions"], action_names=context.get("action_names"),
-                                   action_bounds=context.get("action_bounds"))
+    if pretrain is not None:  # the per-step objective the start is fitted to: every search attack's default
+        objective = AttackSpec(eps=float(eps)).objective(victim.kind, context["n_actions"], context.get("action_names"),
+                                                         context.get("action_bounds"))
         check(pretrain, victim.kind, objective)
     file = Path(policy_ref(model))
     ppo = dict(PPO_DEFAULTS)
@@ -271,8 +261,6 @@ def attack_train(
                 policy_kwargs={"log_std_init": LOG_STD_INIT}, **ppo)
     fitted = None
     if pretrain is not None:
-        from zodrive.agents.amortized import pretrain as fit_start
-
         start = time.perf_counter()
         with_env = make_env(preset)
         fitted = fit_start(agent.policy, with_env, victim, threat, objective, inner.free, pretrain, seed)

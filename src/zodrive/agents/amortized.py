@@ -35,6 +35,7 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.rollout import to_action
 
 
 @dataclass(frozen=True)
@@ -76,10 +77,11 @@ def _mean(policy: Any, x: torch.Tensor) -> torch.Tensor:
     return policy.action_net(policy.mlp_extractor.forward_actor(features))
 
 
-def _fit(net: torch.nn.Module, loss_of, n: int, epochs: int, gen: torch.Generator, lr: float = 1e-3) -> float:
-    """Adam over shuffled mini-batches of 256 of `n` rows; `loss_of(index)` is a batch's mean loss.
-    Returns the last epoch's mean loss."""
-    opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=lr)
+def _fit(params: list[torch.nn.Parameter], loss_of, n: int, epochs: int, gen: torch.Generator,
+         lr: float = 1e-3) -> float:
+    """Adam on `params` over shuffled mini-batches of 256 of `n` rows; `loss_of(index)` is a
+    batch's mean loss. Returns the last epoch's mean loss."""
+    opt = torch.optim.Adam(params, lr=lr)
     last = float("nan")
     for _ in range(epochs):
         total, batches = 0.0, 0
@@ -135,8 +137,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 out = oracle(batch, np.zeros(len(batch), dtype=np.int64))
                 first = torch.from_numpy(np.asarray(out[:1], dtype=np.float32))
                 hits += bool(objective.success(first[:, None], first)[0, 0])
-                chosen = victim.actions(out[:1])[0]
-                chosen = int(chosen) if discrete else np.clip(chosen, env.action_space.low, env.action_space.high)
+                chosen = to_action(victim, out[:1], env.action_space)
                 inputs.append(batch.reshape(len(batch), dim))
                 outputs.append(np.asarray(out, dtype=np.float32))
                 states.append(x.reshape(1, dim))
@@ -158,16 +159,15 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 top2 = np.sort(Y.numpy(), axis=1)[:, -2:]
                 width = float(np.median(top2[:, 1] - top2[:, 0]))  # the victim's typical decision gap
         scale = Y.std().clamp(min=1e-6)
-        mse = _fit(surrogate, lambda i: (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean(), len(X), settings.epochs, gen)
+        mse = _fit(list(surrogate.parameters()), lambda i: (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean(), len(X), settings.epochs, gen)
         with torch.no_grad():  # discrete: the share of points where it picks the victim's action; continuous: RMSE
             agree = (float((surrogate(X).argmax(1) == Y.argmax(1)).float().mean()) if discrete
                      else float(((surrogate(X) - Y) ** 2).mean().sqrt()))
-        for p in surrogate.parameters():
-            p.requires_grad_(False)
+        surrogate.requires_grad_(False)  # fitting the adversary through it: no gradient for its weights
         # discrete: win by the victim's typical gap, so that the attack survives the surrogate's error
         kappa = None if width is None else (1.0 if settings.margin is None else settings.margin) * width
         margin = objective if kappa is None else replace(objective, kappa=kappa)
-        net = _AdversaryMean(policy)
+        actor = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]  # only these are fitted
         low = torch.minimum(torch.tensor(threat.low), S)
         high = torch.maximum(torch.tensor(threat.high), S)
         free_t = torch.from_numpy(free)
@@ -179,17 +179,16 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
             return surrogate(torch.maximum(torch.minimum(S[i] + delta, high[i]), low[i]))
 
         def adversary_loss(i: torch.Tensor) -> torch.Tensor:
-            mean = net(S[i])
+            mean = _mean(policy, S[i])
             out = fed_to_surrogate(i, mean - (mean - mean.clamp(-1.0, 1.0)).detach())  # the attack's clip; gradients pass
             outside = torch.relu(mean.abs() - 1.0)  # ... and a penalty keeps the mean near [-1, 1]
             return margin.loss(out[:, None], out.detach())[:, 0].mean() + (outside ** 2).sum(1).mean()
 
-        fit = _fit(net, adversary_loss, len(S), settings.epochs, gen)
+        fit = _fit(actor, adversary_loss, len(S), settings.epochs, gen)
         with torch.no_grad():  # on the surrogate, the share of visited states the fitted adversary wins
-            out = fed_to_surrogate(slice(None), net(S).clamp(-1.0, 1.0))
+            out = fed_to_surrogate(slice(None), _mean(policy, S).clamp(-1.0, 1.0))
             won = float(objective.success(out[:, None], out)[:, 0].float().mean())
-        for p in surrogate.parameters():
-            p.requires_grad_(True)
+        surrogate.requires_grad_(True)
         rounds.append({"round": r, "episodes": settings.episodes, "steps": steps,
                        "victim_return": float(np.mean(returns)), "target_share": hits / max(steps, 1),
                        "queries": int(oracle.total_queries), "surrogate_mse": round(mse, 4),
@@ -203,18 +202,3 @@ def surrogate_fit(round_: dict[str, Any]) -> str:
     if "surrogate_agreement" in round_:
         return f"surrogate takes the victim's action on {round_['surrogate_agreement']:.1%} of queried points"
     return f"surrogate action RMSE {round_['surrogate_rmse']:.3f}"
-
-
-class _AdversaryMean(torch.nn.Module):
-    """The PPO policy's mean as a module (its parameters are the policy's, trained in place)."""
-
-    def __init__(self, policy: Any) -> None:
-        super().__init__()
-        self.extractor, self.action_net = policy.mlp_extractor, policy.action_net
-        self._policy = [policy]  # not a submodule: only the actor's layers are fitted
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return _mean(self._policy[0], x)
-
-    def parameters(self, recurse: bool = True):  # type: ignore[override]
-        return iter([*self.extractor.policy_net.parameters(), *self.action_net.parameters()])

@@ -77,7 +77,7 @@ class ObservationRules:
         self.eps = float(eps)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 
-    def _rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
+    def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
         right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
         may be beside the ego there, the same as an escape counts them (`*_only`, see
@@ -137,7 +137,7 @@ class ObservationRules:
         return out
 
     def actions(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
-        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
+        r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         own, left, right, centred = r["own"], r["left"], r["right"], r["centred"]
         left_blocked, right_blocked = r["left_blocked"], r["right_blocked"]
         act = np.full(len(own), IDLE)
@@ -163,7 +163,7 @@ class ObservationRules:
         With eps > 0 every test is the pessimistic one, so an action accepted on an observation
         is accepted by the same test on every true state within eps of it. The rules' own
         choice is always accepted."""
-        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
+        r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         safe = np.zeros((len(r["own"]), 5), dtype=bool)
         safe[:, FASTER] = r["own"] > MARGIN
         safe[:, IDLE] = r["own"] >= 0
@@ -184,7 +184,7 @@ class ObservationRules:
         the own lane's worst case too, so its room is at least that (the attacker's trick of
         showing the car ahead half a lane aside does not pin the ego behind it). The side with
         more room; -1 where none qualifies or the own lane's room is >= 0."""
-        r = self._rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
+        r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         room = {}
         for side in ("left", "right"):
             ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0)

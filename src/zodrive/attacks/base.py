@@ -348,22 +348,21 @@ class Attack(abc.ABC):
                 a, m = cand.shape[:2]
                 owners = np.repeat(rows, need.sum(axis=1))
                 grad = None
-                if self.black_box and owners.size == a * m:  # every point is new: one call, no gather
+                if self.black_box and owners.size == a * m:  # every point is new (the usual case): one call
                     out = oracle(cand.reshape(-1, *shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
-                elif self.black_box:
+                else:  # a known base point is not asked again: its outputs are filled in
                     out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
                     out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
-                    if owners.size:
+                    if self.black_box and owners.size:
                         out[need] = oracle(cand[need].reshape(-1, *shape), owners)
-                else:
-                    out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
-                    out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
-                    grad = known_grad[rows].copy()
-                    ask = need[:, 0]
-                    if ask.any():
-                        o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]), rows[ask])
-                        out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
-                    known_grad[rows] = grad
+                    elif not self.black_box:
+                        grad = known_grad[rows].copy()
+                        ask = need[:, 0]
+                        if ask.any():
+                            o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]),
+                                                   rows[ask])
+                            out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
+                        known_grad[rows] = grad
                 known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
                 iterations[rows] += 1
                 l1, l2, f, ok = values(cand, out, rows)

@@ -94,6 +94,14 @@ class AttackSpec:
                                    f"({', '.join(action_names)}) do not have: pass --target none, worst or an action")
         return target
 
+    def objective(self, kind: str, n_actions: int, action_names: tuple[str, ...] | None = None,
+                  action_bounds: tuple[Any, Any] | None = None) -> Objective:
+        """The per-step objective for a victim of this kind (a learned adversary has no per-step
+        target: untargeted; its fitted start, `agents.amortized`, asks a search spec for one)."""
+        return make_objective(kind, None if self.attack == LEARNED else self.resolved_target(kind, action_names),
+                              loss=self.loss, weight=self.weight, kappa=self.kappa, tol=self.tol,
+                              n_actions=n_actions, action_names=action_names, action_bounds=action_bounds)
+
     def threat(self, features: tuple[str, ...], bounds: tuple[float, float]) -> ThreatModel:
         """The threat model on these features; the default mask freezes `presence` where the
         observation has such a feature (an unnamed observation has none to freeze)."""
@@ -156,12 +164,7 @@ class AttackSpec:
         if self.attack == LEARNED:
             attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)
-        objective = make_objective(
-            victim.kind, None if self.attack == LEARNED else self.resolved_target(victim.kind, action_names),
-            loss=self.loss, weight=self.weight,
-            kappa=self.kappa, tol=self.tol, n_actions=n_actions, action_names=action_names,
-            action_bounds=action_bounds,
-        )
+        objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
         if self.timing is not None and victim.kind != "discrete":
             raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")
         if not attack.black_box and victim.differentiable is None:

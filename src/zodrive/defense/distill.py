@@ -336,23 +336,20 @@ def labelled_rollout(env: gym.Env, teacher: Victim, student: Victim, beta: float
                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """`count` states of the mixture policy (at each step the teacher's action with
     probability `beta`, else the student's) from `env.reset(seed=seed)`, an episode that ends
-    followed by a reset with seed `seed + states so far` (as `clean_states`), and the teacher's
+    followed by a reset with seed `seed + states so far` (`states_driven`), and the teacher's
     outputs at each of them. The teacher is asked exactly once per step, while its state is the
     one it labels: a simulator-reading teacher (`baseline:idm-mobil`) reads the simulator then,
     and its own memory (target lane, decision timer) follows the episode whoever drives."""
-    from zodrive.evaluation.rollout import act, to_action
+    from zodrive.evaluation.rollout import act, states_driven, to_action
 
-    obs, _ = env.reset(seed=seed)
-    states, labels = [], []
-    for _ in range(count):
+    labels = []
+
+    def choose(obs: np.ndarray) -> Any:
         out = teacher.query(obs[None])
-        states.append(obs)
         labels.append(out[0])
-        action = to_action(teacher, out, env.action_space) if rng.random() < beta else act(student, obs, env.action_space)
-        obs, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            obs, _ = env.reset(seed=seed + len(states))
-    return np.stack(states), np.stack(labels)
+        return to_action(teacher, out, env.action_space) if rng.random() < beta else act(student, obs, env.action_space)
+
+    return states_driven(env, choose, seed, count), np.stack(labels)
 
 
 def targets(outputs: np.ndarray, kind: str) -> torch.Tensor:

@@ -99,7 +99,7 @@ class Shield:
         """Final actions (B,): `proposed` where safe, the robust rules' choice where not."""
         batch = np.asarray(batch)
         proposed = np.asarray(proposed, dtype=np.int64)
-        r = self.rules._rooms(batch)
+        r = self.rules.rooms(batch)
         ok = self.safe(batch, r)[np.arange(len(batch)), proposed]
         if ok.all():
             return proposed
@@ -112,7 +112,7 @@ class Shield:
         change out of an own lane the test rejects even for IDLE, where one is no worse than
         staying (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
         behind a slower car is no refuge); else SLOWER."""
-        r = self.rules._rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
+        r = self.rules.rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
         act = self.rules.actions(batch, r)
         ok = self.safe(batch, r)[np.arange(len(batch)), act] & (act != SLOWER)
         escape = self.rules.escapes(batch, r)
@@ -125,7 +125,7 @@ class Shield:
         row's max + 1. The argmax is the shielded decision."""
         batch = np.asarray(batch)
         scores = np.asarray(scores, dtype=np.float32)
-        r = self.rules._rooms(batch)  # every query of every attack step goes through here: computed once
+        r = self.rules.rooms(batch)  # every query of every attack step goes through here: computed once
         safe = self.safe(batch, r)
         rows = np.arange(len(scores))
         proposed = scores.argmax(axis=-1)

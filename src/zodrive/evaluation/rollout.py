@@ -60,11 +60,18 @@ def to_action(victim: Victim, out: np.ndarray, space: gym.Space | None = None) -
 def clean_states(env: gym.Env, victim: Victim, seed: int, count: int) -> np.ndarray:
     """`count` observations the victim meets driving clean from `env.reset(seed=seed)`; an
     episode that ends is followed by one reset with seed `seed + states so far`."""
+    return states_driven(env, lambda obs: act(victim, obs, env.action_space), seed, count)
+
+
+def states_driven(env: gym.Env, choose: Callable[[np.ndarray], Any], seed: int, count: int) -> np.ndarray:
+    """`count` observations met acting with `choose(observation) -> action`, called once per
+    step, from `env.reset(seed=seed)`; an episode that ends is followed by one reset with seed
+    `seed + states so far`."""
     obs, _ = env.reset(seed=seed)
     states = []
     for _ in range(count):
         states.append(obs)
-        obs, _, terminated, truncated, _ = env.step(act(victim, obs, env.action_space))
+        obs, _, terminated, truncated, _ = env.step(choose(obs))
         if terminated or truncated:
             obs, _ = env.reset(seed=seed + len(states))
     return np.stack(states)
