@@ -75,6 +75,35 @@ def test_observation_rules_drive_and_can_be_attacked_on_their_decisions() -> Non
     assert result.success[0] and victim.actions(victim.query(result.x_adv))[0] == FASTER
 
 
+def test_continuous_rules_keep_the_lane_follow_and_finish_a_change() -> None:
+    """`baseline:rules` on the continuous preset: on a free road it accelerates and steers back
+    to the lane centre; behind a close, slower car it brakes; while it moves sideways it keeps
+    heading for the next lane centre in that direction (no memory needed to finish a change);
+    and it drives the real environment without a crash or leaving the road."""
+    from zodrive.agents.rules import ContinuousRules
+
+    preset = load_preset("continuous", ["max_episode_steps=150"])
+    driver = ContinuousRules(preset)
+    free = np.zeros((1, 5, 5), np.float32)
+    free[0, 0] = [1, 1, 0.12, 1, 0]  # centred in the right lane (3) at >= 20 m/s (observed 20)
+    right_of_centre = free.copy()
+    right_of_centre[0, 0, 2] = 0.13  # 1 m right of the lane centre
+    close = free.copy()
+    close[0, 1] = [1, 0.15, 0, -0.2, 0]  # a car 15 m ahead in the own lane, 4 m/s slower
+    leaving = free.copy()
+    leaving[0, 0, 2:5] = [0.105, 1, -0.1]  # 1.5 m left of lane 3's centre, moving left at 2 m/s
+    acc, steer = driver.controls(np.concatenate([free, right_of_centre, close, leaving])).T
+    assert acc[0] > 0 and steer[0] == pytest.approx(0, abs=1e-4)  # (float32 rounding of y)
+    assert steer[1] < 0  # back towards the centre, to the left
+    assert acc[2] < 0  # brakes behind the close car
+    assert steer[3] < 0  # on to lane 2 (2.5 m further left), not back to lane 3
+    victim, env = make_policy_env("baseline:rules", preset)
+    assert victim.kind == "continuous" and victim.reads == "observation"
+    record = run_episode(env, victim, episode=0, seed=50_000, max_return=150.0)
+    assert not record.crashed and not record.offroad and record.length == 150
+    assert record.distance > 150 * 20.0 / 15  # [m] at more than 20 m/s on average
+
+
 def test_driving_metrics_of_a_constant_policy() -> None:
     preset = load_preset("discrete", SHORT)
     victim, env = make_policy_env("baseline:slower", preset)

@@ -155,7 +155,8 @@ def test_the_student_zip_is_a_ddpg_zip_with_only_its_actor_replaced(tmp_path: Pa
 
 @pytest.mark.parametrize("extra,message", [
     (["--kappa", "0"], "clones a --teacher with --dagger ROUNDS"),
-    (["--kappa", "0", "--dagger", "1", "--teacher", "baseline:rules"], "baseline:rules drives discrete presets, not a continuous one"),
+    (["--kappa", "0", "--dagger", "1", "--teacher", "baseline:robust-rules@0.05"],
+     "baseline:robust-rules@0.05 drives discrete presets, not a continuous one"),
     (["--kappa", "0", "--dagger", "1", "--teacher", "baseline:brake"], "must be an observation-reading baseline"),
     (["--kappa", "0.5", "--eps", "0.05", "--dagger", "1", "--teacher", "baseline:idm-mobil"], "use --kappa 0"),
 ])

@@ -53,8 +53,9 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
              "always [-1, 0] (full brake)", (-1.0, 0.0)),
     Baseline("accelerate", ("continuous",), "nothing", "always [1, 0.5]: the DDPG attack's target",
              "always [1, 0.5] (the attack's target)", (1.0, 0.5)),
-    Baseline("rules", ("discrete",), "observation",
-             "hand-written lane-changing rules on the observation (zodrive.agents.rules); attackable, decisions only",
+    Baseline("rules", ("discrete", "continuous"), "observation",
+             "hand-written lane-changing rules on the observation (zodrive.agents.rules; on continuous presets "
+             "with a lane-keeping controller and IDM); attackable, decisions only",
              "rules on the observation"),
     Baseline("robust-rules", ("discrete",), "observation",
              "the rules made pessimistic for an attacker of L-inf budget eps (NAME@EPS, default 0.05): they see "
@@ -110,9 +111,12 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
         raise ZodriveError(f"{name} is an [acceleration, steering] action; preset {preset['name']!r} acts on "
                            f"{', '.join(env.action_names)}")
     if baseline.reads == "observation" and (preset.get("env_id") not in RULES_ENVS or env.features != RULES_FEATURES
-                                            or env.action_names != ACTION_NAMES):
+                                            or env.action_names not in (ACTION_NAMES, CONTINUOUS_NAMES)):
+        kinds = ("its five meta-actions: presets discrete, highway, highway-fast" if baseline.kinds == ("discrete",)
+                 else "the five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
+                      "highway-fast")
         raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
-                           "issues its five meta-actions: presets discrete, highway, highway-fast")
+                           f"issues {kinds}")
     if baseline.reads == "simulator" and (preset.get("env_id") not in RULES_ENVS
                                           or (env.kind == "discrete" and env.action_names != ACTION_NAMES)
                                           or (env.kind == "continuous" and env.action_names != CONTINUOUS_NAMES)):

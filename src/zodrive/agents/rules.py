@@ -68,8 +68,6 @@ class ObservationRules:
         if env.features != ("presence", "x", "y", "vx", "vy") or not env.relative or not env.normalized:
             raise ZodriveError("baseline:rules reads the relative, normalized Kinematics observation "
                                "(features presence, x, y, vx, vy)")
-        if env.kind != "discrete":
-            raise ZodriveError("baseline:rules issues meta-actions: it drives discrete presets")
         ranges = env.feature_ranges
         self.scale = np.array([1.0, ranges["x"][1], ranges["y"][1], ranges["vx"][1], ranges["vy"][1]],
                               dtype=np.float64)
@@ -195,9 +193,93 @@ class ObservationRules:
         return np.where(found & (r["own"] < 0), pick, -1)
 
 
+# The continuous rules (`ContinuousRules`): highway-env's own lane-keeping gains
+# (ControlledVehicle: TAU_LATERAL 0.6 s, TAU_HEADING 0.2 s) and IDM's free-road law; tuned on
+# seeds 50000-50019 only (results/rules-continuous/README.md).
+KP_LATERAL = 1 / 0.6   # [1/s] lateral position error -> lateral speed command
+KP_HEADING = 1 / 0.2   # [1/s] heading error -> heading rate command
+MAX_LATERAL_SPEED = 4.0  # [m/s] the lateral speed command's bound (a lane change takes about 1.5 s)
+MOVING_VY = 0.3        # [m/s] |vy| from which the ego is taken to be changing lanes (the rules' "centred" test)
+FREE_SPEED = 30.0      # [m/s] IDM's desired speed: the top of the reward's speed range
+LEAD_WINDOW = 0.75     # [lanes] a vehicle counts as in a lane within this share of a lane width of its centre
+
+
+class ContinuousRules:
+    """`baseline:rules` on a continuous preset: [acceleration, steering] from the observation alone.
+
+    The lane is the discrete rules' choice (`ObservationRules.actions`: a change only from a
+    lane centre, to a lane free by a margin), kept without memory: while the ego moves sideways
+    (|vy| > `MOVING_VY`) its target is the next lane centre in that direction, so a change once
+    begun is finished. Steering follows highway-env's own cascade (lateral position -> lateral
+    speed -> heading -> heading rate -> steering angle through the bicycle model), reading the
+    heading off vy. Acceleration is IDM's (the same s0, T, a, b as the rules' safe gap) towards
+    the nearest vehicle ahead in the current and the target lane, the smaller of the two.
+    The ego's speed is the observed one: the observation clips it at its vx range (20 m/s here),
+    so above that the driver believes it drives at 20 m/s; on the tuning seeds that reading
+    beat assuming 25 or 30 m/s (it keeps shorter gaps and accelerates on free road)."""
+
+    def __init__(self, preset: dict[str, Any]) -> None:
+        self.rules = ObservationRules(preset)
+        action = preset.get("highway", {}).get("action", {})  # highway-env's ContinuousAction defaults below
+        self.acc_range = tuple(float(v) for v in action.get("acceleration_range", (-5.0, 5.0)))
+        self.steer_range = tuple(float(v) for v in action.get("steering_range", (-np.pi / 4, np.pi / 4)))
+
+    def controls(self, batch: np.ndarray) -> np.ndarray:
+        """(B, V, 5) observations -> (B, 2) actions in [-1, 1] (the preset's ranges mapped linearly)."""
+        batch = np.asarray(batch, dtype=np.float64)
+        x = batch * self.rules.scale
+        ego, others = x[:, 0], x[:, 1:]
+        y, vy = ego[:, 2], ego[:, 4]
+        v = np.maximum(ego[:, 3], 1.0)  # [m/s] as observed (clipped at the vx range); never divide by ~0
+        top = self.rules.lanes - 1
+        lane = np.clip(np.rint(y / LANE_WIDTH), 0, top)
+        choice = self.rules.actions(batch)
+        change = np.where(choice == LANE_LEFT, -1, np.where(choice == LANE_RIGHT, 1, 0))
+        onward = np.where(vy < 0, np.floor(y / LANE_WIDTH), np.ceil(y / LANE_WIDTH))
+        target = np.clip(np.where(np.abs(vy) > MOVING_VY, onward, lane + change), 0, top)
+
+        vy_cmd = np.clip(-KP_LATERAL * (y - target * LANE_WIDTH), -MAX_LATERAL_SPEED, MAX_LATERAL_SPEED)
+        heading_cmd = np.arcsin(np.clip(vy_cmd / v, -1, 1))
+        heading = np.arcsin(np.clip(vy / v, -1, 1))
+        slip = np.arcsin(np.clip(CAR_LENGTH / 2 / v * KP_HEADING * (heading_cmd - heading), -1, 1))
+        steering = np.arctan(2 * np.tan(slip))
+
+        acc = np.full(len(x), A_MAX * (1 - (v / FREE_SPEED) ** 4))
+        present = others[:, :, 0] > 0.5
+        dx, dvx = others[:, :, 1], others[:, :, 3]
+        their_y = y[:, None] + others[:, :, 2]
+        for lane_index in (lane, target):
+            inside = present & (dx > 0) & (np.abs(their_y - lane_index[:, None] * LANE_WIDTH) < LEAD_WINDOW * LANE_WIDTH)
+            nearest = np.where(inside, dx, np.inf).argmin(axis=1)
+            rows = np.arange(len(x))
+            has = inside[rows, nearest]
+            gap = np.maximum(dx[rows, nearest] - CAR_LENGTH, 0.1)
+            closing = -dvx[rows, nearest]
+            desired = np.maximum(S0 + v * HEADWAY + v * closing / (2 * np.sqrt(A_MAX * B_COMF)), 0.0)
+            follow = A_MAX * (1 - (v / FREE_SPEED) ** 4 - (desired / gap) ** 2)
+            acc = np.where(has, np.minimum(acc, follow), acc)
+
+        def normalized(value: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
+            low, high = bounds
+            return np.clip(2 * (value - low) / (high - low) - 1, -1, 1)
+
+        return np.stack([normalized(acc, self.acc_range), normalized(steering, self.steer_range)], axis=1)
+
+
 def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0) -> Victim:
-    """`baseline:rules` (or, with `eps`, robust-rules) as a victim: decisions only (one-hot), no
-    scores and no gradients."""
+    """`baseline:rules` (or, with `eps`, robust-rules) as a victim: decisions only (one-hot on
+    discrete presets; on continuous ones the action itself), no scores and no gradients."""
+    from zodrive.envs import action_kind
+
+    if action_kind(preset) == "continuous":
+        if eps:
+            raise ZodriveError("baseline:robust-rules drives discrete presets only")
+        driver = ContinuousRules(preset)
+
+        def controls(obs: np.ndarray) -> np.ndarray:
+            return driver.controls(np.asarray(obs).reshape(len(obs), *obs_shape)).astype(np.float32)
+
+        return Victim(query=controls, kind="continuous", obs_shape=obs_shape, reads="observation")
     rules = ObservationRules(preset, eps)
     eye = np.eye(n_actions, dtype=np.float32)
 

@@ -437,8 +437,9 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     Discrete (DQN): cross-entropy, pure student rollouts after round 0, every batch with a
     `jitter` copy labelled by the (observation-reading) teacher, and the adversarial term when
     `kappa` > 0. Continuous (DDPG/TD3 actor, re-initialized: `reinitialized`): `scaled_mse` on the tanh-squashed action, scaled
-    per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`), no jitter (a
-    simulator-reading teacher labels only the states it is driven through). Agreement (or the
+    per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`), and the `jitter`
+    copy only for an observation-reading teacher (the continuous `baseline:rules`): a
+    simulator-reading one (IDM + MOBIL) labels only the states it is driven through. Agreement (or the
     action error) is measured after each round on the aggregate (train) and on states no round
     trained on: `steps // 2` the teacher drives into and `steps // 2` the current student drives
     into, on the seeds after the training ones. Writes `out/model.zip` (a plain SB3 zip of the
@@ -473,10 +474,10 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     student = standardized(source.net if kind == "discrete" else reinitialized(source.net))
     measure = agreement if kind == "discrete" else action_error
     beta = 0.0 if kind == "discrete" else DAGGER_BETA
-    jittered = kind == "discrete" and DAGGER_JITTER > 0
+    jittered = DAGGER_JITTER > 0 and guide.reads == "observation"
 
     def label(flat: torch.Tensor) -> torch.Tensor:
-        return torch.as_tensor(guide.query(flat.numpy().reshape(len(flat), *source.obs_shape)).argmax(axis=1))
+        return targets(guide.query(flat.numpy().reshape(len(flat), *source.obs_shape)), kind)
 
     setup: dict[str, Any] = {}
 
@@ -507,7 +508,7 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
               "input": "standardized (statistics of round 0's teacher states), folded into the first layer",
               "reference": "Ross et al. 2011 (DAgger); Rusu et al. 2016; Madry et al. 2018"}
     if kind == "continuous":
-        method.update(jitter=0.0, beta=beta, class_weight_power=None, std_floor=DAGGER_STD_FLOOR,
+        method.update(jitter=DAGGER_JITTER if jittered else 0.0, beta=beta, class_weight_power=None, std_floor=DAGGER_STD_FLOOR,
                       init="the source actor's architecture, freshly initialized",
                       loss="MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2")
     write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
