@@ -18,8 +18,8 @@ import pytest
 import torch
 
 from zodrive.attacks.victim import Victim
-from zodrive.defense.distill import (action_error, dagger_rounds, fit, folded, labelled_rollout, scaled_mse,
-                                     standardized)
+from zodrive.defense.distill import (action_error, dagger_rounds, fit, folded, labelled_rollout, scaled_l1,
+                                     scaled_mse, standardized)
 
 ROOT = Path(__file__).resolve().parents[1]
 DDPG = str(ROOT / "models" / "ddpg-driver")
@@ -128,6 +128,31 @@ def test_the_scaled_loss_trades_the_large_dimension_for_the_small_one() -> None:
     scaled = relative_error(scaled_mse(y.std(dim=0)))
     assert scaled[1] < 0.75 * plain[1] and scaled[0] > plain[0]
     assert scaled[1] / scaled[0] < 0.5 * plain[1] / plain[0]
+
+
+def test_the_absolute_loss_keeps_the_lane_where_a_decision_is_a_minority() -> None:
+    """States that look alike, on 20 % of which the teacher starts a lane change (steering 1)
+    and on the rest keeps its lane (0): the scaled MSE learns the mean (0.2, a drift), the
+    scaled absolute error the median (0: keep the lane); where the change is the majority
+    (80 %) the absolute error changes lanes."""
+    gen = torch.Generator().manual_seed(0)
+    x = torch.randn(2000, 25, generator=gen) * 0.01
+    x[1000:, 0] += 1.0  # two groups of states
+    change = torch.rand(2000, generator=gen) < torch.where(x[:, 0] > 0.5, 0.8, 0.2)
+    y = torch.stack([torch.zeros(2000), change.float()], dim=1)
+
+    def fitted(criterion: Any) -> torch.Tensor:
+        torch.manual_seed(1)
+        net = torch.nn.Sequential(torch.nn.Linear(25, 64), torch.nn.ReLU(), torch.nn.Linear(64, 2), torch.nn.Tanh())
+        fit(net, x, y, epochs=60, lr=3e-3, batch=128, weight=None, gen=torch.Generator().manual_seed(2),
+            criterion=criterion)
+        with torch.no_grad():
+            return net(torch.stack([x[:1000].mean(dim=0), x[1000:].mean(dim=0)]))[:, 1]
+
+    scale = torch.tensor([1.0, 1.0])
+    mean, median = fitted(scaled_mse(scale)), fitted(scaled_l1(scale))
+    assert abs(float(mean[0]) - 0.2) < 0.07 and abs(float(median[0])) < 0.05
+    assert float(median[1]) > 0.9
 
 
 def test_the_student_zip_is_a_ddpg_zip_with_only_its_actor_replaced(tmp_path: Path) -> None:

@@ -199,7 +199,8 @@ class ObservationRules:
 KP_LATERAL = 1 / 0.6   # [1/s] lateral position error -> lateral speed command
 KP_HEADING = 1 / 0.2   # [1/s] heading error -> heading rate command
 MAX_LATERAL_SPEED = 4.0  # [m/s] the lateral speed command's bound (a lane change takes about 1.5 s)
-MOVING_VY = 0.3        # [m/s] |vy| from which the ego is taken to be changing lanes (the rules' "centred" test)
+MOVING_VY = 1.0        # [m/s] |vy| from which the ego is taken to be changing lanes (its own changes pass
+                       # it within one step; a student drifting slower is steered back, not on to the next lane)
 FREE_SPEED = 30.0      # [m/s] IDM's desired speed: the top of the reward's speed range
 LEAD_WINDOW = 0.75     # [lanes] a vehicle counts as in a lane within this share of a lane width of its centre
 

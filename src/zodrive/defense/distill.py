@@ -317,6 +317,21 @@ def scaled_mse(scale: torch.Tensor) -> Criterion:
     return criterion
 
 
+def scaled_l1(scale: torch.Tensor) -> Criterion:
+    """Mean absolute error per action dimension divided by `scale`, averaged over the dimensions.
+    Why: an observation-reading teacher's lane change is a decision, and a regression of a
+    decision onto states that look alike learns its mean (half a lane change, i.e. drifting);
+    the absolute error learns its median (keep the lane unless most such states change), and
+    fits the small lane-keeping corrections five times more closely (scratch fit on 20000 of
+    the continuous rules' states: calm-state steering error 0.0057 against 0.026 with `scaled_mse`)."""
+    weight = 1.0 / scale.clamp(min=1e-3)
+
+    def criterion(out: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        return ((out - target).abs() * weight).mean()
+
+    return criterion
+
+
 def action_error(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, names: tuple[str, ...]) -> dict[str, Any]:
     """How far `net`'s continuous action is from the labels `y`, per action dimension: RMSE,
     mean absolute error and the labels' standard deviation (what a constant would score)."""
@@ -437,9 +452,10 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     Discrete (DQN): cross-entropy, pure student rollouts after round 0, every batch with a
     `jitter` copy labelled by the (observation-reading) teacher, and the adversarial term when
     `kappa` > 0. Continuous (DDPG/TD3 actor, re-initialized: `reinitialized`): `scaled_mse` on the tanh-squashed action, scaled
-    per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`), and the `jitter`
-    copy only for an observation-reading teacher (the continuous `baseline:rules`): a
-    simulator-reading one (IDM + MOBIL) labels only the states it is driven through. Agreement (or the
+    per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`); for an
+    observation-reading teacher (the continuous `baseline:rules`) the `jitter` copy and
+    `scaled_l1` instead (a simulator-reading one, IDM + MOBIL, labels only the states it is
+    driven through). Agreement (or the
     action error) is measured after each round on the aggregate (train) and on states no round
     trained on: `steps // 2` the teacher drives into and `steps // 2` the current student drives
     into, on the seeds after the training ones. Writes `out/model.zip` (a plain SB3 zip of the
@@ -486,7 +502,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
             restandardize(net, x, DAGGER_STD_FLOOR if kind == "continuous" else 0.0)
             std = x.std(dim=0) * robust["mask"].reshape(-1)  # frozen features (presence) stay as observed
             setup["augment"] = jitter(label, std, DAGGER_JITTER, low, high, gen) if jittered else None
-            setup["criterion"] = scaled_mse(y.std(dim=0)) if kind == "continuous" else None
+            loss = scaled_l1 if jittered else scaled_mse  # the median of an observation-reading teacher's decisions
+            setup["criterion"] = loss(y.std(dim=0)) if kind == "continuous" else None
         weight = class_weights(y, len(names), DAGGER_WEIGHT_POWER) if DAGGER_WEIGHT_POWER and kind == "discrete" else None
         return fit(net, x, y, epochs=epochs, lr=DAGGER_LR, batch=DAGGER_BATCH, weight=weight, gen=gen,
                    robust=robust if kind == "discrete" else None, augment=setup["augment"],
@@ -510,7 +527,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     if kind == "continuous":
         method.update(jitter=DAGGER_JITTER if jittered else 0.0, beta=beta, class_weight_power=None, std_floor=DAGGER_STD_FLOOR,
                       init="the source actor's architecture, freshly initialized",
-                      loss="MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2")
+                      loss=("absolute error on the tanh-squashed action, per dimension / round 0's label std" if jittered
+                            else "MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2"))
     write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
     _write_zip(model_file(model), folded(student), out / "model.zip", source.algo)
     wall = time.perf_counter() - start
