@@ -248,3 +248,20 @@ def test_the_labelling_teacher_replans_from_a_lane_it_was_driven_into() -> None:
 
     assert abs(steering(False, 1)) > 0.5 and abs(steering(True, 1)) < 0.05
     assert steering(True, 0) == steering(False, 0)
+
+
+def test_cloning_the_continuous_rules_jitters_their_states_and_fits_the_median(tmp_path: Path) -> None:
+    """An observation-reading continuous teacher (`baseline:rules`) gets the noisy labelled copies
+    and the absolute loss; the record says so, and the zip drives."""
+    from zodrive.agents.policies import load_victim
+    from zodrive.defense.distill import distill
+    from zodrive.envs import load_preset
+
+    preset = load_preset("continuous", ["max_episode_steps=40"])
+    out = distill(DDPG, preset, None, 80, tmp_path / "d", kappa=0.0, epochs=2, seed=7,
+                  teacher="baseline:rules", dagger=1)
+    method = json.loads((tmp_path / "d" / "train.json").read_text())["method"]
+    assert method["teacher"] == "baseline:rules" and method["jitter"] == 0.5
+    assert method["loss"].startswith("absolute error")
+    student = load_victim(str(out), preset)
+    assert student.kind == "continuous" and student.query(np.zeros((3, 5, 5), np.float32)).shape == (3, 2)

@@ -61,7 +61,9 @@ aims one lane beyond the target, i.e. two lanes from where the ego is."""
 class ObservationRules:
     """Vectorized rules: `actions(obs)` maps observations (B, V, 5) to meta-actions (B,)."""
 
-    def __init__(self, preset: dict[str, Any], eps: float = 0.0) -> None:
+    def __init__(self, preset: dict[str, Any], eps: float = 0.0, still_vy: float = 0.3) -> None:
+        """`still_vy` [m/s]: the largest |lateral speed| at which the ego counts as centred (a
+        lane change may start); the continuous rules widen it (`ContinuousRules`)."""
         from zodrive.envs import scenario
 
         env = scenario(preset)  # the observation as the environment builds it: highway-env's defaults filled in
@@ -73,6 +75,7 @@ class ObservationRules:
                               dtype=np.float64)
         self.lanes = int(env.lanes or 4)
         self.eps = float(eps)
+        self.still_vy = float(still_vy)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 
     def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
@@ -86,7 +89,7 @@ class ObservationRules:
         present = others[:, :, 0] > 0.5
         dx, dy, dvx = others[:, :, 1], others[:, :, 2], others[:, :, 3]
         lane = np.clip(np.rint(ego[:, 2] / LANE_WIDTH), 0, self.lanes - 1)
-        centred = (np.abs(ego[:, 2] - lane * LANE_WIDTH) < 0.5) & (np.abs(ego[:, 4]) < 0.3)
+        centred = (np.abs(ego[:, 2] - lane * LANE_WIDTH) < 0.5) & (np.abs(ego[:, 4]) < self.still_vy)
 
         _, sx, sy, svx, svy = self.slack
         closing = np.maximum(-dvx + svx, 0.0)
@@ -200,7 +203,8 @@ KP_LATERAL = 1 / 0.6   # [1/s] lateral position error -> lateral speed command
 KP_HEADING = 1 / 0.2   # [1/s] heading error -> heading rate command
 MAX_LATERAL_SPEED = 4.0  # [m/s] the lateral speed command's bound (a lane change takes about 1.5 s)
 MOVING_VY = 1.0        # [m/s] |vy| from which the ego is taken to be changing lanes (its own changes pass
-                       # it within one step; a student drifting slower is steered back, not on to the next lane)
+                       # it within one step); below it the ego counts as centred, so a change may start or
+                       # go on: its labels run "start" -> "go on", never "start" -> "back" -> "go on"
 FREE_SPEED = 30.0      # [m/s] IDM's desired speed: the top of the reward's speed range
 LEAD_WINDOW = 0.75     # [lanes] a vehicle counts as in a lane within this share of a lane width of its centre
 
@@ -220,7 +224,7 @@ class ContinuousRules:
     beat assuming 25 or 30 m/s (it keeps shorter gaps and accelerates on free road)."""
 
     def __init__(self, preset: dict[str, Any]) -> None:
-        self.rules = ObservationRules(preset)
+        self.rules = ObservationRules(preset, still_vy=MOVING_VY)
         action = preset.get("highway", {}).get("action", {})  # highway-env's ContinuousAction defaults below
         self.acc_range = tuple(float(v) for v in action.get("acceleration_range", (-5.0, 5.0)))
         self.steer_range = tuple(float(v) for v in action.get("steering_range", (-np.pi / 4, np.pi / 4)))
