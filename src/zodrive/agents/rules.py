@@ -254,7 +254,8 @@ class ContinuousRules:
         dx, dvx = others[:, :, 1], others[:, :, 3]
         their_y = y[:, None] + others[:, :, 2]
         for lane_index in (lane, target):
-            inside = present & (dx > 0) & (np.abs(their_y - lane_index[:, None] * LANE_WIDTH) < LEAD_WINDOW * LANE_WIDTH)
+            in_lane = np.abs(their_y - lane_index[:, None] * LANE_WIDTH) < LEAD_WINDOW * LANE_WIDTH
+            inside = present & (dx > 0) & in_lane
             nearest = np.where(inside, dx, np.inf).argmin(axis=1)
             rows = np.arange(len(x))
             has = inside[rows, nearest]
