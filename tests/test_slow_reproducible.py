@@ -1,6 +1,7 @@
 """Shipped models reproduce their committed evaluations, clean and under attack, episode for
 episode: the paper-budget DQN its card, the PPO made by plain stable-baselines3 on highway-fast-v0,
-and the DQN and DDPG of Table 1 on their first episodes (slow: real highway-env episodes; CI runs these)."""
+the DQN and DDPG of Table 1, the continuous rules and their DAgger student (`models/ddpg-imitation`) on
+their first episodes (slow: real highway-env episodes; CI runs these)."""
 
 from __future__ import annotations
 
@@ -77,3 +78,22 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
         # the committed DDPG cell differs from a rerun in the 12th digit (so does the code it was made with)
         assert record["return"] == pytest.approx(committed[record["episode"]]["return"], abs=1e-6)
         assert record["length"] == committed[record["episode"]]["length"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model,cell", [
+    ("models/ddpg-imitation", "results/imitation-continuous/eval-rules-s2000"),  # the same actor, made from runs/
+    ("baseline:rules", "results/rules-continuous/eval-rules"),
+])
+def test_the_continuous_rules_and_their_student_reproduce_their_first_episodes(tmp_path: Path, model: str,
+                                                                                 cell: str) -> None:
+    """Issue 22's continuous teacher and the shipped DAgger student drive their committed 100-episode
+    evaluations' first episodes again, number for number."""
+    committed = _records(ROOT / cell / "episodes.jsonl")
+    out = tmp_path / "eval"
+    target = str(ROOT / model) if model.startswith("models/") else model
+    assert main(["evaluate", target, "--preset", "continuous", "--episodes", "3", "--out", str(out),
+                 "--no-progress"]) == 0
+    for record, theirs in zip(_records(out / "episodes.jsonl"), committed[:3], strict=True):
+        assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
+        assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)
