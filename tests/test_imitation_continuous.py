@@ -261,7 +261,7 @@ def test_cloning_the_continuous_rules_jitters_their_states_and_fits_the_median(t
     out = distill(DDPG, preset, None, 80, tmp_path / "d", kappa=0.0, epochs=2, seed=7,
                   teacher="baseline:rules", dagger=1)
     method = json.loads((tmp_path / "d" / "train.json").read_text())["method"]
-    assert method["teacher"] == "baseline:rules" and method["jitter"] == 0.5
+    assert method["teacher"] == "baseline:rules" and method["jitter"] == 0.5 and method["ego_jitter"] == 0.2
     assert method["loss"].startswith("absolute error")
     student = load_victim(str(out), preset)
     assert student.kind == "continuous" and student.query(np.zeros((3, 5, 5), np.float32)).shape == (3, 2)

@@ -530,7 +530,7 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
               "reference": "Ross et al. 2011 (DAgger); Rusu et al. 2016; Madry et al. 2018"}
     if kind == "continuous":
         method.update(jitter=DAGGER_JITTER if jittered else 0.0, beta=beta, class_weight_power=None,
-                      std_floor=DAGGER_STD_FLOOR,
+                      std_floor=DAGGER_STD_FLOOR, **({"ego_jitter": DAGGER_EGO_JITTER} if jittered else {}),
                       init="the source actor's architecture, freshly initialized",
                       loss=("absolute error on the tanh-squashed action, per dimension / round 0's label std" if jittered
                             else "MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2"))
