@@ -159,7 +159,8 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 top2 = np.sort(Y.numpy(), axis=1)[:, -2:]
                 width = float(np.median(top2[:, 1] - top2[:, 0]))  # the victim's typical decision gap
         scale = Y.std().clamp(min=1e-6)
-        mse = _fit(list(surrogate.parameters()), lambda i: (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean(), len(X), settings.epochs, gen)
+        mse = _fit(list(surrogate.parameters()), lambda i: (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean(), len(X),
+                   settings.epochs, gen)
         with torch.no_grad():  # discrete: the share of points where it picks the victim's action; continuous: RMSE
             agree = (float((surrogate(X).argmax(1) == Y.argmax(1)).float().mean()) if discrete
                      else float(((surrogate(X) - Y) ** 2).mean().sqrt()))

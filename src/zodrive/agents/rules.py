@@ -58,6 +58,12 @@ target lane (tests/test_slow_shield.py measures it on the real env); a second LA
 aims one lane beyond the target, i.e. two lanes from where the ego is."""
 
 
+def desired_gap(speed: Any, closing: Any) -> Any:
+    """IDM's desired gap s* = s0 + v T + v dv / (2 sqrt(a b)) [m] at own speed `speed` and closing
+    speed `closing` [m/s]: the rules' safe gap and the continuous rules' following law."""
+    return S0 + speed * HEADWAY + speed * closing / (2 * np.sqrt(A_MAX * B_COMF))
+
+
 class ObservationRules:
     """Vectorized rules: `actions(obs)` maps observations (B, V, 5) to meta-actions (B,)."""
 
@@ -93,7 +99,7 @@ class ObservationRules:
 
         _, sx, sy, svx, svy = self.slack
         closing = np.maximum(-dvx + svx, 0.0)
-        safe = S0 + ASSUMED_SPEED * HEADWAY + ASSUMED_SPEED * closing / (2 * np.sqrt(A_MAX * B_COMF))
+        safe = desired_gap(ASSUMED_SPEED, closing)
         slack = dx - sx - CAR_LENGTH - safe   # per vehicle: its gap beyond the safe gap, if ahead
         rows = np.arange(len(dx))
 
@@ -196,11 +202,9 @@ class ObservationRules:
         return np.where(found & (r["own"] < 0), pick, -1)
 
 
-# The continuous rules (`ContinuousRules`): highway-env's own lane-keeping gains
-# (ControlledVehicle: TAU_LATERAL 0.6 s, TAU_HEADING 0.2 s) and IDM's free-road law; tuned on
-# seeds 50000-50019 only (results/rules-continuous/README.md).
-KP_LATERAL = 1 / 0.6   # [1/s] lateral position error -> lateral speed command
-KP_HEADING = 1 / 0.2   # [1/s] heading error -> heading rate command
+# The continuous rules (`ContinuousRules`): highway-env's own lane-keeping gains (read from its
+# ControlledVehicle) and IDM's free-road law; tuned on seeds 50000-50019 only
+# (results/rules-continuous/README.md).
 MAX_LATERAL_SPEED = 4.0  # [m/s] the lateral speed command's bound (a lane change takes about 1.5 s)
 MOVING_VY = 1.0        # [m/s] |vy| from which the ego is taken to be changing lanes (its own changes pass
                        # it within one step); below it the ego counts as centred, so a change may start or
@@ -224,7 +228,11 @@ class ContinuousRules:
     beat assuming 25 or 30 m/s (it keeps shorter gaps and accelerates on free road)."""
 
     def __init__(self, preset: dict[str, Any]) -> None:
+        from highway_env.vehicle.controller import ControlledVehicle
+
         self.rules = ObservationRules(preset, still_vy=MOVING_VY)
+        # [1/s] lateral position error -> lateral speed command; heading error -> heading rate command
+        self.kp_lateral, self.kp_heading = ControlledVehicle.KP_LATERAL, ControlledVehicle.KP_HEADING
         action = preset.get("highway", {}).get("action", {})  # highway-env's ContinuousAction defaults below
         self.acc_range = tuple(float(v) for v in action.get("acceleration_range", (-5.0, 5.0)))
         self.steer_range = tuple(float(v) for v in action.get("steering_range", (-np.pi / 4, np.pi / 4)))
@@ -243,25 +251,25 @@ class ContinuousRules:
         onward = np.where(vy < 0, np.floor(y / LANE_WIDTH), np.ceil(y / LANE_WIDTH))
         target = np.clip(np.where(np.abs(vy) > MOVING_VY, onward, lane + change), 0, top)
 
-        vy_cmd = np.clip(-KP_LATERAL * (y - target * LANE_WIDTH), -MAX_LATERAL_SPEED, MAX_LATERAL_SPEED)
+        vy_cmd = np.clip(-self.kp_lateral * (y - target * LANE_WIDTH), -MAX_LATERAL_SPEED, MAX_LATERAL_SPEED)
         heading_cmd = np.arcsin(np.clip(vy_cmd / v, -1, 1))
         heading = np.arcsin(np.clip(vy / v, -1, 1))
-        slip = np.arcsin(np.clip(CAR_LENGTH / 2 / v * KP_HEADING * (heading_cmd - heading), -1, 1))
+        slip = np.arcsin(np.clip(CAR_LENGTH / 2 / v * self.kp_heading * (heading_cmd - heading), -1, 1))
         steering = np.arctan(2 * np.tan(slip))
 
         acc = np.full(len(x), A_MAX * (1 - (v / FREE_SPEED) ** 4))
         present = others[:, :, 0] > 0.5
         dx, dvx = others[:, :, 1], others[:, :, 3]
         their_y = y[:, None] + others[:, :, 2]
+        rows = np.arange(len(x))
         for lane_index in (lane, target):
             in_lane = np.abs(their_y - lane_index[:, None] * LANE_WIDTH) < LEAD_WINDOW * LANE_WIDTH
             inside = present & (dx > 0) & in_lane
             nearest = np.where(inside, dx, np.inf).argmin(axis=1)
-            rows = np.arange(len(x))
             has = inside[rows, nearest]
             gap = np.maximum(dx[rows, nearest] - CAR_LENGTH, 0.1)
             closing = -dvx[rows, nearest]
-            desired = np.maximum(S0 + v * HEADWAY + v * closing / (2 * np.sqrt(A_MAX * B_COMF)), 0.0)
+            desired = np.maximum(desired_gap(v, closing), 0.0)
             follow = A_MAX * (1 - (v / FREE_SPEED) ** 4 - (desired / gap) ** 2)
             acc = np.where(has, np.minimum(acc, follow), acc)
 

@@ -492,7 +492,11 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     student = standardized(source.net if kind == "discrete" else reinitialized(source.net))
     measure = agreement if kind == "discrete" else action_error
     beta = 0.0 if kind == "discrete" else DAGGER_BETA
-    jittered = DAGGER_JITTER > 0 and guide.reads == "observation"
+    reads_observation = guide.reads == "observation"  # it can label any state, and its decisions are sharp
+    jittered = DAGGER_JITTER > 0 and reads_observation
+    continuous_loss = ("absolute error on the tanh-squashed action, per dimension / round 0's label std"
+                       if reads_observation else
+                       "MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2")
 
     def label(flat: torch.Tensor) -> torch.Tensor:
         return targets(guide.query(flat.numpy().reshape(len(flat), *source.obs_shape)), kind)
@@ -506,7 +510,7 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
             if kind == "continuous":  # less noise on the ego row: its offset from the lane centre, within 0.5 m,
                 std[: source.obs_shape[-1]] *= DAGGER_EGO_JITTER  # decides the steering (a lane's width drowns it)
             setup["augment"] = jitter(label, std, DAGGER_JITTER, low, high, gen) if jittered else None
-            loss = scaled_l1 if jittered else scaled_mse  # the median of an observation-reading teacher's decisions
+            loss = scaled_l1 if reads_observation else scaled_mse  # the median of a teacher's decisions
             setup["criterion"] = loss(y.std(dim=0)) if kind == "continuous" else None
         weight = class_weights(y, len(names), DAGGER_WEIGHT_POWER) if DAGGER_WEIGHT_POWER and kind == "discrete" else None
         return fit(net, x, y, epochs=epochs, lr=DAGGER_LR, batch=DAGGER_BATCH, weight=weight, gen=gen,
@@ -532,8 +536,7 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
         method.update(jitter=DAGGER_JITTER if jittered else 0.0, beta=beta, class_weight_power=None,
                       std_floor=DAGGER_STD_FLOOR, **({"ego_jitter": DAGGER_EGO_JITTER} if jittered else {}),
                       init="the source actor's architecture, freshly initialized",
-                      loss=("absolute error on the tanh-squashed action, per dimension / round 0's label std" if jittered
-                            else "MSE on the tanh-squashed action, per dimension / (round 0's label std) ** 2"))
+                      loss=continuous_loss)
     write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
     _write_zip(model_file(model), folded(student), out / "model.zip", source.algo)
     wall = time.perf_counter() - start
