@@ -23,6 +23,11 @@ their values mean nothing to a TD target. Three steps turn it into a DQN startin
    thousand TD updates of the whole network then continue the policy evaluation (next action:
    the frozen clone's argmax) with DQfD's large-margin loss on the clone's own actions, so the
    values fit better while the greedy policy stays the clone's.
+
+A cloned DDPG / TD3 actor (`models/ddpg-imitation`) keeps its outputs as they are: the actor goes
+into the actor and target actor (`init_actor_from_model`), drives into the buffer with the recipe's
+exploration noise (`collect`), and the fresh critics are fitted to its returns by critic-only TD
+updates (`evaluate_critic`) before the first actor update (then `GuidedTD3`, TD3+BC).
 """
 
 from __future__ import annotations
@@ -32,10 +37,13 @@ from typing import Any
 
 import numpy as np
 import torch as th
+from torch.nn import functional as F
 
 from zodrive.errors import ZodriveError
 
 Q_PREFIX = "q_net.q_net."  # SB3 DQN: the online Q-network's MLP in policy.pth
+ACTOR_PREFIX = "actor.mu."  # SB3 DDPG / TD3: the actor's MLP in policy.pth
+EVALUATION_TAU = 0.05  # Polyak rate of the target critics during `evaluate_critic`
 
 
 def init_from_model(model: Any, path: str | Path) -> dict[str, Any]:
@@ -50,44 +58,105 @@ def init_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     theirs = {k[len("q_net."):]: v for k, v in weights.items() if k.startswith(Q_PREFIX)}
     if not theirs:
         raise ZodriveError(f"init model {file} is not a DQN (no Q-network weights); init needs a DQN zip")
-    ours = model.q_net.state_dict()
+    _load_matching(model.q_net, theirs, file)
+    model.q_net_target.load_state_dict(model.q_net.state_dict())
+    return {"model": str(file), "sha256": sha256(file)}
+
+
+def init_actor_from_model(model: Any, path: str | Path) -> dict[str, Any]:
+    """Copy the actor of the DDPG / TD3 zip at `path` (file or model folder) into `model`'s actor
+    and target actor; the critics stay freshly initialized (`evaluate_critic` fits them). Read
+    without unpickling; a missing, non-DDPG/TD3 or differently shaped model is a one-line error."""
+    from zodrive.agents.loading import model_file
+    from zodrive.agents.safe_load import read_plain, sha256
+
+    file = model_file(path)
+    _, weights = read_plain(file)
+    theirs = {k[len("actor."):]: v for k, v in weights.items() if k.startswith(ACTOR_PREFIX)}
+    if not theirs:
+        raise ZodriveError(f"init model {file} is not a DDPG or TD3 (no actor weights); init needs one")
+    _load_matching(model.actor, theirs, file)
+    model.actor_target.load_state_dict(model.actor.state_dict())
+    return {"model": str(file), "sha256": sha256(file), "part": "actor"}
+
+
+def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> None:
+    ours = network.state_dict()
     if set(theirs) != set(ours):
         raise ZodriveError(f"init model {file} has layers {sorted(theirs)}; the recipe's network has {sorted(ours)}")
     for key, value in ours.items():
         if tuple(theirs[key].shape) != tuple(value.shape):
             raise ZodriveError(f"init model {file}: {key} has shape {tuple(theirs[key].shape)}, the recipe's "
                                f"network {tuple(value.shape)} (policy_kwargs.net_arch and the preset must match)")
-    state = {k: v.to(dtype=ours[k].dtype) for k, v in theirs.items()}
-    model.q_net.load_state_dict(state)
-    model.q_net_target.load_state_dict(state)
-    return {"model": str(file), "sha256": sha256(file)}
+    network.load_state_dict({k: v.to(dtype=ours[k].dtype) for k, v in theirs.items()})
 
 
-def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float) -> dict[str, Any]:
-    """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the model's greedy
-    action, a uniform random one with probability `epsilon` (numpy generator seeded by `seed`),
-    and add every transition to the model's replay buffer. Returns counts and the mean return."""
+def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float = 0.0) -> dict[str, Any]:
+    """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the model's own
+    action and add every transition to its replay buffer. A DQN acts greedily, a uniform random
+    action with probability `epsilon` (numpy generator seeded by `seed`); a DDPG / TD3 takes its
+    deterministic action plus its recipe's exploration noise (`model.action_noise`), clipped to
+    [-1, 1] (the noise is drawn from numpy's global generator, which SB3 seeds with the run's seed).
+    Returns counts and the mean return."""
     rng = np.random.default_rng(seed)
-    n_actions = int(model.action_space.n)
+    discrete = hasattr(model.action_space, "n")
     returns, random_actions = [], 0
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
         total, done = 0.0, False
         while not done:
-            if rng.random() < epsilon:
-                action, random_actions = int(rng.integers(n_actions)), random_actions + 1
+            if not discrete:
+                with th.no_grad():
+                    action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
+                if model.action_noise is not None:
+                    action = np.clip(action + model.action_noise(), -1.0, 1.0)
+                stored = action[None]  # the actor's [-1, 1] space is the preset's (checked by the recipe)
+            elif rng.random() < epsilon:
+                action, random_actions = int(rng.integers(model.action_space.n)), random_actions + 1
+                stored = np.array([[action]])
             else:
                 with th.no_grad():
                     action = int(model.q_net(th.as_tensor(obs[None], dtype=th.float32)).argmax(dim=1)[0])
+                stored = np.array([[action]])
             next_obs, reward, terminated, truncated, _ = env.step(action)
             done = terminated or truncated
-            model.replay_buffer.add(obs[None], next_obs[None], np.array([[action]]), np.array([reward]),
+            model.replay_buffer.add(obs[None], next_obs[None], stored, np.array([reward]),
                                     np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
             obs, total = next_obs, total + float(reward)
         returns.append(total)
-    return {"episodes": episodes, "seeds_from": seed, "epsilon": epsilon,
-            "transitions": int(model.replay_buffer.size()), "random_actions": random_actions,
-            "mean_return": round(float(np.mean(returns)), 3)}
+    return {"episodes": episodes, "seeds_from": seed,
+            **({"epsilon": epsilon, "random_actions": random_actions} if discrete else {}),
+            "transitions": int(model.replay_buffer.size()), "mean_return": round(float(np.mean(returns)), 3)}
+
+
+def evaluate_critic(model: Any, steps: int, batch_size: int) -> dict[str, Any]:
+    """`steps` critic-only TD3 / DDPG updates on the replay buffer (`GuidedTD3.train_actor` off, so
+    the targets use the frozen actor's next actions): policy evaluation of the initial driver, so
+    that the first actor updates follow a critic of *its* returns, not a random one. Returns the
+    one-step TD loss on a fixed sample of the buffer before and after, and the critic's mean value.
+    The target critics follow at `EVALUATION_TAU` (at TD3's 0.005 they would lag the values over
+    some 400 updates each, and values of a 100-step horizon need many such lags to build up)."""
+    data = model.replay_buffer.sample(min(4096, int(model.replay_buffer.size())))
+
+    def td_loss() -> float:
+        with th.no_grad():
+            discounts = data.discounts if data.discounts is not None else model.gamma
+            next_q = th.cat(model.critic_target(data.next_observations, model.actor_target(data.next_observations)),
+                            dim=1).min(dim=1, keepdim=True)[0]
+            target = data.rewards + (1 - data.dones) * discounts * next_q
+            return float(F.mse_loss(model.critic.q1_forward(data.observations, data.actions), target))
+
+    before = td_loss()
+    model.train_actor, tau = False, model.tau
+    model.tau = max(tau, EVALUATION_TAU)
+    try:
+        model.train(steps, batch_size)
+    finally:
+        model.train_actor, model.tau = True, tau
+    with th.no_grad():
+        value = model.critic.q1_forward(data.observations, model.actor(data.observations))
+    return {"td_steps": steps, "td_loss_before": round(before, 4), "td_loss_after": round(td_loss(), 4),
+            "mean_q": round(float(value.mean()), 4), "mean_reward": round(float(data.rewards.mean()), 4)}
 
 
 def _hidden_and_logits(q_net: Any, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
@@ -171,8 +240,6 @@ def evaluate_td(model: Any, steps: int, batch_size: int, margin: float = 0.8, we
     one every `sync_every` updates and at the end. Uses the model's optimizer, learning rate and
     gradient clipping. Returns the losses and the greedy agreement with pi on the buffer's states."""
     import copy
-
-    from torch.nn import functional as F
 
     frozen = copy.deepcopy(model.q_net).requires_grad_(False)
     model.policy.set_training_mode(True)

@@ -35,6 +35,8 @@ RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "
 GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
 DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
 CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
+CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
+GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation"}  # DDPG / TD3: TD3+BC's imitation term only
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -46,11 +48,10 @@ def algorithm_class(recipe: dict[str, Any]):
 
         return DoubleDQN
     if recipe.get("guide"):
-        if recipe["algo"] != "dqn":
-            raise ZodriveError("guide applies to dqn recipes only")
+        from zodrive.agents.actor_critic_variants import GuidedDDPG, GuidedTD3
         from zodrive.agents.dqn_variants import GuidedDQN
 
-        return GuidedDQN
+        return {"dqn": GuidedDQN, "ddpg": GuidedDDPG, "td3": GuidedTD3}[recipe["algo"]]
     return ALGOS[recipe["algo"]]
 
 
@@ -75,34 +76,44 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
 
 
 def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
-    """Check a recipe's `init: MODEL` and `calibrate: {episodes, epsilon, ridge, min_scale}`
-    (start a DQN from a cloned network, then evaluate its policy; `finetune`); returns the
-    calibration settings with defaults, or None. Options that would be ignored are errors."""
+    """Check a recipe's `init: MODEL` and `calibrate:` (start from a cloned network, then evaluate
+    its policy; `finetune`): for a DQN `{episodes, epsilon, ridge, min_scale, td_steps}`, for a DDPG /
+    TD3 `{episodes, td_steps}` (critic-only updates). Returns the calibration settings with
+    defaults, or None. Options that would be ignored are errors."""
     init, spec = recipe.get("init"), recipe.get("calibrate")
     if init is None:
         if spec is not None:
             raise ZodriveError(f"{context}: calibrate needs init: MODEL (it calibrates the values of an initial network)")
         return None
-    if recipe["algo"] != "dqn" or recipe.get("double_q"):
-        raise ZodriveError(f"{context}: init applies to dqn recipes without double_q only")
+    if recipe.get("double_q"):
+        raise ZodriveError(f"{context}: init applies to recipes without double_q only")
     if not isinstance(init, str) or not init:
-        raise ZodriveError(f"{context}: init must be a model path (a DQN zip or model folder), not {init!r}")
+        raise ZodriveError(f"{context}: init must be a model path (a zip or model folder), not {init!r}")
+    if recipe["algo"] in ACTOR_CRITIC:
+        return _check_calibrate(spec, CALIBRATE_KEYS_ACTOR_CRITIC, context)
     guide = recipe.get("guide") or {}
     if isinstance(guide, dict) and (guide.get("demonstrations") or guide.get("pretrain_steps")):
         raise ZodriveError(f"{context}: init with guide demonstrations/pretrain_steps is not supported "
                            "(the calibration replaces DQfD's pre-training)")
+    settings = _check_calibrate(spec, CALIBRATE_KEYS, context)
+    if settings is not None and not (0 <= settings["epsilon"] <= 1 and settings["ridge"] > 0
+                                     and settings["min_scale"] > 0):
+        raise ZodriveError(f"{context}: calibrate needs epsilon in [0, 1], ridge > 0 and min_scale > 0")
+    return settings
+
+
+def _check_calibrate(spec: Any, defaults: dict[str, float], context: str) -> dict[str, float] | None:
+    """`calibrate:` with `defaults` filled in: known keys, numbers, integer episodes >= 1 and td_steps >= 0."""
     if spec is None:
         return None
-    if not isinstance(spec, dict) or set(spec) - set(CALIBRATE_KEYS):
-        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(CALIBRATE_KEYS)}}}, not {spec!r}")
-    settings = {**CALIBRATE_KEYS, **spec}
+    if not isinstance(spec, dict) or set(spec) - set(defaults):
+        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(defaults)}}}, not {spec!r}")
+    settings = {**defaults, **spec}
     if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in settings.values()):
         raise ZodriveError(f"{context}: calibrate values must be numbers, not {spec!r}")
-    if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1 and 0 <= settings["epsilon"] <= 1
-            and settings["ridge"] > 0 and settings["min_scale"] > 0
+    if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1
             and isinstance(settings["td_steps"], int) and settings["td_steps"] >= 0):
-        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 (integer), epsilon in [0, 1], ridge > 0, "
-                           "min_scale > 0 and td_steps >= 0 (integer)")
+        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 and td_steps >= 0 (integers)")
     return settings
 
 
@@ -113,14 +124,21 @@ def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any],
         return None
     from zodrive.agents import finetune
 
-    done: dict[str, Any] = {"init": finetune.init_from_model(model, recipe["init"])}
+    actor_critic = recipe["algo"] in ACTOR_CRITIC
+    init = finetune.init_actor_from_model if actor_critic else finetune.init_from_model
+    done: dict[str, Any] = {"init": init(model, recipe["init"])}
     settings = check_init(recipe, "recipe")
     if settings is not None:
         start = time.perf_counter()
         env = make_env(preset)
         done["collect"] = finetune.collect(model, env, int(settings["episodes"]), DEMO_SEEDS + 1000 * seed,
-                                           float(settings["epsilon"]))
+                                           float(settings.get("epsilon", 0.0)))
         env.close()
+        if actor_critic:
+            done["evaluate_critic"] = finetune.evaluate_critic(model, int(settings["td_steps"]), int(model.batch_size))
+            done["wall_time_s"] = round(time.perf_counter() - start, 1)
+            log.info("critic of %s evaluated: %s", recipe["init"], done["evaluate_critic"])
+            return done
         done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
         if settings["td_steps"]:
             margin = float((recipe.get("guide") or {}).get("margin", 0.8))
@@ -131,8 +149,20 @@ def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any],
 
 
 def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
-    """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F}`."""
+    """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F, ...}`,
+    a GuidedTD3 / GuidedDDPG from `guide: {name: rules, imitation: W}` (TD3+BC's term)."""
     spec = recipe["guide"]
+    if recipe["algo"] in ACTOR_CRITIC:
+        if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
+            raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES)}, "
+                               f"imitation: W}} (guided exploration and DQfD's options are for dqn), not {spec!r}")
+        weight = spec.get("imitation", 0.4)
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
+            raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
+        from zodrive.agents.rules import ContinuousRules
+
+        model.configure_guide(ContinuousRules(preset).controls, float(weight))
+        return
     keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
     if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
         raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
