@@ -111,8 +111,7 @@ def test_collect_drives_the_greedy_policy_into_the_buffer() -> None:
 
 @pytest.mark.parametrize(("recipe", "message"), [
     ({"algo": "dqn", "calibrate": {}}, "calibrate needs init"),
-    ({"algo": "ddpg", "init": "models/x"}, "dqn recipes"),
-    ({"algo": "dqn", "double_q": True, "init": "models/x"}, "dqn recipes"),
+    ({"algo": "dqn", "double_q": True, "init": "models/x"}, "without double_q"),
     ({"algo": "dqn", "init": 3}, "model path"),
     ({"algo": "dqn", "init": "m", "calibrate": {"episode": 3}}, "calibrate must be"),
     ({"algo": "dqn", "init": "m", "calibrate": {"epsilon": 2.0}}, "epsilon in"),
