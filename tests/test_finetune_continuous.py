@@ -79,12 +79,12 @@ def test_critic_evaluation_finds_the_value_of_a_constant_reward_and_leaves_the_a
     assert model.train_actor and model.tau == 0.005  # restored for RL
 
 
-@pytest.mark.parametrize("cls", [GuidedTD3, GuidedDDPG])
-def test_the_imitation_term_pulls_the_actor_to_the_guide(cls: type) -> None:
+@pytest.mark.parametrize(("cls", "error"), [(GuidedTD3, "squared"), (GuidedDDPG, "squared"), (GuidedTD3, "absolute")])
+def test_the_imitation_term_pulls_the_actor_to_the_guide(cls: type, error: str) -> None:
     """With a large imitation weight, a few hundred updates bring the actor to a guide's constant action."""
     model = _td3(0, [32, 32], cls=cls, batch_size=64, learning_rate=3e-3)
     target = np.array([0.5, -0.3], dtype=np.float32)
-    model.configure_guide(lambda batch: np.tile(target, (len(batch), 1)), imitation=100.0)
+    model.configure_guide(lambda batch: np.tile(target, (len(batch), 1)), imitation=100.0, error=error)
     rng = np.random.default_rng(0)
     obs = rng.uniform(-1, 1, (301, 5, 5)).astype(np.float32)
     for i in range(300):
@@ -117,7 +117,7 @@ def test_actor_critic_init_options_with_defaults() -> None:
 
 @pytest.mark.parametrize("guide", [{"name": "rules", "start": 0.5}, {"name": "rules", "margin": 0.8},
                                    {"name": "idm", "imitation": 0.4}, {"name": "rules", "imitation": -1},
-                                   {"name": "rules", "imitation": "0.4"}])
+                                   {"name": "rules", "imitation": "0.4"}, {"name": "rules", "error": "huber"}])
 def test_a_guide_option_an_actor_critic_would_ignore_is_an_error(guide: dict, tmp_path: Path) -> None:
     from zodrive.agents.training import load_recipe, train
 

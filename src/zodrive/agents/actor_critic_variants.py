@@ -7,7 +7,10 @@ NeurIPS 2021) used online: the actor maximizes
 
 with a_G(s) the guide's action (`baseline:rules` on the continuous preset, which reads the same
 observation) on every sampled state. The Q term is normalized as in TD3+BC so that `imitation` means
-the same whatever the return scale (TD3+BC's alpha = 2.5 is `imitation` = 0.4). The guide's term
+the same whatever the return scale (TD3+BC's alpha = 2.5 is `imitation` = 0.4). With `error`
+"absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, the loss the continuous clone was
+fitted with (DAgger: a lane-change decision's median, not the mean drift a squared error learns
+where the rules switch between lanes). The guide's term
 keeps the driver where the critic does not show it something better, the way DQfD's margin loss does
 for the DQN (`dqn_variants.GuidedDQN`). With `train_actor` False, `train` updates the critics only
 (target actions from the frozen actor): policy evaluation of the initial driver before RL starts.
@@ -26,14 +29,19 @@ from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
+IMITATION_ERRORS = ("squared", "absolute")
+
 
 class GuidedTD3(TD3):
     guide: Any = None        # (B, ...) observations -> (B, action dims) actions in [-1, 1]
-    imitation: float = 0.0   # weight of the guide's squared error in the actor's loss
+    imitation: float = 0.0   # weight of the guide's error in the actor's loss
+    error: str = "squared"   # squared (TD3+BC) | absolute
     train_actor: bool = True  # False: critic-only updates (policy evaluation of the frozen actor)
 
-    def configure_guide(self, guide: Any, imitation: float) -> None:
-        self.guide, self.imitation = guide, float(imitation)
+    def configure_guide(self, guide: Any, imitation: float, error: str = "squared") -> None:
+        if error not in IMITATION_ERRORS:
+            raise ValueError(f"error must be one of {IMITATION_ERRORS}, not {error!r}")
+        self.guide, self.imitation, self.error = guide, float(imitation), error
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "guide"]
@@ -46,7 +54,7 @@ class GuidedTD3(TD3):
         if self.guide is None or self.imitation <= 0:
             return loss, None
         labels = th.as_tensor(np.asarray(self.guide(observations.detach().cpu().numpy())), dtype=actions.dtype)
-        bc = F.mse_loss(actions, labels)
+        bc = F.mse_loss(actions, labels) if self.error == "squared" else F.l1_loss(actions, labels)
         return loss + self.imitation * bc, bc.item()
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:

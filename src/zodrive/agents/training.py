@@ -36,7 +36,7 @@ GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide
 DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
 CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
 CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
-GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation"}  # DDPG / TD3: TD3+BC's imitation term only
+GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation", "error"}  # DDPG / TD3: TD3+BC's imitation term only
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -155,13 +155,18 @@ def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any])
     if recipe["algo"] in ACTOR_CRITIC:
         if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
             raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES)}, "
-                               f"imitation: W}} (guided exploration and DQfD's options are for dqn), not {spec!r}")
-        weight = spec.get("imitation", 0.4)
+                               f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), "
+                               f"not {spec!r}")
+        from zodrive.agents.actor_critic_variants import IMITATION_ERRORS
+
+        weight, error = spec.get("imitation", 0.4), spec.get("error", "squared")
         if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
             raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
+        if error not in IMITATION_ERRORS:
+            raise ZodriveError(f"recipe guide: error must be one of {', '.join(IMITATION_ERRORS)}, not {error!r}")
         from zodrive.agents.rules import ContinuousRules
 
-        model.configure_guide(ContinuousRules(preset).controls, float(weight))
+        model.configure_guide(ContinuousRules(preset).controls, float(weight), error)
         return
     keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
     if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
