@@ -125,3 +125,27 @@ def test_a_guide_option_an_actor_critic_would_ignore_is_an_error(guide: dict, tm
     with pytest.raises(ZodriveError, match="guide") as info:
         train(recipe, tmp_path / "run", progress_bar=False)
     assert "\n" not in str(info.value)
+
+
+def test_the_init_guide_is_the_init_model_s_actor_frozen(tmp_path: Path) -> None:
+    from zodrive.agents.finetune import frozen_actor
+
+    clone = _td3(1, [16, 16])
+    clone.save(tmp_path / "clone.zip")
+    model = _td3(2, [16, 16])
+    guide = frozen_actor(model, tmp_path / "clone.zip")
+    obs = np.random.default_rng(0).uniform(-1, 1, (7, 5, 5)).astype(np.float32)
+    with th.no_grad():
+        np.testing.assert_array_equal(guide(obs), clone.actor(th.as_tensor(obs)).numpy())
+    model.actor.mu[0].weight.data.add_(1.0)  # the learner moves; the guide does not
+    with th.no_grad():
+        np.testing.assert_array_equal(guide(obs), clone.actor(th.as_tensor(obs)).numpy())
+
+
+def test_the_init_guide_needs_an_init_model(tmp_path: Path) -> None:
+    from zodrive.agents.training import load_recipe, train
+
+    recipe = {**load_recipe("td3"), "guide": {"name": "init"}, "total_timesteps": 10}
+    with pytest.raises(ZodriveError, match="needs init") as info:
+        train(recipe, tmp_path / "run", progress_bar=False)
+    assert "\n" not in str(info.value) and not (tmp_path / "run").exists()  # no half-made run folder

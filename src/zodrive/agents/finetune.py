@@ -80,6 +80,27 @@ def init_actor_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     return {"model": str(file), "sha256": sha256(file), "part": "actor"}
 
 
+def frozen_actor(model: Any, path: str | Path) -> Any:
+    """The actor of the DDPG / TD3 zip at `path` as a frozen function (B, ...) observations -> (B, dims)
+    actions: a copy of `model`'s actor with those weights (read without unpickling). A guide that keeps
+    the learner near the policy it started from (a behaviour-regularized objective), the same on resume."""
+    import copy
+
+    from zodrive.agents.loading import model_file
+    from zodrive.agents.safe_load import read_plain
+
+    file = model_file(path)
+    _, weights = read_plain(file)
+    actor = copy.deepcopy(model.actor).requires_grad_(False)
+    _load_matching(actor, {k[len("actor."):]: v for k, v in weights.items() if k.startswith(ACTOR_PREFIX)}, file)
+
+    def act(observations: np.ndarray) -> np.ndarray:
+        with th.no_grad():
+            return actor(th.as_tensor(observations, dtype=th.float32)).numpy()
+
+    return act
+
+
 def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> None:
     ours = network.state_dict()
     if set(theirs) != set(ours):

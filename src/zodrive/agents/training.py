@@ -37,6 +37,7 @@ DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000
 CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
 CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
 GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation", "error"}  # DDPG / TD3: TD3+BC's imitation term only
+GUIDES_ACTOR_CRITIC = ("rules", "init")  # the continuous rules, or the recipe's init actor kept frozen
 
 
 def algorithm_class(recipe: dict[str, Any]):
@@ -153,8 +154,8 @@ def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any])
     a GuidedTD3 / GuidedDDPG from `guide: {name: rules, imitation: W}` (TD3+BC's term)."""
     spec = recipe["guide"]
     if recipe["algo"] in ACTOR_CRITIC:
-        if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
-            raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES)}, "
+        if not isinstance(spec, dict) or spec.get("name") not in GUIDES_ACTOR_CRITIC or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
+            raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES_ACTOR_CRITIC)}, "
                                f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), "
                                f"not {spec!r}")
         from zodrive.agents.actor_critic_variants import IMITATION_ERRORS
@@ -164,9 +165,17 @@ def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any])
             raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
         if error not in IMITATION_ERRORS:
             raise ZodriveError(f"recipe guide: error must be one of {', '.join(IMITATION_ERRORS)}, not {error!r}")
-        from zodrive.agents.rules import ContinuousRules
+        if spec["name"] == "init":
+            if recipe.get("init") is None:
+                raise ZodriveError("recipe guide: name init needs init: MODEL (the actor it keeps the learner near)")
+            from zodrive.agents.finetune import frozen_actor
 
-        model.configure_guide(ContinuousRules(preset).controls, float(weight), error)
+            guide = frozen_actor(model, recipe["init"])
+        else:
+            from zodrive.agents.rules import ContinuousRules
+
+            guide = ContinuousRules(preset).controls
+        model.configure_guide(guide, float(weight), error)
         return
     keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
     if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
@@ -295,9 +304,13 @@ def train(
     try:
         return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
                       tensorboard=tensorboard)
-    except (TypeError, ValueError, AssertionError) as exc:  # SB3 rejects a hyperparameter
+    except ZodriveError:  # a recipe option found wrong once the model exists (guide, init)
         if fresh:
             shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
+        raise
+    except (TypeError, ValueError, AssertionError) as exc:  # SB3 rejects a hyperparameter
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)
         raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
 
 
