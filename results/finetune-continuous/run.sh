@@ -3,8 +3,10 @@
 # Usage (from the repository root): results/finetune-continuous/run.sh SEED NAME [--set KEY=VALUE ...]
 # Train into runs/td3-finetune/NAME-sSEED, choose a checkpoint on 20 tuning episodes (seeds
 # 50000-50019, the start included), evaluate the choice on 100 evaluation episodes (100000-100099).
-# The recipe as committed is NAME "abs"; "squared" was run with
-#   --set guide.error=squared --set guide.imitation=0.4
+# The recipe as committed is NAME "init1" (seeds 1000 and 2000 were trained with --steps 20000
+# --set guide.name=init --set guide.error=squared --set guide.imitation=1.0 on an earlier version of
+# the recipe, which this one equals). "squared" (TD3+BC towards the rules) was the recipe before it:
+#   --steps 40000 --set guide.name=rules --set guide.error=squared --set guide.imitation=0.4
 set -euo pipefail
 seed=$1; name=$2; shift 2
 run=runs/td3-finetune/$name-s$seed
