@@ -1,7 +1,7 @@
 """Shipped models reproduce their committed evaluations, clean and under attack, episode for
 episode: the paper-budget DQN its card, the PPO made by plain stable-baselines3 on highway-fast-v0,
-the DQN and DDPG of Table 1, the continuous rules and their DAgger student (`models/ddpg-imitation`) on
-their first episodes (slow: real highway-env episodes; CI runs these)."""
+the DQN and DDPG of Table 1, the continuous rules, their DAgger student (`models/ddpg-imitation`) and
+the TD3 fine-tuned from it (`models/td3-finetuned`) on their first episodes (slow: real highway-env episodes; CI runs these)."""
 
 from __future__ import annotations
 
@@ -84,11 +84,12 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
 @pytest.mark.parametrize("model,cell", [
     ("models/ddpg-imitation", "results/imitation-continuous/eval-rules-s2000"),  # the same actor, made from runs/
     ("baseline:rules", "results/rules-continuous/eval-rules"),
+    ("models/td3-finetuned", "results/finetune-continuous/eval-init1-s1000"),  # the checkpoint it was copied from
 ])
 def test_the_continuous_rules_and_their_student_reproduce_their_first_episodes(tmp_path: Path, model: str,
                                                                                  cell: str) -> None:
-    """Issue 22's continuous teacher and the shipped DAgger student drive their committed 100-episode
-    evaluations' first episodes again, number for number."""
+    """Issue 22's continuous teacher, the shipped DAgger student and the TD3 fine-tuned from it drive
+    their committed 100-episode evaluations' first episodes again, number for number."""
     committed = _records(ROOT / cell / "episodes.jsonl")
     out = tmp_path / "eval"
     target = str(ROOT / model) if model.startswith("models/") else model
