@@ -43,6 +43,7 @@ from zodrive.errors import ZodriveError
 
 Q_PREFIX = "q_net.q_net."  # SB3 DQN: the online Q-network's MLP in policy.pth
 ACTOR_PREFIX = "actor.mu."  # SB3 DDPG / TD3: the actor's MLP in policy.pth
+ACTOR_KIND = "DDPG or TD3 (no actor weights)"
 EVALUATION_TAU = 0.05  # Polyak rate of the target critics during `evaluate_critic`
 
 
@@ -50,14 +51,9 @@ def init_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     """Copy the Q-network weights of the DQN zip at `path` (file or model folder) into `model`'s
     online and target networks. Nothing is unpickled; a missing, non-DQN or differently shaped
     model is a one-line ZodriveError. Returns the file and its SHA-256."""
-    from zodrive.agents.loading import model_file
-    from zodrive.agents.safe_load import read_plain, sha256
+    from zodrive.agents.safe_load import sha256
 
-    file = model_file(path)
-    _, weights = read_plain(file)
-    theirs = {k[len("q_net."):]: v for k, v in weights.items() if k.startswith(Q_PREFIX)}
-    if not theirs:
-        raise ZodriveError(f"init model {file} is not a DQN (no Q-network weights); init needs a DQN zip")
+    file, theirs = _read_network(path, Q_PREFIX, "q_net.", "DQN (no Q-network weights)")
     _load_matching(model.q_net, theirs, file)
     model.q_net_target.load_state_dict(model.q_net.state_dict())
     return {"model": str(file), "sha256": sha256(file)}
@@ -67,14 +63,9 @@ def init_actor_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     """Copy the actor of the DDPG / TD3 zip at `path` (file or model folder) into `model`'s actor
     and target actor; the critics stay freshly initialized (`evaluate_critic` fits them). Read
     without unpickling; a missing, non-DDPG/TD3 or differently shaped model is a one-line error."""
-    from zodrive.agents.loading import model_file
-    from zodrive.agents.safe_load import read_plain, sha256
+    from zodrive.agents.safe_load import sha256
 
-    file = model_file(path)
-    _, weights = read_plain(file)
-    theirs = {k[len("actor."):]: v for k, v in weights.items() if k.startswith(ACTOR_PREFIX)}
-    if not theirs:
-        raise ZodriveError(f"init model {file} is not a DDPG or TD3 (no actor weights); init needs one")
+    file, theirs = _read_network(path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
     _load_matching(model.actor, theirs, file)
     model.actor_target.load_state_dict(model.actor.state_dict())
     return {"model": str(file), "sha256": sha256(file), "part": "actor"}
@@ -86,19 +77,29 @@ def frozen_actor(model: Any, path: str | Path) -> Any:
     the learner near the policy it started from (a behaviour-regularized objective), the same on resume."""
     import copy
 
-    from zodrive.agents.loading import model_file
-    from zodrive.agents.safe_load import read_plain
-
-    file = model_file(path)
-    _, weights = read_plain(file)
+    file, theirs = _read_network(path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
     actor = copy.deepcopy(model.actor).requires_grad_(False)
-    _load_matching(actor, {k[len("actor."):]: v for k, v in weights.items() if k.startswith(ACTOR_PREFIX)}, file)
+    _load_matching(actor, theirs, file)
 
     def act(observations: np.ndarray) -> np.ndarray:
         with th.no_grad():
             return actor(th.as_tensor(observations, dtype=th.float32)).numpy()
 
     return act
+
+
+def _read_network(path: str | Path, prefix: str, strip: str, kind: str) -> tuple[Path, dict[str, th.Tensor]]:
+    """The weights under `prefix` in the zip at `path` (file or model folder), keys without `strip`,
+    read without unpickling; a missing file or a zip without them is a one-line ZodriveError."""
+    from zodrive.agents.loading import model_file
+    from zodrive.agents.safe_load import read_plain
+
+    file = model_file(path)
+    _, weights = read_plain(file)
+    theirs = {k[len(strip):]: v for k, v in weights.items() if k.startswith(prefix)}
+    if not theirs:
+        raise ZodriveError(f"init model {file} is not a {kind}; init needs one")
+    return file, theirs
 
 
 def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> None:
