@@ -149,34 +149,38 @@ def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any],
     return done
 
 
+def _actor_critic_guide(recipe: dict[str, Any], model: Any, preset: dict[str, Any]) -> tuple[Any, float, str]:
+    """A DDPG / TD3 recipe's `guide: {name: init|rules, imitation: W, error: squared|absolute}` as
+    (guide function, weight, error): the init model's actor kept frozen, or the continuous rules."""
+    from zodrive.agents.actor_critic_variants import IMITATION_ERRORS
+
+    spec = recipe["guide"]
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES_ACTOR_CRITIC or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
+        raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES_ACTOR_CRITIC)}, "
+                           f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), not {spec!r}")
+    weight, error = spec.get("imitation", 0.4), spec.get("error", "squared")
+    if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
+        raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
+    if error not in IMITATION_ERRORS:
+        raise ZodriveError(f"recipe guide: error must be one of {', '.join(IMITATION_ERRORS)}, not {error!r}")
+    if spec["name"] == "rules":
+        from zodrive.agents.rules import ContinuousRules
+
+        return ContinuousRules(preset).controls, float(weight), error
+    if recipe.get("init") is None:
+        raise ZodriveError("recipe guide: name init needs init: MODEL (the actor it keeps the learner near)")
+    from zodrive.agents.finetune import frozen_actor
+
+    return frozen_actor(model, recipe["init"]), float(weight), error
+
+
 def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
     """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F, ...}`,
-    a GuidedTD3 / GuidedDDPG from `guide: {name: rules, imitation: W}` (TD3+BC's term)."""
-    spec = recipe["guide"]
+    a GuidedTD3 / GuidedDDPG from `guide: {name: init|rules, imitation: W, error: E}` (TD3+BC's term)."""
     if recipe["algo"] in ACTOR_CRITIC:
-        if not isinstance(spec, dict) or spec.get("name") not in GUIDES_ACTOR_CRITIC or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
-            raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES_ACTOR_CRITIC)}, "
-                               f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), "
-                               f"not {spec!r}")
-        from zodrive.agents.actor_critic_variants import IMITATION_ERRORS
-
-        weight, error = spec.get("imitation", 0.4), spec.get("error", "squared")
-        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
-            raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
-        if error not in IMITATION_ERRORS:
-            raise ZodriveError(f"recipe guide: error must be one of {', '.join(IMITATION_ERRORS)}, not {error!r}")
-        if spec["name"] == "init":
-            if recipe.get("init") is None:
-                raise ZodriveError("recipe guide: name init needs init: MODEL (the actor it keeps the learner near)")
-            from zodrive.agents.finetune import frozen_actor
-
-            guide = frozen_actor(model, recipe["init"])
-        else:
-            from zodrive.agents.rules import ContinuousRules
-
-            guide = ContinuousRules(preset).controls
-        model.configure_guide(guide, float(weight), error)
+        model.configure_guide(*_actor_critic_guide(recipe, model, preset))
         return
+    spec = recipe["guide"]
     keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
     if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
         raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
