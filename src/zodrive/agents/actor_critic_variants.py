@@ -5,14 +5,15 @@ NeurIPS 2021) used online: the actor maximizes
 
     Q1(s, pi(s)) / mean_batch |Q1(s, pi(s))|  -  imitation * mean_dims (pi(s) - a_G(s))^2,
 
-with a_G(s) the guide's action (`baseline:rules` on the continuous preset, which reads the same
-observation) on every sampled state. The Q term is normalized as in TD3+BC so that `imitation` means
-the same whatever the return scale (TD3+BC's alpha = 2.5 is `imitation` = 0.4). With `error`
-"absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, the loss the continuous clone was
-fitted with (DAgger: a lane-change decision's median, not the mean drift a squared error learns
-where the rules switch between lanes). The guide's term
-keeps the driver where the critic does not show it something better, the way DQfD's margin loss does
-for the DQN (`dqn_variants.GuidedDQN`). With `train_actor` False, `train` updates the critics only
+with a_G(s) the guide's action on every sampled state: the actor the run started from, kept frozen
+(recipe `guide.name: init`, a behaviour-regularized objective), or `baseline:rules` on the continuous
+preset (`rules`, TD3+BC with an online teacher). The Q term is normalized as in TD3+BC so that
+`imitation` means the same whatever the return scale (TD3+BC's alpha = 2.5 is `imitation` = 0.4).
+With `error` "absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, the loss the
+continuous clone was fitted with. The guide's term keeps the driver where the critic does not show
+it something better, the way DQfD's margin loss does for the DQN (`dqn_variants.GuidedDQN`); from a
+clone of the rules, the clone is the guide that works (the rules' high-gain steering, which the
+clone smooths, undid its lane keeping: results/finetune-continuous/README.md). With `train_actor` False, `train` updates the critics only
 (target actions from the frozen actor): policy evaluation of the initial driver before RL starts.
 Critic updates, target smoothing, delayed actor updates and Polyak averaging are SB3's TD3 unchanged;
 `GuidedDDPG` is the same on SB3's DDPG (one critic, no smoothing, no delay). The saved zip is an
