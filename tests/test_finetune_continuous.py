@@ -149,3 +149,23 @@ def test_the_init_guide_needs_an_init_model(tmp_path: Path) -> None:
     with pytest.raises(ZodriveError, match="needs init") as info:
         train(recipe, tmp_path / "run", progress_bar=False)
     assert "\n" not in str(info.value) and not (tmp_path / "run").exists()  # no half-made run folder
+
+
+def test_an_actor_critic_started_from_a_clone_without_a_guide_still_evaluates_its_critic_only() -> None:
+    """`init` without `guide` on a TD3/DDPG recipe trains a GuidedTD3 (TD3's own loss without a guide),
+    so the critic-only calibration really leaves the actor alone."""
+    assert algorithm_class({"algo": "td3", "init": "m"}) is GuidedTD3
+    assert algorithm_class({"algo": "ddpg", "init": "m"}) is GuidedDDPG
+    assert algorithm_class({"algo": "td3"}) is TD3
+    model = _td3(0, [16, 16], cls=GuidedTD3, batch_size=32)
+    rng = np.random.default_rng(0)
+    obs = rng.uniform(-1, 1, (101, 5, 5)).astype(np.float32)
+    for i in range(100):
+        model.replay_buffer.add(obs[i][None], obs[i + 1][None], rng.uniform(-1, 1, (1, 2)), np.array([1.0]),
+                                np.array([False]), [{}])
+    actor = {k: v.clone() for k, v in model.actor.state_dict().items()}
+    evaluate_critic(model, 20, 32)
+    for key, value in model.actor.state_dict().items():
+        assert th.equal(value, actor[key]), key
+    model.train(20, 32)  # with the actor on, TD3's loss moves it
+    assert any(not th.equal(value, actor[key]) for key, value in model.actor.state_dict().items())

@@ -13,8 +13,10 @@ With `error` "absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, 
 continuous clone was fitted with. The guide's term keeps the driver where the critic does not show
 it something better, the way DQfD's margin loss does for the DQN (`dqn_variants.GuidedDQN`); from a
 clone of the rules, the clone is the guide that works (the rules' high-gain steering, which the
-clone smooths, undid its lane keeping: results/finetune-continuous/README.md). With `train_actor` False, `train` updates the critics only
-(target actions from the frozen actor): policy evaluation of the initial driver before RL starts.
+clone smooths, undid its lane keeping: results/finetune-continuous/README.md). With `train_actor`
+False, `train` updates the critics only (target actions from the frozen actor): policy evaluation
+of the initial driver before RL starts; a recipe with `init` therefore trains a GuidedTD3 even
+without a guide.
 Critic updates, target smoothing, delayed actor updates and Polyak averaging are SB3's TD3 unchanged;
 `GuidedDDPG` is the same on SB3's DDPG (one critic, no smoothing, no delay). The saved zip is an
 ordinary SB3 TD3 / DDPG zip; the guide is not part of the policy.
@@ -48,12 +50,13 @@ class GuidedTD3(TD3):
         return [*super()._excluded_save_params(), "guide"]
 
     def actor_loss(self, observations: th.Tensor) -> tuple[th.Tensor, float | None]:
-        """TD3+BC's actor loss; returns it and the imitation term (None without a guide)."""
+        """TD3+BC's actor loss; returns it and the imitation term (None without a guide: then TD3's own
+        loss, -Q, so that a GuidedTD3 without a guide learns as SB3's TD3)."""
         actions = self.actor(observations)
         q = self.critic.q1_forward(observations, actions)
-        loss = -q.mean() / q.abs().mean().detach().clamp_min(1e-6)
         if self.guide is None or self.imitation <= 0:
-            return loss, None
+            return -q.mean(), None
+        loss = -q.mean() / q.abs().mean().detach().clamp_min(1e-6)
         labels = th.as_tensor(np.asarray(self.guide(observations.detach().cpu().numpy())), dtype=actions.dtype)
         bc = F.mse_loss(actions, labels) if self.error == "squared" else F.l1_loss(actions, labels)
         return loss + self.imitation * bc, bc.item()

@@ -127,22 +127,19 @@ def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float = 0.0
         obs, _ = env.reset(seed=seed + episode)
         total, done = 0.0, False
         while not done:
-            if not discrete:
+            if not discrete:  # the actor's [-1, 1] space is the preset's (checked by the recipe)
                 with th.no_grad():
                     action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
                 if model.action_noise is not None:
                     action = np.clip(action + model.action_noise(), -1.0, 1.0)
-                stored = action[None]  # the actor's [-1, 1] space is the preset's (checked by the recipe)
             elif rng.random() < epsilon:
                 action, random_actions = int(rng.integers(model.action_space.n)), random_actions + 1
-                stored = np.array([[action]])
             else:
                 with th.no_grad():
                     action = int(model.q_net(th.as_tensor(obs[None], dtype=th.float32)).argmax(dim=1)[0])
-                stored = np.array([[action]])
             next_obs, reward, terminated, truncated, _ = env.step(action)
             done = terminated or truncated
-            model.replay_buffer.add(obs[None], next_obs[None], stored, np.array([reward]),
+            model.replay_buffer.add(obs[None], next_obs[None], np.reshape(action, (1, -1)), np.array([reward]),
                                     np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
             obs, total = next_obs, total + float(reward)
         returns.append(total)

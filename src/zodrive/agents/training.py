@@ -48,7 +48,8 @@ def algorithm_class(recipe: dict[str, Any]):
         from zodrive.agents.dqn_variants import DoubleDQN
 
         return DoubleDQN
-    if recipe.get("guide"):
+    if recipe.get("guide") or (recipe["algo"] in ACTOR_CRITIC and recipe.get("init")):
+        # an actor-critic started from a clone needs GuidedTD3's critic-only updates even without a guide
         from zodrive.agents.actor_critic_variants import GuidedDDPG, GuidedTD3
         from zodrive.agents.dqn_variants import GuidedDQN
 
@@ -308,13 +309,11 @@ def train(
     try:
         return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
                       tensorboard=tensorboard)
-    except ZodriveError:  # a recipe option found wrong once the model exists (guide, init)
+    except (ZodriveError, TypeError, ValueError, AssertionError) as exc:  # a recipe option (guide, init) or SB3
         if fresh:
             shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
-        raise
-    except (TypeError, ValueError, AssertionError) as exc:  # SB3 rejects a hyperparameter
-        if fresh:
-            shutil.rmtree(out, ignore_errors=True)
+        if isinstance(exc, ZodriveError):
+            raise
         raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
 
 
