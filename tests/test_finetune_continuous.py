@@ -27,6 +27,17 @@ def _td3(seed: int, arch: list[int], cls: type = TD3, **kwargs) -> TD3:
     return model
 
 
+def _fill(model: TD3, n: int, reward: float) -> np.ndarray:
+    """`n` transitions between uniform random states with random actions and a constant reward,
+    no termination; returns the n + 1 states."""
+    rng = np.random.default_rng(0)
+    obs = rng.uniform(-1, 1, (n + 1, 5, 5)).astype(np.float32)
+    for i in range(n):
+        model.replay_buffer.add(obs[i][None], obs[i + 1][None], rng.uniform(-1, 1, (1, 2)), np.array([reward]),
+                                np.array([False]), [{}])
+    return obs
+
+
 def test_init_loads_the_actor_into_the_actor_and_the_target_actor_only(tmp_path: Path) -> None:
     clone = _td3(1, [16, 16], cls=DDPG)  # a DDPG actor goes into a TD3: the same actor layout
     clone.save(tmp_path / "clone.zip")
@@ -65,11 +76,7 @@ def test_collect_drives_the_actor_with_its_exploration_noise_into_the_buffer() -
 def test_critic_evaluation_finds_the_value_of_a_constant_reward_and_leaves_the_actor_alone() -> None:
     """Reward 1 at every step, no termination, gamma 0.5: the actor's value is 2 everywhere."""
     model = _td3(0, [32, 32], cls=GuidedTD3, gamma=0.5, batch_size=64)
-    rng = np.random.default_rng(0)
-    obs = rng.uniform(-1, 1, (501, 5, 5)).astype(np.float32)
-    for i in range(500):
-        model.replay_buffer.add(obs[i][None], obs[i + 1][None], rng.uniform(-1, 1, (1, 2)), np.array([1.0]),
-                                np.array([False]), [{}])
+    _fill(model, 500, reward=1.0)
     actor = {k: v.clone() for k, v in model.actor.state_dict().items()}
     stats = evaluate_critic(model, 2000, 64)
     assert stats["mean_q"] == pytest.approx(2.0, abs=0.1)
@@ -85,11 +92,7 @@ def test_the_imitation_term_pulls_the_actor_to_the_guide(cls: type, error: str) 
     model = _td3(0, [32, 32], cls=cls, batch_size=64, learning_rate=3e-3)
     target = np.array([0.5, -0.3], dtype=np.float32)
     model.configure_guide(lambda batch: np.tile(target, (len(batch), 1)), imitation=100.0, error=error)
-    rng = np.random.default_rng(0)
-    obs = rng.uniform(-1, 1, (301, 5, 5)).astype(np.float32)
-    for i in range(300):
-        model.replay_buffer.add(obs[i][None], obs[i + 1][None], rng.uniform(-1, 1, (1, 2)), np.array([0.0]),
-                                np.array([False]), [{}])
+    obs = _fill(model, 300, reward=0.0)
     model.train(600, 64)
     with th.no_grad():
         actions = model.actor(th.as_tensor(obs)).numpy()
@@ -158,11 +161,7 @@ def test_an_actor_critic_started_from_a_clone_without_a_guide_still_evaluates_it
     assert algorithm_class({"algo": "ddpg", "init": "m"}) is GuidedDDPG
     assert algorithm_class({"algo": "td3"}) is TD3
     model = _td3(0, [16, 16], cls=GuidedTD3, batch_size=32)
-    rng = np.random.default_rng(0)
-    obs = rng.uniform(-1, 1, (101, 5, 5)).astype(np.float32)
-    for i in range(100):
-        model.replay_buffer.add(obs[i][None], obs[i + 1][None], rng.uniform(-1, 1, (1, 2)), np.array([1.0]),
-                                np.array([False]), [{}])
+    _fill(model, 100, reward=1.0)
     actor = {k: v.clone() for k, v in model.actor.state_dict().items()}
     evaluate_critic(model, 20, 32)
     for key, value in model.actor.state_dict().items():
