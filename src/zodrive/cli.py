@@ -269,7 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--epochs", type=_positive_int, help="distill: passes over the collected states [20]")
     rob.add_argument("--teacher", metavar="baseline:NAME",
                      help="distill: an observation-reading baseline that drives and labels (default: the model itself); "
-                          "with --dagger also baseline:idm-mobil, the teacher of a DDPG/TD3 actor (continuous presets)")
+                          "with --dagger also the simulator-reading baseline:idm-mobil (a DDPG/TD3 actor's teacher) or "
+                          "baseline:planner (a DQN's)")
     rob.add_argument("--dagger", type=_nonnegative_int, metavar="ROUNDS",
                      help="distill: behaviour cloning with DAgger (Ross et al. 2011): after the teacher's --steps states, "
                           "ROUNDS rounds of --steps states the student drives into (a DDPG/TD3 student: with the "

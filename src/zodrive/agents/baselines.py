@@ -6,6 +6,8 @@ observation attack can touch them: they are the robustness floor. `baseline:idm-
 classical lane-changing driver (IDM for speed, MOBIL for lane changes, highway-env's own models
 and constants, target speed 30 m/s) that reads the **simulator**, not the observation: it is
 the reference a learned driver should beat, and an observation attack does not apply to it.
+`baseline:planner` (`zodrive.agents.planner`) also reads the simulator: it tries each meta-action
+in a copy of it, 5 s ahead, a privileged teacher that shows what the meta-actions can reach.
 `baseline:rules` is a hand-written driver that reads the same observation as the learned
 agents (`zodrive.agents.rules`): attackable like them, but it shows the attacker only its decision.
 `baseline:robust-rules@EPS` is that driver made pessimistic for an attacker of budget EPS
@@ -63,6 +65,10 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
     Baseline("idm-mobil", ("discrete", "continuous"), "simulator",
              "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
              "IDM + MOBIL driver (reads the simulator)"),
+    Baseline("planner", ("discrete",), "simulator",
+             "look-ahead planner: each meta-action then the rules for 5 s in a copy of the simulator "
+             "(zodrive.agents.planner); reads the simulator, about 0.5 s per decision",
+             "look-ahead planner (reads the simulator)"),
 )}
 
 
@@ -123,6 +129,9 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
         raise ZodriveError(f"{name} drives a straight highway (it plans no route: no merge, exit or turn) with the "
                            "five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
                            "highway-fast")
+    if baseline.name == "planner" and env.features != RULES_FEATURES:
+        raise ZodriveError(f"{name} looks ahead with the rules, which read a Kinematics observation of presence x y "
+                           "vx vy: presets discrete, highway, highway-fast")
 
 
 def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int,
@@ -251,6 +260,16 @@ def mobil_gain(vehicle, lane_index) -> float:
     old_rear_pred_a = vehicle.acceleration(ego_vehicle=old_rear, front_vehicle=old_front)
     return float(self_pred_a - self_a + vehicle.POLITENESS * (
         new_rear_pred_a - new_rear_a + old_rear_pred_a - old_rear_a))
+
+
+def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind: str, *,
+                     replan: bool = False) -> Callable[[], Any]:
+    """The simulator-reading `baseline` bound to `env` (called for the action at its current state)."""
+    if baseline.name == "planner":
+        from zodrive.agents.planner import LookAheadPlanner
+
+        return LookAheadPlanner(env, preset)
+    return IdmMobilDriver(env, kind, replan=replan)
 
 
 def driver_victim(driver: Callable[[], Any], kind: str, obs_shape: tuple[int, ...], n_actions: int) -> Victim:

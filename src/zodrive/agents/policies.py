@@ -167,7 +167,7 @@ def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mod
             raise ZodriveError(f"{model} reads the simulator: an observation defense does not apply to it")
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
-        driver = bl.IdmMobilDriver(env, kind)
+        driver = bl.simulator_driver(bl.get_baseline(model), env, preset, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
     from zodrive.defense import keeps_state, make_defense

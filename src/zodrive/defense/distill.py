@@ -21,7 +21,8 @@ network shape and zip).
 
 With `dagger` the student is cloned with DAgger (`dagger_distill`): into a DQN's Q-network, or
 into a DDPG/TD3 actor (regression on the tanh-squashed action) from `baseline:idm-mobil`, a
-teacher that reads the simulator and so labels states only as they are driven through.
+teacher that reads the simulator and so labels states only as they are driven through (as
+`baseline:planner`, the look-ahead teacher of a DQN student).
 """
 
 from __future__ import annotations
@@ -79,7 +80,8 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     readers = ("observation", "simulator") if dagger is not None else ("observation",)
     if teacher is not None and not (is_baseline(teacher) and get_baseline(teacher).reads in readers):
         raise ZodriveError(f"--teacher must be an observation-reading baseline (baseline:rules, baseline:robust-rules@EPS)"
-                           f"{' or, with --dagger, baseline:idm-mobil' if dagger is not None else ''}, not {teacher!r}")
+                           f"{' or, with --dagger, baseline:idm-mobil or baseline:planner' if dagger is not None else ''}, "
+                           f"not {teacher!r}")
     if teacher is not None:
         check_baseline_fits(get_baseline(teacher), preset)
     if dagger is not None:
@@ -413,14 +415,14 @@ def teacher_and_env(teacher: str | None, source: PolicyNetwork, preset: dict[str
     `IdmMobilDriver(replan=True)`) is bound to that very environment (it reads its vehicles);
     otherwise the observation-reading baseline, or the source network itself, beside a fresh
     environment."""
-    from zodrive.agents.baselines import IdmMobilDriver, driver_victim, get_baseline
+    from zodrive.agents.baselines import driver_victim, get_baseline, simulator_driver
     from zodrive.agents.policies import load_victim
     from zodrive.agents.victims import network_victim
     from zodrive.envs import make_env, n_actions, observation_shape
 
     if teacher is not None and get_baseline(teacher).reads == "simulator":
         env = make_env(preset)
-        driver = IdmMobilDriver(env, source.kind, replan=True)
+        driver = simulator_driver(get_baseline(teacher), env, preset, source.kind, replan=True)
         return driver_victim(driver, source.kind, observation_shape(preset), n_actions(preset)), env
     guide = load_victim(teacher, preset) if teacher else network_victim(source.net, source.kind, source.obs_shape)
     return guide, make_env(preset)
