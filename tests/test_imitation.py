@@ -108,6 +108,7 @@ def test_dagger_distillation_writes_a_zip_that_reproduces_its_heldout_agreement(
                   teacher="baseline:rules", dagger=1)
     train = json.loads((tmp_path / "d" / "train.json").read_text())
     assert train["method"]["name"] == "dagger-distillation" and len(train["rounds"]) == 2
+    assert train["method"]["jitter"] == 0.5  # the rules read the observation: noisy labelled copies
     held = train["heldout_seeds"]
     assert all(r["seeds"][1] < held[0] for r in train["rounds"]) and train["rounds"][1]["aggregate"] == 240
     rules = load_victim("baseline:rules", preset)
@@ -127,3 +128,16 @@ def test_dagger_is_an_error_outside_distill(tmp_path: Path) -> None:
     with pytest.raises(ZodriveError, match="--dagger applies to --method distill"):
         robust_train("models/dqn", load_preset("discrete"), "sa", 0.05, 100, tmp_path / "x", dagger=2)
     assert not (tmp_path / "x").exists()
+
+
+def test_a_teacher_that_reads_the_simulator_gets_no_noisy_copies_and_the_record_says_so(tmp_path: Path) -> None:
+    """The noisy labelled copies need a teacher that can label any observation; IDM + MOBIL reads
+    the simulator, so none are made, and train.json records jitter 0 (it recorded 0.5)."""
+    from zodrive.defense.distill import distill
+    from zodrive.envs import load_preset
+
+    preset = load_preset("discrete", ["max_episode_steps=20"])
+    distill("models/dqn", preset, None, 40, tmp_path / "d", kappa=0.0, epochs=1, seed=7,
+            teacher="baseline:idm-mobil", dagger=1)
+    method = json.loads((tmp_path / "d" / "train.json").read_text())["method"]
+    assert method["teacher"] == "baseline:idm-mobil" and method["jitter"] == 0.0

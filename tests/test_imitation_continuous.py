@@ -209,6 +209,7 @@ def test_cloning_idm_mobil_writes_a_zip_that_reproduces_its_heldout_action_error
                   teacher="baseline:idm-mobil", dagger=1)
     train = json.loads((tmp_path / "d" / "train.json").read_text())
     assert train["algo"] == "ddpg" and [r["beta"] for r in train["rounds"]] == [1.0, 0.5]
+    assert train["method"]["jitter"] == 0.0 and "ego_jitter" not in train["method"]  # it reads the simulator
     held = train["heldout_seeds"]
     assert all(r["seeds"][1] < held[0] for r in train["rounds"]) and train["rounds"][1]["aggregate"] == 240
     teacher, env = make_policy_env("baseline:idm-mobil", preset)

@@ -531,11 +531,12 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     env.close()
     method = {"name": "dagger-distillation", "teacher": teacher or "the source model", "eps": eps, "kappa": kappa,
               "pgd_steps": pgd_steps, "epochs": epochs, "states": steps, "rounds": rounds, "lr": DAGGER_LR,
-              "batch": DAGGER_BATCH, "class_weight_power": DAGGER_WEIGHT_POWER, "jitter": DAGGER_JITTER,
+              "batch": DAGGER_BATCH, "class_weight_power": DAGGER_WEIGHT_POWER,
+              "jitter": DAGGER_JITTER if jittered else 0.0,  # none when the teacher reads the simulator
               "input": "standardized (statistics of round 0's teacher states), folded into the first layer",
               "reference": "Ross et al. 2011 (DAgger); Rusu et al. 2016; Madry et al. 2018"}
     if kind == "continuous":
-        method.update(jitter=DAGGER_JITTER if jittered else 0.0, beta=beta, class_weight_power=None,
+        method.update(beta=beta, class_weight_power=None,
                       std_floor=DAGGER_STD_FLOOR, **({"ego_jitter": DAGGER_EGO_JITTER} if jittered else {}),
                       init="the source actor's architecture, freshly initialized",
                       loss=continuous_loss)
