@@ -287,3 +287,29 @@ def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
     continuous = _pretrain_lines({"queries": 45, "margin": None, "wall_time_s": 1.0, "rounds": rounds})
     assert "margin" not in continuous[0] and "RMSE 0.120" in continuous[1]
     assert _pretrain_lines(None) == []
+
+
+def test_explore_std_trains_with_a_plain_gaussian_of_that_std(trained, tmp_path: Path, capsys) -> None:
+    """`--explore-std S`: PPO explores with a state-independent Gaussian of std S (the default's
+    gSDE noise is state-dependent); the record and the card say which; mistakes are one-line errors."""
+    import torch
+    from stable_baselines3 import PPO
+
+    victim, adv, _ = trained
+    out = tmp_path / "g"
+    assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "16", "--explore-std", "0.2",
+                 "--out", str(out), "--seed", "1", "--no-progress"]) == 0
+    model = PPO.load(out / "model.zip", device="cpu")  # our own file, written by this test
+    assert not model.policy.use_sde
+    obs = torch.zeros((3, *model.observation_space.shape))
+    std = model.policy.get_distribution(obs).distribution.stddev
+    assert torch.allclose(std, torch.full_like(std, 0.2), rtol=0.05)  # 16 steps barely move it from 0.2
+    assert json.loads((out / "train.json").read_text())["exploration"] == "Gaussian, std 0.2"
+    assert "exploration: Gaussian, std 0.2" in (out / "CARD.md").read_text()
+    assert json.loads((adv / "train.json").read_text())["exploration"].startswith("gSDE")
+    base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--out", str(tmp_path / "b"), "--no-progress"]
+    assert "no PPO step is taken" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1",
+                                                     "--explore-std", "0.2"])
+    assert "a finite number > 0" in _error(capsys, [*base, "--steps", "8", "--explore-std", "0"])
+    assert "in (0, 2]" in _error(capsys, [*base, "--steps", "8", "--explore-std", "3"])
+    assert not (tmp_path / "b").exists()

@@ -327,6 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--pretrain-margin", type=_nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default 1)")
+    atk.add_argument("--explore-std", type=_positive_float,
+                     help="PPO's exploration: a Gaussian of this std per action dimension (in units of eps), "
+                          "redrawn every step, instead of the default gSDE noise (whose std on the highway "
+                          "presets is about 1.3-1.9: the eps-box's corners, whatever the mean)")
     atk.add_argument("--out", type=Path, required=True, help="the adversary's model folder")
     atk.add_argument("--seed", type=_seed, default=0, help="training seed (PPO and the environment)")
     atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]",
@@ -651,9 +655,11 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
         raise ZodriveError(f"--pretrain-{next(iter(given))} applies with --pretrain-rounds")
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
+    if args.steps == 0 and args.explore_std is not None:
+        raise ZodriveError("--explore-std sets PPO's exploration; with --steps 0 no PPO step is taken")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
-                        victim_action=args.victim_action, reward=args.reward, pretrain=pretrain, force=args.force,
-                        progress_bar=not args.no_progress)
+                        victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
+                        explore_std=args.explore_std, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):
         print(f"pretrain round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "

@@ -46,8 +46,10 @@ REWARDS = ("minus", "horizon")
 """The adversary's reward (`AdversaryEnv._reward`): minus the victim's reward, or the same
 objective over the fixed horizon with a crash credited at once."""
 LOG_STD_INIT = -1.0
-"""Initial log std of the Gaussian (SB3's default 0: std 1, whose samples are clipped to the
-box's vertices whatever the mean, so the mean the attack acts on would learn little)."""
+"""Initial log std of gSDE's noise weights (SB3's default 0). With gSDE the action's std is
+|latent features| x exp(log std) summed over the 64 latent features: measured on the committed
+adversaries it is 1.3-1.9 per dimension of [-1, 1], so the samples sit near the box's corners
+whatever the mean. `explore_std` replaces it by a plain Gaussian of a stated std."""
 
 
 class AdversaryEnv(gym.Env):
@@ -151,7 +153,7 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
            else " only (0 queries per step at attack time)"),
         *_pretrain_lines(train.get("pretrain")),
         f"- PPO training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
-        f"{train['wall_time_s']} s; victim queries {train['victim_queries']}",
+        f"{train['wall_time_s']} s; victim queries {train['victim_queries']}; exploration: {train['exploration']}",
         f"- victim return per training episode: first 10 {first if first is None else round(first, 2)}, "
         f"last 10 {last if last is None else round(last, 2)} (exploring adversary: not an evaluation)",
         "", "Use: `zodrive evaluate " + meta["victim"] + f" --attack learned:{out} --eps {meta['eps']:g}`"
@@ -186,13 +188,16 @@ def attack_train(
     victim_action: bool = False,
     reward: str = "minus",
     pretrain: Pretrain | None = None,
+    explore_std: float | None = None,
     force: bool = False,
     progress_bar: bool = True,
 ) -> Path:
     """Train a learned adversary against `model` (behind `defense`) at L-inf `eps` for `steps`
     environment steps of PPO (0 allowed after `pretrain`: the fitted start alone), first fitting
     its mean action as an amortized transfer attack with `pretrain` (`zodrive.agents.amortized`);
-    write the model folder `out` and return it."""
+    `explore_std`: PPO explores with a Gaussian of that std per action dimension, redrawn every
+    step, instead of gSDE (a fitted start's mean survives noise on that scale, not at the box's
+    corners); write the model folder `out` and return it."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -206,6 +211,10 @@ def attack_train(
 
     if not (isinstance(steps, int) and steps >= (0 if pretrain else 1)):
         raise ZodriveError(f"steps must be an integer >= 1 (>= 0 with a pretrained start), not {steps}")
+    if explore_std is not None and not (isinstance(explore_std, float) and 0 < explore_std <= 2):
+        raise ZodriveError(f"explore_std must be a float in (0, 2] (units of eps per action dimension), not {explore_std}")
+    if explore_std is not None and not steps:
+        raise ZodriveError("explore_std sets PPO's exploration; with 0 steps no PPO step is taken")
     if pretrain is not None and victim_action:
         raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
@@ -233,6 +242,11 @@ def attack_train(
     ppo = dict(PPO_DEFAULTS)
     ppo["n_steps"] = min(ppo["n_steps"], max(steps, 8))  # a tiny run (tests) still completes its rollouts
     ppo["batch_size"] = min(ppo["batch_size"], ppo["n_steps"])
+    log_std = LOG_STD_INIT
+    if explore_std is not None:  # a plain Gaussian of the stated std (SB3: state-independent log std)
+        ppo.update(use_sde=False)
+        ppo.pop("sde_sample_freq")
+        log_std = float(np.log(explore_std))
     horizon = None
     if reward == "horizon":
         from zodrive.envs import scenario
@@ -253,12 +267,13 @@ def attack_train(
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
                          "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
-                         "log_std_init": LOG_STD_INIT, "pretrain": pretrain and pretrain.__dict__}, seed)
+                         "log_std_init": log_std, "explore_std": explore_std,
+                         "pretrain": pretrain and pretrain.__dict__}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))
     venv = DummyVecEnv([lambda: env])
     venv.seed(seed)
     agent = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0,
-                policy_kwargs={"log_std_init": LOG_STD_INIT}, **ppo)
+                policy_kwargs={"log_std_init": log_std}, **ppo)
     fitted = None
     if pretrain is not None:
         start = time.perf_counter()
@@ -281,7 +296,9 @@ def attack_train(
              "episodes": len(returns),
              "victim_return_first10": float(np.mean(returns[:10])) if returns else None,
              "victim_return_last10": float(np.mean(returns[-10:])) if returns else None,
-             "reward": reward, "horizon": horizon}
+             "reward": reward, "horizon": horizon,
+             "exploration": f"Gaussian, std {explore_std}" if explore_std is not None else
+             f"gSDE, log std {LOG_STD_INIT}, redrawn every {PPO_DEFAULTS['sde_sample_freq']} steps"}
     write_json(out / "train.json", train)
     write_atomic(out / META_FILE, json.dumps(meta, indent=2) + "\n")
     write_atomic(out / "CARD.md", _card(out, meta, train))
