@@ -313,3 +313,43 @@ def test_explore_std_trains_with_a_plain_gaussian_of_that_std(trained, tmp_path:
     assert "a finite number > 0" in _error(capsys, [*base, "--steps", "8", "--explore-std", "0"])
     assert "in (0, 2]" in _error(capsys, [*base, "--steps", "8", "--explore-std", "3"])
     assert not (tmp_path / "b").exists()
+
+
+def test_critic_warmup_trains_the_value_function_only_then_both(trained, tmp_path: Path, monkeypatch,
+                                                                 capsys) -> None:
+    """`--critic-warmup N`: PPO's first learn call (N steps) leaves the actor's weights exactly
+    as they were and moves the critic's; the second moves the actor."""
+    import torch
+    from stable_baselines3 import PPO
+
+    victim, _, _ = trained
+    snapshots: list[tuple[list[torch.Tensor], list[torch.Tensor]]] = []
+    original = PPO.learn
+
+    def weights(agent: PPO) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        policy = agent.policy
+        actor = [p.detach().clone() for p in [*policy.mlp_extractor.policy_net.parameters(),
+                                               *policy.action_net.parameters(), policy.log_std]]
+        critic = [p.detach().clone() for p in [*policy.mlp_extractor.value_net.parameters(),
+                                                *policy.value_net.parameters()]]
+        return actor, critic
+
+    def learn(self: PPO, *args, **kwargs):
+        snapshots.append(weights(self))
+        out = original(self, *args, **kwargs)
+        snapshots.append(weights(self))
+        return out
+
+    monkeypatch.setattr(PPO, "learn", learn)
+    out = tmp_path / "w"
+    assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "32", "--critic-warmup", "16",
+                 "--explore-std", "0.3", "--out", str(out), "--seed", "1", "--no-progress"]) == 0
+    assert len(snapshots) == 4  # before / after the warm-up, before / after PPO proper
+    same = lambda a, b: all(torch.equal(x, y) for x, y in zip(a, b))  # noqa: E731
+    assert same(snapshots[0][0], snapshots[1][0]) and not same(snapshots[0][1], snapshots[1][1])
+    assert not same(snapshots[2][0], snapshots[3][0])
+    assert json.loads((out / "train.json").read_text())["critic_warmup"] == 16
+    assert "the first 16 steps trained the critic only" in (out / "CARD.md").read_text()
+    base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--out", str(tmp_path / "b"), "--no-progress"]
+    assert "must be below --steps 8" in _error(capsys, [*base, "--steps", "8", "--critic-warmup", "8"])
+    assert not (tmp_path / "b").exists()

@@ -331,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="PPO's exploration: a Gaussian of this std per action dimension (in units of eps), "
                           "redrawn every step, instead of the default gSDE noise (whose std on the highway "
                           "presets is about 1.3-1.9: the eps-box's corners, whatever the mean)")
+    atk.add_argument("--critic-warmup", type=_positive_int,
+                     help="the first N of --steps train PPO's value function only, the actor frozen (keeps a "
+                          "fitted start while the critic learns its returns)")
     atk.add_argument("--out", type=Path, required=True, help="the adversary's model folder")
     atk.add_argument("--seed", type=_seed, default=0, help="training seed (PPO and the environment)")
     atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]",
@@ -657,9 +660,12 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     if args.steps == 0 and args.explore_std is not None:
         raise ZodriveError("--explore-std sets PPO's exploration; with --steps 0 no PPO step is taken")
+    if args.critic_warmup is not None and args.critic_warmup >= args.steps:
+        raise ZodriveError(f"--critic-warmup {args.critic_warmup} must be below --steps {args.steps}: "
+                           "PPO's actor would never train")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
                         victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
-                        explore_std=args.explore_std, force=args.force, progress_bar=not args.no_progress)
+                        explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):
         print(f"pretrain round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "

@@ -153,7 +153,8 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
            else " only (0 queries per step at attack time)"),
         *_pretrain_lines(train.get("pretrain")),
         f"- PPO training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
-        f"{train['wall_time_s']} s; victim queries {train['victim_queries']}; exploration: {train['exploration']}",
+        f"{train['wall_time_s']} s; victim queries {train['victim_queries']}; exploration: {train['exploration']}"
+        + (f"; the first {train['critic_warmup']} steps trained the critic only" if train.get("critic_warmup") else ""),
         f"- victim return per training episode: first 10 {first if first is None else round(first, 2)}, "
         f"last 10 {last if last is None else round(last, 2)} (exploring adversary: not an evaluation)",
         "", "Use: `zodrive evaluate " + meta["victim"] + f" --attack learned:{out} --eps {meta['eps']:g}`"
@@ -189,6 +190,7 @@ def attack_train(
     reward: str = "minus",
     pretrain: Pretrain | None = None,
     explore_std: float | None = None,
+    critic_warmup: int = 0,
     force: bool = False,
     progress_bar: bool = True,
 ) -> Path:
@@ -197,7 +199,9 @@ def attack_train(
     its mean action as an amortized transfer attack with `pretrain` (`zodrive.agents.amortized`);
     `explore_std`: PPO explores with a Gaussian of that std per action dimension, redrawn every
     step, instead of gSDE (a fitted start's mean survives noise on that scale, not at the box's
-    corners); write the model folder `out` and return it."""
+    corners); `critic_warmup`: the first that many of the `steps` update PPO's value function
+    only, the actor frozen (advantages from an untrained critic move a fitted mean at random);
+    write the model folder `out` and return it."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -215,6 +219,8 @@ def attack_train(
         raise ZodriveError(f"explore_std must be a float in (0, 2] (units of eps per action dimension), not {explore_std}")
     if explore_std is not None and not steps:
         raise ZodriveError("explore_std sets PPO's exploration; with 0 steps no PPO step is taken")
+    if not (isinstance(critic_warmup, int) and 0 <= critic_warmup < max(steps, 1)):
+        raise ZodriveError(f"critic_warmup must be an integer in [0, steps), not {critic_warmup}")
     if pretrain is not None and victim_action:
         raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
@@ -267,7 +273,7 @@ def attack_train(
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
                          "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
-                         "log_std_init": log_std, "explore_std": explore_std,
+                         "log_std_init": log_std, "explore_std": explore_std, "critic_warmup": critic_warmup,
                          "pretrain": pretrain and pretrain.__dict__}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))
     venv = DummyVecEnv([lambda: env])
@@ -282,8 +288,17 @@ def attack_train(
         with_env.close()
         fitted["wall_time_s"] = round(time.perf_counter() - start, 1)
     start = time.perf_counter()
-    if steps:
-        agent.learn(total_timesteps=steps, progress_bar=progress_bar)
+    if critic_warmup:  # the value function learns the fitted start's returns; the actor stays as fitted
+        actor = [*agent.policy.mlp_extractor.policy_net.parameters(), *agent.policy.action_net.parameters(),
+                 agent.policy.log_std]
+        for param in actor:
+            param.requires_grad_(False)  # no gradient: Adam leaves them alone
+        agent.learn(total_timesteps=critic_warmup, progress_bar=progress_bar)
+        for param in actor:
+            param.requires_grad_(True)
+    if steps - critic_warmup > 0:
+        agent.learn(total_timesteps=steps - critic_warmup, progress_bar=progress_bar,
+                    reset_num_timesteps=not critic_warmup)
     wall = time.perf_counter() - start
     agent.save(out / "model.zip")
     returns = list(inner.victim_returns)  # the victim's return per training episode
@@ -298,7 +313,8 @@ def attack_train(
              "victim_return_last10": float(np.mean(returns[-10:])) if returns else None,
              "reward": reward, "horizon": horizon,
              "exploration": f"Gaussian, std {explore_std}" if explore_std is not None else
-             f"gSDE, log std {LOG_STD_INIT}, redrawn every {PPO_DEFAULTS['sde_sample_freq']} steps"}
+             f"gSDE, log std {LOG_STD_INIT}, redrawn every {PPO_DEFAULTS['sde_sample_freq']} steps",
+             "critic_warmup": critic_warmup}
     write_json(out / "train.json", train)
     write_atomic(out / META_FILE, json.dumps(meta, indent=2) + "\n")
     write_atomic(out / "CARD.md", _card(out, meta, train))
