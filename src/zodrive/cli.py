@@ -658,14 +658,10 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
         raise ZodriveError(f"--pretrain-{next(iter(given))} applies with --pretrain-rounds")
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
-    if args.steps == 0 and args.explore_std is not None:
-        raise ZodriveError("--explore-std sets PPO's exploration; with --steps 0 no PPO step is taken")
-    if args.critic_warmup is not None and args.critic_warmup >= args.steps:
-        raise ZodriveError(f"--critic-warmup {args.critic_warmup} must be below --steps {args.steps}: "
-                           "PPO's actor would never train")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
                         victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
-                        explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
+                        explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force,
+                        progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):
         print(f"pretrain round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "

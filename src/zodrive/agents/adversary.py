@@ -218,9 +218,10 @@ def attack_train(
     if explore_std is not None and not (isinstance(explore_std, float) and 0 < explore_std <= 2):
         raise ZodriveError(f"explore_std must be a float in (0, 2] (units of eps per action dimension), not {explore_std}")
     if explore_std is not None and not steps:
-        raise ZodriveError("explore_std sets PPO's exploration; with 0 steps no PPO step is taken")
+        raise ZodriveError("--explore-std sets PPO's exploration; with --steps 0 no PPO step is taken")
     if not (isinstance(critic_warmup, int) and 0 <= critic_warmup < max(steps, 1)):
-        raise ZodriveError(f"critic_warmup must be an integer in [0, steps), not {critic_warmup}")
+        raise ZodriveError(f"--critic-warmup {critic_warmup} must be below --steps {steps}: "
+                           "PPO's actor would never train")
     if pretrain is not None and victim_action:
         raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
