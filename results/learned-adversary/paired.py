@@ -1,0 +1,36 @@
+"""The learned adversary against the strongest per-step attack on the same 100 seeds (100000-100099):
+mean of (learned - per-step) return per seed with its bootstrap 95 % CI (`zodrive.evaluation.stats.
+paired_difference_ci`). Both start every episode from the same traffic, so the pairs are correlated and
+the difference is measured more precisely than the two CIs side by side show. Positive: the learned
+adversary left the victim more return (it is weaker). Usage: python results/learned-adversary/paired.py"""
+import json
+from pathlib import Path
+
+from zodrive.evaluation.stats import paired_difference_ci
+
+C, R = Path("results/learned-adversary/cells"), Path("results/robustness-100")
+PAIRS = [  # (learned cell, per-step cell)
+    (C / "dqn-driver-amortized-eps0.05-100", C / "dqn-driver-pgd-eps0.05-100"),
+    (C / "dqn-driver-amortized-eps0.2-100", C / "dqn-driver-random-search-eps0.2-100"),
+    (C / "dqn-robust-amortized-eps0.02-100", R / "dqn-robust-pgd-eps0.02"),
+    (C / "dqn-driver-amortized-eps0.02-100", R / "dqn-driver-pgd-eps0.02"),
+    (C / "ppo-dqn-driver-eps0.02-std0.2-w10k-100", R / "dqn-driver-pgd-eps0.02"),
+    (C / "dqn-robust-amortized-eps0.05-100", R / "dqn-robust-random-search-eps0.05"),
+    (C / "ppo-dqn-robust-eps0.05-std0.2-w10k-100", R / "dqn-robust-random-search-eps0.05"),
+    *[(C / f"ppo-ddpg-driver-eps0.2{s}-100", C / "ddpg-driver-random-search-eps0.2-100") for s in ("", "-seed1", "-seed2")],
+    *[(C / f"ppo-ddpg-driver-eps0.05{s}-100", C / "ddpg-driver-random-search-eps0.05-100") for s in ("", "-seed1", "-seed2")],
+    (C / "ppo-ddpg-robust-eps0.05-100", C / "ddpg-robust-random-search-eps0.05-100"),
+    (C / "ppo-td3-finetuned-eps0.2-100", C / "td3-finetuned-random-search-eps0.2-100"),
+]
+
+
+def returns(cell: Path) -> dict[int, float]:
+    rows = (json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line)
+    return {row["seed"]: row["return"] for row in rows}
+
+
+for learned, per_step in PAIRS:
+    a, b = returns(learned), returns(per_step)
+    seeds = sorted(set(a) & set(b))
+    diff, low, high = paired_difference_ci([a[s] for s in seeds], [b[s] for s in seeds])
+    print(f"{learned.name} - {per_step.name}: {diff:+.2f} [{low:+.2f}, {high:+.2f}] over {len(seeds)} seeds")
