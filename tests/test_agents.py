@@ -101,3 +101,27 @@ def test_demonstrations_fill_the_buffer_and_pretraining_learns_them() -> None:
     assert agreement() > max(before, 0.8)
     for online, target in zip(model.q_net.parameters(), model.q_net_target.parameters()):
         assert th.equal(online, target)  # the target network copied the pre-trained one
+
+
+def test_recipe_guide_names_the_rules_it_follows() -> None:
+    """`guide: {name: close-rules}` gives the DQN the close rules' decisions, not the rules'; an
+    unknown name is a one-line error."""
+    from zodrive.agents.rules import named_rules
+    from zodrive.agents.training import _configure_guide
+    from zodrive.errors import ZodriveError
+
+    preset = load_preset("discrete")
+
+    class Recorder:
+        def configure_guide(self, guide, start, steps, **kwargs):
+            self.guide = guide
+
+    close, plain = named_rules(preset, "close-rules"), named_rules(preset, "rules")
+    states = np.random.default_rng(1).uniform(-1, 1, size=(2000, 5, 5)).astype(np.float32)
+    states[:, :, 0] = 1.0  # every vehicle present
+    assert (close.actions(states) != plain.actions(states)).any()  # the two guides tell apart on these states
+    model = Recorder()
+    _configure_guide(model, {"algo": "dqn", "total_timesteps": 100, "guide": {"name": "close-rules"}}, preset)
+    np.testing.assert_array_equal(model.guide(states), close.actions(states))
+    with pytest.raises(ZodriveError, match="recipe guide must be"):
+        _configure_guide(model, {"algo": "dqn", "total_timesteps": 100, "guide": {"name": "closer-rules"}}, preset)

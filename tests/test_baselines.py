@@ -147,6 +147,8 @@ def test_attacking_a_constant_baseline_is_refused_since_it_changes_nothing(capsy
 @pytest.mark.parametrize(("args", "message"), [
     (["evaluate", "baseline:nosuch"], "known: baseline:slower"),
     (["evaluate", "baseline:brake", "--preset", "discrete"], "drives continuous presets"),
+    (["evaluate", "baseline:close-rules", "--preset", "continuous"], "drives discrete presets"),
+    (["evaluate", "baseline:close-rules@0.05"], "take @EPS"),
     (["evaluate", "baseline:idm-mobil", "--attack", "zo-signsgd"], "reads the simulator"),
     (["render", "baseline:idm-mobil", "--attack", "nes", "--out", "x"], "reads the simulator"),
 ])
@@ -243,3 +245,26 @@ def test_robust_rules_are_a_named_budgeted_baseline() -> None:
             get_baseline(bad)
     victim = load_victim("baseline:robust-rules@0.02", load_preset("discrete"))
     assert victim.reads == "observation" and victim.differentiable is None
+
+
+def test_close_rules_follow_closer_and_otherwise_decide_as_the_rules() -> None:
+    """`baseline:close-rules` is the rules with IDM's time gap 0.3 s and a 5 m margin: a car 40 m
+    ahead at the same speed leaves room to speed up for them (10 + 25 * 0.3 + 5 < 35 m) and not for
+    the rules (10 + 25 * 1.0 + 15 > 35 m); far from any car, or close behind one, both decide alike."""
+    from zodrive.agents.rules import FASTER, IDLE, ObservationRules
+
+    preset = load_preset("discrete")
+    alone = np.zeros((1, 5, 5), np.float32)
+    alone[0, 0] = [1, 1, 0.12, 1, 0]  # the right lane, >= 20 m/s
+    ahead = alone.copy()
+    ahead[0, 1] = [1, 0.4, 0, 0, 0]  # a car 40 m ahead (35 m gap), same speed
+    close_car = alone.copy()
+    close_car[0, 1] = [1, 0.12, 0, -0.1, 0]  # 12 m ahead, 2 m/s slower
+    batch = np.concatenate([alone, ahead, close_car])
+    plain = load_victim("baseline:rules", preset)
+    close = load_victim("baseline:close-rules", preset)
+    assert plain.actions(plain.query(batch)).tolist()[:2] == [FASTER, IDLE]
+    assert close.actions(close.query(batch)).tolist()[:2] == [FASTER, FASTER]
+    assert close.actions(close.query(batch))[2] == plain.actions(plain.query(batch))[2]
+    assert close.reads == "observation" and close.differentiable is None
+    np.testing.assert_array_equal(ObservationRules(preset).actions(batch), plain.actions(plain.query(batch)))

@@ -98,3 +98,21 @@ def test_the_continuous_rules_and_their_student_reproduce_their_first_episodes(t
     for record, theirs in zip(_records(out / "episodes.jsonl"), committed[:3], strict=True):
         assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
         assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model,cell", [
+    ("baseline:close-rules", "results/close-rules/eval"),
+])
+def test_the_close_rules_and_their_student_reproduce_their_first_episodes(tmp_path: Path, model: str,
+                                                                          cell: str) -> None:
+    """Issue 22's faster discrete teacher drives its committed 100-episode evaluation's first
+    episodes again, number for number."""
+    committed = _records(ROOT / cell / "episodes.jsonl")
+    out = tmp_path / "eval"
+    target = str(ROOT / model) if model.startswith("models/") else model
+    assert main(["evaluate", target, "--preset", "discrete", "--episodes", "3", "--out", str(out),
+                 "--no-progress"]) == 0
+    for record, theirs in zip(_records(out / "episodes.jsonl"), committed[:3], strict=True):
+        assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
+        assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)

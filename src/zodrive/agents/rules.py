@@ -51,6 +51,9 @@ ASSUMED_SPEED = 25.0   # [m/s] own speed for the safe gap (the observation clips
 S0, HEADWAY = 10.0, 1.0          # [m], [s] highway-env's IDM distance and time gap
 A_MAX, B_COMF = 3.0, 5.0         # [m/s^2] IDM's comfort acceleration and deceleration
 MARGIN = 15.0          # [m] extra gap asked of a lane before moving into it or speeding up
+CLOSE_HEADWAY, CLOSE_MARGIN = 0.3, 5.0  # [s], [m] `baseline:close-rules`: the same rules following closer,
+# tuned for return on seeds 50000-50019 (347.39 -> 375.56) and checked on 70000-70019 (356.18 -> 374.82)
+# (results/close-rules/README.md)
 BESIDE = 8.0           # [m] |dx| within which a vehicle beside the ego blocks a lane change
 MID_CHANGE_VY = 0.9    # [m/s] |lateral speed| from which the ego may be in the first half of a lane change
 """highway-env's lane change moves the ego sideways at >= 1.0 m/s until it crosses into the
@@ -58,18 +61,23 @@ target lane (tests/test_slow_shield.py measures it on the real env); a second LA
 aims one lane beyond the target, i.e. two lanes from where the ego is."""
 
 
-def desired_gap(speed: Any, closing: Any) -> Any:
-    """IDM's desired gap s* = s0 + v T + v dv / (2 sqrt(a b)) [m] at own speed `speed` and closing
-    speed `closing` [m/s]: the rules' safe gap and the continuous rules' following law."""
-    return S0 + speed * HEADWAY + speed * closing / (2 * np.sqrt(A_MAX * B_COMF))
+def desired_gap(speed: Any, closing: Any, headway: float = HEADWAY) -> Any:
+    """IDM's desired gap s* = s0 + v T + v dv / (2 sqrt(a b)) [m] at own speed `speed`, closing
+    speed `closing` [m/s] and time headway T = `headway` [s]: the rules' safe gap and the
+    continuous rules' following law."""
+    return S0 + speed * headway + speed * closing / (2 * np.sqrt(A_MAX * B_COMF))
 
 
 class ObservationRules:
     """Vectorized rules: `actions(obs)` maps observations (B, V, 5) to meta-actions (B,)."""
 
-    def __init__(self, preset: dict[str, Any], eps: float = 0.0, still_vy: float = 0.3) -> None:
+    def __init__(self, preset: dict[str, Any], eps: float = 0.0, still_vy: float = 0.3, *,
+                 headway: float = HEADWAY, margin: float = MARGIN) -> None:
         """`still_vy` [m/s]: the largest |lateral speed| at which the ego counts as centred (a
-        lane change may start); the continuous rules widen it (`ContinuousRules`)."""
+        lane change may start); the continuous rules widen it (`ContinuousRules`). `headway` [s]
+        (IDM's time gap in the safe gap) and `margin` [m] (the room asked beyond it before
+        speeding up or changing lanes): the defaults are `baseline:rules`'s, CLOSE_HEADWAY and
+        CLOSE_MARGIN `baseline:close-rules`'s."""
         from zodrive.envs import scenario
 
         env = scenario(preset)  # the observation as the environment builds it: highway-env's defaults filled in
@@ -82,6 +90,7 @@ class ObservationRules:
         self.lanes = int(env.lanes or 4)
         self.eps = float(eps)
         self.still_vy = float(still_vy)
+        self.headway, self.margin = float(headway), float(margin)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
 
     def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
@@ -99,7 +108,7 @@ class ObservationRules:
 
         _, sx, sy, svx, svy = self.slack
         closing = np.maximum(-dvx + svx, 0.0)
-        safe = desired_gap(ASSUMED_SPEED, closing)
+        safe = desired_gap(ASSUMED_SPEED, closing, self.headway)
         slack = dx - sx - CAR_LENGTH - safe   # per vehicle: its gap beyond the safe gap, if ahead
         rows = np.arange(len(dx))
 
@@ -148,22 +157,22 @@ class ObservationRules:
         own, left, right, centred = r["own"], r["left"], r["right"], r["centred"]
         left_blocked, right_blocked = r["left_blocked"], r["right_blocked"]
         act = np.full(len(own), IDLE)
-        act[own > MARGIN] = FASTER
-        keep_right = centred & ~right_blocked & (right > MARGIN)
+        act[own > self.margin] = FASTER
+        keep_right = centred & ~right_blocked & (right > self.margin)
         act[keep_right] = LANE_RIGHT
         close = own < 0
         act[close] = SLOWER
-        go_left = close & centred & ~left_blocked & (left > MARGIN)
-        go_right = close & centred & ~right_blocked & (right > MARGIN) & ~go_left
+        go_left = close & centred & ~left_blocked & (left > self.margin)
+        go_right = close & centred & ~right_blocked & (right > self.margin) & ~go_left
         act[go_left], act[go_right] = LANE_LEFT, LANE_RIGHT
         return act
 
     def safe_actions(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """(B, 5) booleans: the meta-actions these rules' room test accepts on each observation,
-        whatever the rules would choose. FASTER: the own lane free by MARGIN (as the rules ask
+        whatever the rules would choose. FASTER: the own lane free by the margin (as the rules ask
         before speeding up); IDLE: the own lane not too close (the rules keep speed there);
         LANE_LEFT / LANE_RIGHT: the target lane exists, nothing may be beside the ego there, and
-        its room exceeds MARGIN (as the rules ask before any change; the "centred" test is left
+        its room exceeds the margin (as the rules ask before any change; the "centred" test is left
         out: it decides when to ask, not whether the target lane is free) and, where the ego may
         be in the first half of a lane change (a second change aims one lane further), the same
         of the lane beyond; SLOWER: always.
@@ -172,11 +181,11 @@ class ObservationRules:
         choice is always accepted."""
         r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         safe = np.zeros((len(r["own"]), 5), dtype=bool)
-        safe[:, FASTER] = r["own"] > MARGIN
+        safe[:, FASTER] = r["own"] > self.margin
         safe[:, IDLE] = r["own"] >= 0
         for side, action in (("left", LANE_LEFT), ("right", LANE_RIGHT)):
-            beyond = ~r["moving"] | (~r[f"{side}2_blocked"] & (r[f"{side}2"] > MARGIN))
-            safe[:, action] = ~r[f"{side}_blocked"] & (r[side] > MARGIN) & r[f"{side}_exists"] & beyond
+            beyond = ~r["moving"] | (~r[f"{side}2_blocked"] & (r[f"{side}2"] > self.margin))
+            safe[:, action] = ~r[f"{side}_blocked"] & (r[side] > self.margin) & r[f"{side}_exists"] & beyond
         safe[:, SLOWER] = True
         return safe
 
@@ -280,21 +289,33 @@ class ContinuousRules:
         return np.stack([normalized(acc, self.acc_range), normalized(steering, self.steer_range)], axis=1)
 
 
-def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0) -> Victim:
-    """`baseline:rules` (or, with `eps`, robust-rules) as a victim: decisions only (one-hot on
-    discrete presets; on continuous ones the action itself), no scores and no gradients."""
+def named_rules(preset: dict[str, Any], name: str, eps: float = 0.0) -> ObservationRules:
+    """The discrete rules by their baseline name: `rules` (with `eps`, robust-rules) or
+    `close-rules` (following closer), e.g. as a teacher or a recipe's guide."""
+    if name == "close-rules":
+        return ObservationRules(preset, eps, headway=CLOSE_HEADWAY, margin=CLOSE_MARGIN)
+    if name == "rules":
+        return ObservationRules(preset, eps)
+    raise ZodriveError(f"unknown rules {name!r} (rules, close-rules)")
+
+
+def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0, *,
+                 close: bool = False) -> Victim:
+    """`baseline:rules` (with `eps`, robust-rules; with `close`, close-rules) as a victim:
+    decisions only (one-hot on discrete presets; on continuous ones the action itself), no
+    scores and no gradients."""
     from zodrive.envs import action_kind
 
     if action_kind(preset) == "continuous":
-        if eps:
-            raise ZodriveError("baseline:robust-rules drives discrete presets only")
+        if eps or close:
+            raise ZodriveError(f"baseline:{'robust' if eps else 'close'}-rules drives discrete presets only")
         driver = ContinuousRules(preset)
 
         def controls(obs: np.ndarray) -> np.ndarray:
             return driver.controls(np.asarray(obs).reshape(len(obs), *obs_shape)).astype(np.float32)
 
         return Victim(query=controls, kind="continuous", obs_shape=obs_shape, reads="observation")
-    rules = ObservationRules(preset, eps)
+    rules = named_rules(preset, "close-rules" if close else "rules", eps)
     eye = np.eye(n_actions, dtype=np.float32)
 
     def query(obs: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
 ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
                "double_q", "guide", "init", "calibrate"}
-GUIDES = ("rules",)  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
+GUIDES = ("rules", "close-rules")  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
 DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
 CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
 CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
@@ -192,9 +192,9 @@ def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any])
             and int(spec.get("demonstrations", 0)) >= 0 and int(spec.get("pretrain_steps", 0)) >= 0):
         raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation, margin, demonstrations "
                            "and pretrain_steps >= 0")
-    from zodrive.agents.rules import ObservationRules
+    from zodrive.agents.rules import named_rules
 
-    rules = ObservationRules(preset)
+    rules = named_rules(preset, spec["name"])
     model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])),
                           imitation=imitation, margin=margin)
 
