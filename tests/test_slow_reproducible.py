@@ -81,23 +81,21 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("model,cell", [
-    ("models/ddpg-imitation", "results/imitation-continuous/eval-rules-s2000"),  # the same actor, made from runs/
-    ("baseline:rules", "results/rules-continuous/eval-rules"),
-    ("models/td3-finetuned", "results/finetune-continuous/eval-init1-s1000"),  # the checkpoint it was copied from
-    ("baseline:close-rules", "results/close-rules/eval"),  # the faster discrete teacher
+@pytest.mark.parametrize("model,cell,preset", [
+    ("models/ddpg-imitation", "results/imitation-continuous/eval-rules-s2000", "continuous"),  # the same actor, made from runs/
+    ("baseline:rules", "results/rules-continuous/eval-rules", "continuous"),
+    ("models/td3-finetuned", "results/finetune-continuous/eval-init1-s1000", "continuous"),  # the checkpoint it was copied from
+    ("baseline:close-rules", "results/close-rules/eval", "discrete"),  # the faster discrete teacher
 ])
-def test_the_continuous_rules_and_their_student_reproduce_their_first_episodes(tmp_path: Path, model: str,
-                                                                                 cell: str) -> None:
+def test_the_rules_and_their_students_reproduce_their_first_episodes(tmp_path: Path, model: str, cell: str,
+                                                                     preset: str) -> None:
     """Issue 22's continuous teacher, the shipped DAgger student and the TD3 fine-tuned from it drive
     their committed 100-episode evaluations' first episodes again, number for number."""
     committed = _records(ROOT / cell / "episodes.jsonl")
     out = tmp_path / "eval"
     target = str(ROOT / model) if model.startswith("models/") else model
-    preset = "discrete" if model == "baseline:close-rules" else "continuous"
     assert main(["evaluate", target, "--preset", preset, "--episodes", "3", "--out", str(out),
                  "--no-progress"]) == 0
     for record, theirs in zip(_records(out / "episodes.jsonl"), committed[:3], strict=True):
         assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
         assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)
-

@@ -133,8 +133,8 @@ def load_victim(model: str, preset: dict[str, Any], *, trust: bool = False) -> V
         if baseline.reads == "observation":
             from zodrive.agents.rules import rules_victim
 
-            return rules_victim(preset, observation_shape(preset), n_actions(preset), baseline.eps or 0.0,
-                                close=baseline.name == "close-rules")
+            return rules_victim(preset, observation_shape(preset), n_actions(preset),
+                                baseline.name.partition("@")[0], baseline.eps or 0.0)  # NAME@EPS: the budget is eps
         from zodrive.envs import action_names
 
         return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset), action_names(preset))

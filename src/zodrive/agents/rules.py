@@ -290,32 +290,32 @@ class ContinuousRules:
 
 
 def named_rules(preset: dict[str, Any], name: str, eps: float = 0.0) -> ObservationRules:
-    """The discrete rules by their baseline name: `rules` (with `eps`, robust-rules) or
-    `close-rules` (following closer), e.g. as a teacher or a recipe's guide."""
+    """The discrete rules by their baseline name: `rules`, `robust-rules` (pessimistic for `eps`)
+    or `close-rules` (following closer), e.g. as a victim, a teacher or a recipe's guide."""
     if name == "close-rules":
         return ObservationRules(preset, eps, headway=CLOSE_HEADWAY, margin=CLOSE_MARGIN)
-    if name == "rules":
+    if name in ("rules", "robust-rules"):
         return ObservationRules(preset, eps)
-    raise ZodriveError(f"unknown rules {name!r} (rules, close-rules)")
+    raise ZodriveError(f"unknown rules {name!r} (rules, robust-rules, close-rules)")
 
 
-def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, eps: float = 0.0, *,
-                 close: bool = False) -> Victim:
-    """`baseline:rules` (with `eps`, robust-rules; with `close`, close-rules) as a victim:
-    decisions only (one-hot on discrete presets; on continuous ones the action itself), no
-    scores and no gradients."""
+def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, name: str = "rules",
+                 eps: float = 0.0) -> Victim:
+    """The rules baseline `name` (`named_rules`) as a victim: decisions only (one-hot on discrete
+    presets; on continuous ones, where only `rules` drives, the action itself), no scores and no
+    gradients."""
     from zodrive.envs import action_kind
 
     if action_kind(preset) == "continuous":
-        if eps or close:
-            raise ZodriveError(f"baseline:{'robust' if eps else 'close'}-rules drives discrete presets only")
+        if name != "rules":
+            raise ZodriveError(f"baseline:{name} drives discrete presets only")
         driver = ContinuousRules(preset)
 
         def controls(obs: np.ndarray) -> np.ndarray:
             return driver.controls(np.asarray(obs).reshape(len(obs), *obs_shape)).astype(np.float32)
 
         return Victim(query=controls, kind="continuous", obs_shape=obs_shape, reads="observation")
-    rules = named_rules(preset, "close-rules" if close else "rules", eps)
+    rules = named_rules(preset, name, eps)
     eye = np.eye(n_actions, dtype=np.float32)
 
     def query(obs: np.ndarray) -> np.ndarray:
