@@ -1,7 +1,8 @@
 """Shipped models reproduce their committed evaluations, clean and under attack, episode for
 episode: the paper-budget DQN its card, the PPO made by plain stable-baselines3 on highway-fast-v0,
 the DQN and DDPG of Table 1, the continuous rules, their DAgger student (`models/ddpg-imitation`) and
-the TD3 fine-tuned from it (`models/td3-finetuned`) on their first episodes (slow: real highway-env episodes; CI runs these)."""
+the TD3 fine-tuned from it (`models/td3-finetuned`), the faster discrete rules and their student
+(`models/dqn-close`) on their first episodes (slow: real highway-env episodes; CI runs these)."""
 
 from __future__ import annotations
 
@@ -86,10 +87,11 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
     ("baseline:rules", "results/rules-continuous/eval-rules", "continuous"),
     ("models/td3-finetuned", "results/finetune-continuous/eval-init1-s1000", "continuous"),  # the checkpoint it was copied from
     ("baseline:close-rules", "results/close-rules/eval", "discrete"),  # the faster discrete teacher
+    ("models/dqn-close", "results/close-rules/eval-dagger10-s21000", "discrete"),  # its student, retrained into models/
 ])
 def test_the_rules_and_their_students_reproduce_their_first_episodes(tmp_path: Path, model: str, cell: str,
                                                                      preset: str) -> None:
-    """Issue 22's continuous teacher, the shipped DAgger student and the TD3 fine-tuned from it drive
+    """Issue 22's teachers, the shipped DAgger students and the TD3 fine-tuned from one drive
     their committed 100-episode evaluations' first episodes again, number for number."""
     committed = _records(ROOT / cell / "episodes.jsonl")
     out = tmp_path / "eval"
