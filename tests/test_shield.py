@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from zodrive.agents.rules import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, ObservationRules
+from zodrive.agents.rules import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, ObservationRules, named_rules
 from zodrive.attacks.victim import Victim
-from zodrive.defense import parse_defense
-from zodrive.defense.shield import DEFAULT_EPS, Shield, shielded_victim
+from zodrive.defense import defense_version, parse_defense
+from zodrive.defense.shield import DEFAULT_EPS, SHIELD_RULES, VERSION, Shield, shielded_victim
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 
@@ -60,13 +60,15 @@ def test_unsafe_faster_is_replaced_and_safe_faster_passes() -> None:
     assert shield.decide(blocked, np.array([LANE_LEFT]))[0] != LANE_LEFT
 
 
-def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box() -> None:
+@pytest.mark.parametrize("name", ["shield", "close-shield"])
+def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) -> None:
     """Under any perturbation of budget eps of the other vehicles' rows (here: corners of the
     box, the attacker's random-search vertices), whatever the driver proposes, the shield's
-    action is one the plain rules' test accepts on the true observation."""
+    action is one its plain rules' test (`baseline:rules`' or `close-rules`' gap) accepts on the
+    true observation."""
     rng = np.random.default_rng(0)
     for eps in (0.02, 0.05):
-        shield, truth_test = Shield(PRESET, eps), ObservationRules(PRESET, 0.0)
+        shield, truth_test = Shield(PRESET, eps, name), named_rules(PRESET, SHIELD_RULES[name], 0.0)
         truth = _truths(2000, rng)
         safe_truth = truth_test.safe_actions(truth)
         passed = vetoed = 0
@@ -235,8 +237,6 @@ def test_defended_outputs_pick_the_shielded_action_and_pgd_gets_gradients() -> N
 
 
 def test_results_and_adversaries_are_keyed_on_the_shields_version() -> None:
-    from zodrive.defense import defense_version
-    from zodrive.defense.shield import VERSION
     from zodrive.evaluation.evaluate import EvalJob
 
     assert defense_version("shield") == defense_version("shield@0.05") == VERSION >= 3
@@ -250,7 +250,10 @@ def test_names_budgets_and_presets() -> None:
     assert parse_defense("shield") == f"shield@{DEFAULT_EPS:g}" == "shield@0.02"
     assert parse_defense("shield@.050") == "shield@0.05"
     assert parse_defense("kinematic") == "kinematic"
-    for bad in ("shield@0", "shield@1", "shield@x", "shield@nan", "shield@-0.1", "shield@", "magic"):
+    assert parse_defense("close-shield") == "close-shield@0.02" and parse_defense("close-shield@.05") == "close-shield@0.05"
+    assert defense_version("close-shield") == VERSION
+    for bad in ("shield@0", "shield@1", "shield@x", "shield@nan", "shield@-0.1", "shield@", "magic", "close-shield@2",
+                "closer-shield"):
         with pytest.raises(ZodriveError):
             parse_defense(bad)
     with pytest.raises(ZodriveError, match="discrete"):
@@ -259,7 +262,7 @@ def test_names_budgets_and_presets() -> None:
         Shield(load_preset("discrete", ["highway.observation.absolute=true"]))
 
 
-@pytest.mark.parametrize("defense", ["shield@2", "shield@abc", "shieldx"])
+@pytest.mark.parametrize("defense", ["shield@2", "shield@abc", "shieldx", "close-shield@abc"])
 def test_bad_defense_on_the_command_line_is_one_line(defense: str, capsys: pytest.CaptureFixture[str]) -> None:
     from zodrive.cli import main
 
@@ -287,3 +290,17 @@ def test_the_policy_env_drives_with_the_shield() -> None:
     action = act(victim, obs, env.action_space)
     assert shield.safe(obs[None])[0, int(action)]
     env.close()
+
+
+def test_the_close_shield_asks_for_close_rules_gap() -> None:
+    """`close-shield` lets a driver follow where `shield` vetoes it (a car 30 m ahead at the same
+    speed: outside close-rules' gap at eps 0.02, inside the rules'), and both veto a car 12 m
+    ahead closing at 2 m/s; each falls back to its own rules' choice."""
+    free, close = _road()
+    follow = free.copy()
+    follow[0, 1] = [1, 0.30, 0, 0, 0]
+    shield, close_shield = Shield(PRESET, 0.02), Shield(PRESET, 0.02, "close-shield")
+    assert shield.decide(follow, np.array([IDLE]))[0] != IDLE
+    assert close_shield.decide(follow, np.array([IDLE]))[0] == IDLE
+    assert close_shield.decide(close, np.array([FASTER]))[0] != FASTER
+    assert close_shield.decide(close, np.array([FASTER]))[0] == named_rules(PRESET, "close-rules", 0.02).actions(close)[0]

@@ -232,8 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
     _envs_flag(ev)
     ev.add_argument("--defense", type=_defense, metavar="|".join(DEFENSE_NAMES),
                     help="kinematic: filter between the (attacked) sensor and the policy; shield[@EPS]: the "
-                         "pessimistic rules at budget EPS (default 0.02) veto unsafe actions; attacks query the "
-                         "defended system")
+                         "pessimistic rules at budget EPS (default 0.02) veto unsafe actions; close-shield[@EPS]: the same "
+                         "with baseline:close-rules' shorter gap; attacks query the defended system")
     _attack_flags(ev)
     ev.add_argument("--no-progress", action="store_true")
 
@@ -336,7 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fitted start while the critic learns its returns)")
     atk.add_argument("--out", type=Path, required=True, help="the adversary's model folder")
     atk.add_argument("--seed", type=_seed, default=0, help="training seed (PPO and the environment)")
-    atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]",
+    atk.add_argument("--defense", type=_defense, metavar="shield[@EPS]|close-shield[@EPS]",
                      help="train against the defended system (stateless defenses only)")
     atk.add_argument("--victim-action", action="store_true",
                      help="the adversary also observes the victim's clean action (1 query per step at attack time)")

@@ -3,7 +3,7 @@
 `kinematic`: an observation filter (physics between two decisions); it tracks an episode, so it
 wraps the environment. `shield[@EPS]`: a certified safety shield that vetoes the policy's action
 when the pessimistic rules at budget EPS do not find it safe (default EPS 0.02;
-`zodrive.defense.shield`); it keeps no state, so the shielded policy is itself a policy."""
+`zodrive.defense.shield`); `close-shield[@EPS]` the same with `baseline:close-rules`' shorter gap; it keeps no state, so the shielded policy is itself a policy."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from zodrive.defense.kinematic import KinematicFilter
     from zodrive.defense.shield import Shield
 
-DEFENSE_NAMES = ("kinematic", "shield", "shield@EPS")  # as the user may write them
+DEFENSE_NAMES = ("kinematic", "shield", "shield@EPS", "close-shield", "close-shield@EPS")  # as the user may write them
 
 
 def parse_defense(name: str) -> str:
@@ -25,10 +25,10 @@ def parse_defense(name: str) -> str:
 
     if name == "kinematic":
         return name
-    eps = parse_shield(name)
-    if eps is None:
+    shield = parse_shield(name)
+    if shield is None:
         raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSE_NAMES)})")
-    return f"shield@{eps:g}"
+    return f"{shield[0]}@{shield[1]:g}"
 
 
 def keeps_state(name: str) -> bool:
@@ -41,18 +41,19 @@ def defense_version(name: str) -> int | None:
     """The version of the defense's behaviour, recorded in result keys and adversaries, so that
     a folder or an adversary made against an earlier shield is not taken for this one (None:
     unversioned, unchanged since it was built)."""
-    from zodrive.defense.shield import VERSION
+    from zodrive.defense.shield import VERSION, parse_shield
 
-    return VERSION if parse_defense(name).startswith("shield@") else None
+    return VERSION if parse_shield(parse_defense(name)) is not None else None
 
 
 def make_defense(name: str, preset: dict[str, Any]) -> KinematicFilter | Shield:
-    """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`)."""
+    """A defense by name (one name per idea: `--defense kinematic`, `--defense shield[@EPS]`,
+    `--defense close-shield[@EPS]`)."""
     from zodrive.defense.shield import Shield, parse_shield
 
-    eps = parse_shield(name)
-    if eps is not None:
-        return Shield(preset, eps)
+    shield = parse_shield(name)
+    if shield is not None:
+        return Shield(preset, shield[1], shield[0])
     if name != "kinematic":
         raise ZodriveError(f"unknown defense {name!r} (known: {', '.join(DEFENSE_NAMES)})")
     from zodrive.defense.kinematic import KinematicFilter

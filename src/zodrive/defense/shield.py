@@ -1,5 +1,5 @@
-"""A certified safety shield (`--defense shield[@EPS]`): the learned driver acts, the
-pessimistic rules veto.
+"""A certified safety shield (`--defense shield[@EPS]`, `close-shield[@EPS]`): the learned
+driver acts, the pessimistic rules veto.
 
 Each step the driver proposes its action (argmax of its scores). If the robust rules'
 room test at budget EPS (`ObservationRules.safe_actions`, the code `baseline:robust-rules@EPS`
@@ -57,36 +57,45 @@ budget of zodrive's robustness grid, the one at which the pessimistic rules stil
 (at 0.05 they are the brake)."""
 
 
-def parse_shield(name: str) -> float | None:
-    """The budget of `shield` / `shield@EPS` (None if `name` is not a shield); one-line error on a
-    malformed budget."""
+SHIELD_RULES = {"shield": "robust-rules", "close-shield": "close-rules"}
+"""Each shield by name and the rules whose room test it applies pessimistically: `shield` asks for
+`baseline:rules`' gap (1 s IDM time gap, 15 m margin), `close-shield` for `baseline:close-rules`'
+(0.3 s, 5 m), the gap a driver cloned from those rules (`models/dqn-close`) keeps; the
+guarantee is the same, relative to that gap."""
+
+
+def parse_shield(name: str) -> tuple[str, float] | None:
+    """The shield's name and budget of `shield[@EPS]` / `close-shield[@EPS]` (None if `name` is
+    not a shield); one-line error on a malformed budget."""
     base, at, eps = str(name).partition("@")
-    if base != "shield":
+    if base not in SHIELD_RULES:
         return None
     if not at:
-        return DEFAULT_EPS
+        return base, DEFAULT_EPS
     try:
         value = float(eps)
     except ValueError:
         value = float("nan")
     if not 0 < value < 1:  # also rejects nan
-        raise ZodriveError(f"{name}: shield@EPS takes a budget EPS in (0, 1) in normalized units, "
-                           "e.g. shield@0.02")
-    return value
+        raise ZodriveError(f"{name}: {base}@EPS takes a budget EPS in (0, 1) in normalized units, "
+                           f"e.g. {base}@0.02")
+    return base, value
 
 
 class Shield:
     """`decide(obs, proposed)`: the proposed meta-actions where the robust rules' room test at
-    `eps` accepts them, the robust rules' choice elsewhere. Stateless."""
+    `eps` accepts them, the robust rules' choice elsewhere. Stateless. `name` (`SHIELD_RULES`):
+    whose gap the room test asks for."""
 
-    def __init__(self, preset: dict[str, Any], eps: float = DEFAULT_EPS) -> None:
+    def __init__(self, preset: dict[str, Any], eps: float = DEFAULT_EPS, name: str = "shield") -> None:
+        from zodrive.agents.rules import named_rules
         from zodrive.envs import action_kind
 
         if action_kind(preset) != "discrete":
             raise ZodriveError("the shield vetoes meta-actions: it guards discrete policies (preset `discrete`), "
                                "not continuous ones")
         try:
-            self.rules = ObservationRules(preset, eps)
+            self.rules: ObservationRules = named_rules(preset, SHIELD_RULES[name], eps)
         except ZodriveError as exc:
             raise ZodriveError(f"the shield reads what the rules read: {exc}") from None
         self.eps = float(eps)
