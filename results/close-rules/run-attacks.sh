@@ -1,6 +1,7 @@
 #!/bin/bash
 # models/dqn-close under attack, bare and behind the certified shield: the cells of the shield's v4
-# table (results/shield/run-v4.sh, on models/dqn-driver) on the new driver, 100 episodes per cell on
+# table (results/shield/run-v4.sh, on models/dqn-driver) on the new driver, and the shield asking for
+# close-rules' gap (close-shield), 100 episodes per cell on
 # seeds 100000-100099, into results/close-rules/attacked/. Two cells at a time (one per core);
 # a cell already complete is skipped by zodrive's resume, so the script can be run again after an
 # interruption. Usage: bash results/close-rules/run-attacks.sh
@@ -28,6 +29,8 @@ shield@0.02-random-search-eps0.02 --defense shield@0.02 --attack random-search -
 shield@0.05-none --defense shield@0.05
 shield@0.05-pgd-eps0.05 --defense shield@0.05 --attack pgd --eps 0.05
 shield@0.05-random-search-eps0.05 --defense shield@0.05 --attack random-search --eps 0.05
+close-shield@0.02-none --defense close-shield@0.02
+close-shield@0.02-random-search-eps0.02 --defense close-shield@0.02 --attack random-search --eps 0.02
 EOF
 # certificates and the per-state sandwich on the states of 10 clean episodes (docs/defenses.md's table)
 [ -f results/certify/dqn-close/certify.json ] || zodrive certify models/dqn-close --eps 0.005 0.01 0.02 0.05 \
