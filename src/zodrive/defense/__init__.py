@@ -15,9 +15,7 @@ if TYPE_CHECKING:
     from zodrive.defense.kinematic import KinematicFilter
     from zodrive.defense.shield import Shield
 
-from zodrive.defense.shield import SHIELD_RULES  # noqa: E402  (names only: the shield module imports numpy, not torch)
-
-DEFENSE_NAMES = ("kinematic", *(f"{name}{at}" for name in SHIELD_RULES for at in ("", "@EPS")))  # as the user may write them
+DEFENSE_NAMES = ("kinematic", "shield", "shield@EPS", "close-shield", "close-shield@EPS")  # as the user may write them
 
 
 def parse_defense(name: str) -> str:
