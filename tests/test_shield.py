@@ -83,11 +83,14 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) ->
             escape = unsafe & (final == shield.rules.escapes(seen))   # taken although the test rejects it
             assert not (unsafe & ~escape).any()
             assert safe_truth[np.arange(len(truth)), final][~escape].all()
-            # an escape: the own lane too close for IDLE in the worst case, and the target lane's
-            # true room at least that worst case (never worse than staying)
+            # an escape: the own lane too close for IDLE in the worst case, and the target lane one
+            # the plain test accepts IDLE in on the true observation (room >= 0, nobody beside)
             own_worst = shield.rules.rooms(seen)["own"]
-            target = np.where(final == LANE_RIGHT, true_rooms["right"], true_rooms["left"])
-            assert (own_worst[escape] < 0).all() and (target[escape] >= own_worst[escape] - 1e-3).all()  # float32 seen
+            side = np.where(final == LANE_RIGHT, "right", "left")
+            target = np.where(side == "right", true_rooms["right"], true_rooms["left"])
+            beside = np.where(side == "right", true_rooms["right_blocked"], true_rooms["left_blocked"])
+            assert (own_worst[escape] < 0).all()
+            assert (target[escape] >= -1e-3).all() and not beside[escape].any()   # float32 seen
             escaped += int(escape.sum())
             passed += int(((final == proposed) & (proposed != SLOWER)).sum())
             vetoed += int((final != proposed).sum())
@@ -159,25 +162,46 @@ def _trapped(right_car: bool) -> tuple[np.ndarray, np.ndarray]:
     return truth, seen
 
 
-def test_the_shield_escapes_a_lane_the_attacker_would_keep_it_braking_in() -> None:
-    """SLOWER never takes the ego below 20 m/s: behind a slower car, braking is no refuge. The
-    attacker (v2: 4 crashes in 100 episodes under the learned adversary) made the car ahead look
-    as if it might be in the free lane beside, so every lane change was vetoed; v3 counts a car
-    that may be in both lanes as the danger it is in either, and leaves."""
+def test_the_shield_escapes_only_into_a_lane_free_for_every_true_state() -> None:
+    """SLOWER never takes the ego below 20 m/s: behind a slower car, braking is no refuge, so
+    where the own lane is too close even to keep speed the shield changes lanes if a neighbour is
+    free enough to keep speed in whatever the attacker did. A car shown half a lane aside may be
+    in either lane, so it blocks both: the shield then brakes, as the constant brake would."""
     shield = Shield(PRESET, 0.02)
     truth, seen = _trapped(right_car=False)
-    assert not shield.safe(seen)[0, LANE_RIGHT]                  # the right lane looks occupied ...
-    assert ObservationRules(PRESET).safe_actions(truth)[0, LANE_RIGHT]   # ... and is free
-    assert shield.decide(seen, np.array([FASTER]))[0] == LANE_RIGHT
-    assert shield.decide(seen, np.array([LANE_RIGHT]))[0] == LANE_RIGHT
-    _, seen = _trapped(right_car=True)                           # a car truly there: no escape
-    assert shield.decide(seen, np.array([FASTER]))[0] == SLOWER
-    calm = seen.copy()
-    calm[0, 1, 1], calm[0, 2, 1] = 0.9, 0.9                      # the own lane not too close: no escape
+    free = seen.copy()
+    free[0, 1, 2] = 0.0                                          # the car ahead seen in its lane
+    free[0, 2] = [1, 0.55, 0.04, 0.0, 0.0]                       # a car 55 m ahead on the right
+    r = shield.rules.rooms(free)
+    assert r["own"][0] < 0 and 0 <= r["right"][0] <= shield.rules.margin  # too close; the right: IDLE's room
+    assert shield.rules.actions(free)[0] == SLOWER               # the rules brake (no room by the margin) ...
+    assert shield.decide(free, np.array([FASTER]))[0] == LANE_RIGHT   # ... the shield escapes
+    assert shield.decide(seen, np.array([FASTER]))[0] == SLOWER  # the car shown aside: it may be there
+    assert ObservationRules(PRESET).safe_actions(truth)[0, LANE_RIGHT]   # (it is not: the brake's trap)
+    calm = free.copy()
+    calm[0, 1, 1] = 0.9                                          # the own lane not too close: no escape
     assert shield.rules.escapes(calm)[0] == -1
-    moving = _trapped(right_car=False)[1]
+    moving = free.copy()
     moving[0, 0, 4] = 0.1                                        # mid-change (2 m/s sideways): no escape
     assert shield.rules.escapes(moving)[0] == -1
+
+
+def test_an_escape_never_moves_in_behind_a_car_seen_half_a_lane_aside() -> None:
+    """v4's one crash in 100 episodes under random search at eps 0.02 (seed 100031, step 44, the
+    seen observation as traced in results/shield/traces): own lane too close; a car truly in the
+    right lane 11 m ahead and 3 m/s slower, shown exactly half a lane towards the ego. v4 counted
+    it with the own lane, escaped right and ran into it 36 steps later; v5 counts it in both and
+    escapes left, where the cars that may be there (one truly in the own lane, shown half a lane
+    left, and one far ahead) leave room to keep speed."""
+    shield = Shield(PRESET, 0.02)
+    seen = _seen([[1, 98, 6, 19.6, -0.4], [1, 13.21, 2, -2.62, -0.4], [1, 46.98, 2, 2.2, 0.4],
+                  [1, 57.81, -2, -0.09, 0.4], [1, 85.71, -1.99, 2.6, -0.42]])
+    assert shield.rules.rooms(seen)["own"][0] < 0
+    assert not shield.safe(seen)[0, LANE_RIGHT]
+    assert shield.decide(seen, np.array([LANE_RIGHT]))[0] == LANE_LEFT
+    no_left = seen.copy()
+    no_left[0, 4, 1] = 0.3                                       # the car on the left 30 m ahead: no escape
+    assert shield.decide(no_left, np.array([LANE_RIGHT]))[0] == SLOWER
 
 
 def _seen(rows: list[list[float]]) -> np.ndarray:
@@ -189,7 +213,7 @@ def test_an_escape_minds_a_car_centred_in_its_target_lane_and_cut_ins_from_beyon
     """v3's escapes caused both crashes of 100 episodes under PGD at eps 0.02: into a lane whose
     car, seen at its centre 7 m ahead, also counted as possibly in the own lane and was left out
     (seed 100055, step 98), and beside slow cars one lane further that then cut in (seed 100044,
-    step 12; the seen observations of those steps, rounded). v4 does neither."""
+    step 12; the seen observations of those steps, rounded). v4 and v5 do neither."""
     shield = Shield(PRESET, 0.02)
     centred = _seen([[1, 98, 10, 19.6, -0.4], [1, -8.14, -14, -6.86, -0.4], [1, 7.19, -4, -7.46, 0],
                      [1, 37.35, -8, -6.84, 0], [1, 73.07, 0, -7.53, -0.4]])
@@ -201,6 +225,7 @@ def test_an_escape_minds_a_car_centred_in_its_target_lane_and_cut_ins_from_beyon
         assert shield.decide(seen, np.array([LANE_LEFT]))[0] == SLOWER
     clear = beyond.copy()
     clear[0, 1:3, 1] = 0.9                                     # the cars one lane further 90 m ahead
+    clear[0, 3, 2] = 0.0                                       # the own lane's car seen at its centre
     assert shield.rules.escapes(clear)[0] == LANE_LEFT
 
 

@@ -96,9 +96,8 @@ class ObservationRules:
     def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
         right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
-        may be beside the ego there, the same as an escape counts them (`*_only`, see
-        `escapes`), whether the ego is centred and whether it may be mid-change; pessimistic
-        within eps."""
+        may be beside the ego there, whether the ego is centred and whether it may be
+        mid-change; pessimistic within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5
@@ -137,14 +136,6 @@ class ObservationRules:
             value, beside = room(near)
             out[side], out[f"{side}_blocked"] = np.where(exists(sign), value, -np.inf), beside | ~exists(sign)
             out[f"{side}2"], out[f"{side}2_blocked"] = room(beyond)
-            # for an escape: the vehicles that may be there, except one that may be in the own
-            # lane too and is seen nearer the own lane's centre (the same danger whichever lane
-            # the ego picks) unless it may overlap the ego; and, as cut-in risks, the lane beyond
-            shared = near & own_lane & (np.abs(dy) <= np.abs(dy - sign * LANE_WIDTH))
-            value, beside = room(near & ~shared)
-            overlap = (shared & (dx - sx < CAR_LENGTH)).any(axis=1)
-            out[f"{side}_only"], out[f"{side}_only_blocked"] = value, beside | overlap
-            out[f"{side}2_only"], out[f"{side}2_only_blocked"] = room(beyond & ~own_lane)
         # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
         lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
         lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)
@@ -193,19 +184,21 @@ class ObservationRules:
         """(B,) the lane change that leaves an own lane the room test rejects even for IDLE, or
         -1: SLOWER cannot always save the ego there (a meta-action never slows it below the
         preset's lowest target speed, 20 m/s, and the car ahead may be slower). A side qualifies
-        if it exists wherever the ego may be, the ego is not mid-change, the vehicles that may be
-        there leave room >= 0 and none may be beside, and so do those that may be in the lane
-        beyond (they may cut in). A vehicle that may be in both the own and the target lane and
-        is seen nearer the own lane's centre is left out unless it may overlap the ego: it is
-        the own lane's worst case too, so its room is at least that (the attacker's trick of
-        showing the car ahead half a lane aside does not pin the ego behind it). The side with
-        more room; -1 where none qualifies or the own lane's room is >= 0."""
+        if it exists wherever the ego may be, the ego is not mid-change, every vehicle that may
+        be there leaves room >= 0 (the test IDLE passes) and none may be beside, and so does
+        every vehicle that may be in the lane beyond (it may cut in). Every vehicle that may be
+        in the target lane counts, also one that may be in the own lane too: at eps 0.02 a car
+        seen half a lane aside may truly be in either, and no rule on its seen position tells
+        which (v4 left out the one seen nearer the own lane and drove in behind it, seed 100031).
+        So an escape never moves towards a car the test would not keep speed behind; an attacker
+        who shows the car ahead half a lane aside keeps the ego braking, as the constant brake
+        would. The side with more room; -1 where none qualifies or the own lane's room is >= 0."""
         r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
         room = {}
         for side in ("left", "right"):
-            ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_only_blocked"] & (r[f"{side}_only"] >= 0)
-                  & ~r[f"{side}2_only_blocked"] & (r[f"{side}2_only"] >= 0))
-            room[side] = np.where(ok, r[f"{side}_only"], -np.inf)
+            ok = (r[f"{side}_exists"] & ~r["moving"] & ~r[f"{side}_blocked"] & (r[side] >= 0)
+                  & ~r[f"{side}2_blocked"] & (r[f"{side}2"] >= 0))
+            room[side] = np.where(ok, r[side], -np.inf)
         pick = np.where(room["right"] >= room["left"], LANE_RIGHT, LANE_LEFT)
         found = np.maximum(room["left"], room["right"]) > -np.inf
         return np.where(found & (r["own"] < 0), pick, -1)

@@ -7,21 +7,23 @@ decides with, plus: a lane change only towards a lane that exists wherever the e
 be, and, while the ego may be mid-change, only if the lane beyond is free too, since a second
 change aims there) does not accept that action on the observation, the shield takes the robust
 rules' own choice instead (IDLE, FASTER or a lane change they find room for); where that is
-SLOWER and the own lane is too close even to keep speed, a lane change that is no worse than
-staying (`ObservationRules.escapes`); else SLOWER.
+SLOWER and the own lane is too close even to keep speed, a lane change into a lane free enough
+to keep speed in for every true state (`ObservationRules.escapes`); else SLOWER.
 
 Guarantee: the room test at EPS is pessimistic over every true state within L-inf EPS of the
 observation (every observed vehicle possibly anywhere its true state may be: closer, closing
 faster, in every lane it may overlap). So under any attack of budget <= EPS on the other
-vehicles' rows, every action the shielded car takes, escapes aside, is one the plain rules'
-test (eps 0) accepts on the *true* observation: no FASTER or IDLE into an own-lane gap below the
+vehicles' rows, every action the shielded car takes is one the plain rules' test (eps 0)
+accepts on the *true* observation (an escape by a weaker standard, below): no FASTER or IDLE into an own-lane gap below the
 rules' safe gap, no lane change into a lane whose gap is too small or where a listed vehicle is
 beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
-state, and its lane's true room is at least the own lane's worst case (a vehicle that may be in
-both lanes and is seen nearer the own one is the same danger whichever the ego picks), with the
-lane beyond it clear enough that no car there is about to cut in: the attacker can still make the car
-careful, but no longer keep it braking behind a car slower than it can go (the meta-actions
-never slow it below 20 m/s) by making every car ahead look as if it might be in the lane beside.
+state, and only into a lane where the test accepts IDLE for every true state (every vehicle that
+may be there counts, also one that may be in the own lane too), with the lane beyond it clear
+enough that no car there is about to cut in. So every action is accepted by the plain test on the
+true observation, an escape by the standard of keeping speed (room >= 0) rather than that of
+changing lanes (room > the margin). The attacker can make the car careful, also keep it braking behind a
+car shown half a lane aside (the constant brake's failure: the meta-actions never slow it below
+20 m/s), but not steer it towards a car.
 What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
 may shift the ego's perceived lateral position and speed; the test assumes an own speed of
 25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
@@ -42,13 +44,13 @@ from zodrive.agents.rules import SLOWER, ObservationRules
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
-VERSION = 4
+VERSION = 5
 """The shield's behaviour, part of every result key that names it: v1 the robust rules' room
 test, v2 + a lane change only towards a lane that exists for every ego position, v3 + the lane
 beyond checked while the ego may be mid-change, and the escape from an own lane too close to
 stay in (the fallback), v4 + an escape minds the lane beyond its target (cut-ins) and leaves out
-only a shared vehicle seen nearer the own lane. Folders made by an earlier version are not
-resumed with this one."""
+only a shared vehicle seen nearer the own lane, v5 the sound escape: every vehicle that may be in
+its target lane counts. Folders made by an earlier version are not resumed with this one."""
 
 DEFAULT_EPS = 0.02
 """`--defense shield` = `shield@0.02`: a defense is one fixed system (its clean and attacked cells
@@ -118,8 +120,8 @@ class Shield:
 
     def fallback(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """The robust rules' choice where the test accepts it and it is not SLOWER; else a lane
-        change out of an own lane the test rejects even for IDLE, where one is no worse than
-        staying (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
+        change out of an own lane the test rejects even for IDLE, into a lane it accepts IDLE in
+        for every true state (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
         behind a slower car is no refuge); else SLOWER."""
         r = self.rules.rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
         act = self.rules.actions(batch, r)
