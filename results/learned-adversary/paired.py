@@ -9,6 +9,7 @@ from pathlib import Path
 from zodrive.evaluation.stats import paired_difference_ci
 
 C, R = Path("results/learned-adversary/cells"), Path("results/robustness-100")
+K = Path("results/close-rules/attacked")
 PAIRS = [  # (learned cell, per-step cell)
     (C / "dqn-driver-amortized-eps0.05-100", C / "dqn-driver-pgd-eps0.05-100"),
     (C / "dqn-driver-amortized-eps0.2-100", C / "dqn-driver-random-search-eps0.2-100"),
@@ -21,6 +22,7 @@ PAIRS = [  # (learned cell, per-step cell)
     *[(C / f"ppo-ddpg-driver-eps0.05{s}-100", C / "ddpg-driver-random-search-eps0.05-100") for s in ("", "-seed1", "-seed2")],
     (C / "ppo-ddpg-robust-eps0.05-100", C / "ddpg-robust-random-search-eps0.05-100"),
     (C / "ppo-td3-finetuned-eps0.2-100", C / "td3-finetuned-random-search-eps0.2-100"),
+    *[(K / f"amortized-eps{e}", K / f"random-search-eps{e}") for e in ("0.02", "0.05")],  # models/dqn-close
 ]
 
 
@@ -29,8 +31,12 @@ def returns(cell: Path) -> dict[int, float]:
     return {row["seed"]: row["return"] for row in rows}
 
 
+def label(cell: Path) -> str:
+    return f"dqn-close-{cell.name}" if cell.parent == K else cell.name
+
+
 for learned, per_step in PAIRS:
     a, b = returns(learned), returns(per_step)
     seeds = sorted(set(a) & set(b))
     diff, low, high = paired_difference_ci([a[s] for s in seeds], [b[s] for s in seeds])
-    print(f"{learned.name} - {per_step.name}: {diff:+.2f} [{low:+.2f}, {high:+.2f}] over {len(seeds)} seeds")
+    print(f"{label(learned)} - {label(per_step)}: {diff:+.2f} [{low:+.2f}, {high:+.2f}] over {len(seeds)} seeds")
