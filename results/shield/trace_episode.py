@@ -6,9 +6,11 @@ product command). Used to diagnose the crashes of shield v2 under the learned ad
     python results/shield/trace_episode.py models/dqn-driver ATTACK EPS SEED shield@0.02 [--last N] [--every K]
 
 ATTACK: `none`, a registry/config name, or `learned:DIR`; `--transfer` runs an adversary trained
-against another shield version (the evaluation refuses it). Columns: own / right = the lane's
-room beyond the safe gap [m] on the true / seen observation; safe = the shield's accepted
+against another shield version (the evaluation refuses it). Columns: own / left / right = the
+lane's room beyond the safe gap [m] on the true / seen observation; safe = the shield's accepted
 actions (L I R F S) on the seen / true observation; gap = the simulator's gap to the car ahead.
+Both sides of every column are the shield's pessimistic test at EPS, so the true side is stricter
+than the plain rules' test (eps 0) its guarantee is stated against.
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ def main() -> None:
         if t % a.every == 0:
             rows.append(f"t={t:3d} v={ego.speed:5.1f} lane={ego.lane_index[2]}->{ego.target_lane_index[2]} "
                         f"vy={ego.velocity[1]:5.2f} gap={gap:6.1f} own={rt['own'][0]:6.1f}/{rs['own'][0]:6.1f} "
-                        f"right={rt['right'][0]:6.1f}/{rs['right'][0]:6.1f} proposed={NAMES[proposed]:6s} "
+                        f"left={rt['left'][0]:6.1f}/{rs['left'][0]:6.1f} right={rt['right'][0]:6.1f}/{rs['right'][0]:6.1f} proposed={NAMES[proposed]:6s} "
                         f"action={NAMES[action]:6s} safe={marks(shield.safe(obs[None])[0])}/{marks(shield.safe(true[None])[0])}")
         obs, _, terminated, truncated, info = env.step(action)
         done, t = terminated or truncated, t + 1
