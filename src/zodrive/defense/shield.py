@@ -14,16 +14,16 @@ Guarantee: the room test at EPS is pessimistic over every true state within L-in
 observation (every observed vehicle possibly anywhere its true state may be: closer, closing
 faster, in every lane it may overlap). So under any attack of budget <= EPS on the other
 vehicles' rows, every action the shielded car takes is one the plain rules' test (eps 0)
-accepts on the *true* observation (an escape by a weaker standard, below): no FASTER or IDLE into an own-lane gap below the
-rules' safe gap, no lane change into a lane whose gap is too small or where a listed vehicle is
-beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
+accepts on the *true* observation (an escape by a weaker standard, below): no FASTER or IDLE
+into an own-lane gap below the rules' safe gap, no lane change into a lane whose gap is too
+small or where a listed vehicle is beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
 state, and only into a lane where the test accepts IDLE for every true state (every vehicle that
 may be there counts, also one that may be in the own lane too), with the lane beyond it clear
 enough that no car there is about to cut in. So every action is accepted by the plain test on the
 true observation, an escape by the standard of keeping speed (room >= 0) rather than that of
-changing lanes (room > the margin). The attacker can make the car careful, also keep it braking behind a
-car shown half a lane aside (the constant brake's failure: the meta-actions never slow it below
-20 m/s), but not steer it towards a car.
+changing lanes (room > the margin). The attacker can make the car careful, and keep it braking
+behind a car shown half a lane aside (the constant brake's failure: the meta-actions never slow
+it below 20 m/s), but not steer it towards a car.
 What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
 may shift the ego's perceived lateral position and speed; the test assumes an own speed of
 25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
@@ -121,8 +121,8 @@ class Shield:
     def fallback(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """The robust rules' choice where the test accepts it and it is not SLOWER; else a lane
         change out of an own lane the test rejects even for IDLE, into a lane it accepts IDLE in
-        for every true state (`ObservationRules.escapes`: SLOWER never slows the ego below 20 m/s, so braking
-        behind a slower car is no refuge); else SLOWER."""
+        for every true state (`ObservationRules.escapes`: SLOWER never slows the ego below
+        20 m/s, so braking behind a slower car is no refuge); else SLOWER."""
         r = self.rules.rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
         act = self.rules.actions(batch, r)
         ok = self.safe(batch, r)[np.arange(len(batch)), act] & (act != SLOWER)
