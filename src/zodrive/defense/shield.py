@@ -16,12 +16,12 @@ faster, in every lane it may overlap). So under any attack of budget <= EPS on t
 vehicles' rows, every action the shielded car takes is one the plain rules' test (eps 0)
 accepts on the *true* observation (an escape by a weaker standard, below): no FASTER or IDLE
 into an own-lane gap below the rules' safe gap, no lane change into a lane whose gap is too
-small or where a listed vehicle is beside. An escape is taken only where that test rejects even IDLE in the own lane for some true
-state, and only into a lane where the test accepts IDLE for every true state (every vehicle that
-may be there counts, also one that may be in the own lane too), with the lane beyond it clear
-enough that no car there is about to cut in. So every action is accepted by the plain test on the
-true observation, an escape by the standard of keeping speed (room >= 0) rather than that of
-changing lanes (room > the margin). The attacker can make the car careful, and keep it braking
+small or where a listed vehicle is beside. An escape is taken only where that test rejects
+even IDLE in the own lane for some true state, and only into a lane where the test accepts IDLE
+for every true state (every vehicle that may be there counts, also one that may be in the own
+lane too), with the lane beyond it clear enough that no car there is about to cut in. So every
+action is accepted by the plain test on the true observation, an escape by the standard of
+keeping speed (room >= 0) rather than that of changing lanes (room > the margin). The attacker can make the car careful, and keep it braking
 behind a car shown half a lane aside (the constant brake's failure: the meta-actions never slow
 it below 20 m/s), but not steer it towards a car.
 What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
