@@ -21,9 +21,9 @@ even IDLE in the own lane for some true state, and only into a lane where the te
 for every true state (every vehicle that may be there counts, also one that may be in the own
 lane too), with the lane beyond it clear enough that no car there is about to cut in. So every
 action is accepted by the plain test on the true observation, an escape by the standard of
-keeping speed (room >= 0) rather than that of changing lanes (room > the margin). The attacker can make the car careful, and keep it braking
-behind a car shown half a lane aside (the constant brake's failure: the meta-actions never slow
-it below 20 m/s), but not steer it towards a car.
+keeping speed (room >= 0) rather than that of changing lanes (room > the margin). The attacker
+can make the car careful, and keep it braking behind a car shown half a lane aside (the constant
+brake's failure: the meta-actions never slow it below 20 m/s), but not steer it towards a car.
 What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
 may shift the ego's perceived lateral position and speed; the test assumes an own speed of
 25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
