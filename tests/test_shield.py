@@ -86,9 +86,9 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) ->
             # an escape: the own lane too close for IDLE in the worst case, and the target lane one
             # the plain test accepts IDLE in on the true observation (room >= 0, nobody beside)
             own_worst = shield.rules.rooms(seen)["own"]
-            side = np.where(final == LANE_RIGHT, "right", "left")
-            target = np.where(side == "right", true_rooms["right"], true_rooms["left"])
-            beside = np.where(side == "right", true_rooms["right_blocked"], true_rooms["left_blocked"])
+            right = final == LANE_RIGHT
+            target = np.where(right, true_rooms["right"], true_rooms["left"])
+            beside = np.where(right, true_rooms["right_blocked"], true_rooms["left_blocked"])
             assert (own_worst[escape] < 0).all()
             assert (target[escape] >= -1e-3).all() and not beside[escape].any()   # float32 seen
             escaped += int(escape.sum())
