@@ -222,8 +222,9 @@ class ToyCar(ToyRoad):
         return self._obs(), 0.1, self.t >= 10, False, {}
 
 
-@pytest.mark.parametrize("kind", ["discrete", "continuous"])
-def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind: str) -> None:
+@pytest.mark.parametrize(("kind", "probe", "loss"), [("discrete", "ball", "scores"), ("continuous", "ball", "scores"),
+                                                      ("discrete", "vertices", "decisions")])
+def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind: str, probe: str, loss: str) -> None:
     """The amortized start (`--pretrain-rounds`): from queries alone (the victim offers no
     gradients), the adversary's mean action comes to make the victim take the target (FASTER;
     [1, 0.5] within 0.2 for a continuous victim) on most states where it took it on few; every
@@ -253,7 +254,8 @@ def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind
         return float(objective.success(out[:, None], out)[:, 0].float().mean())
 
     before = target_share()
-    settings = Pretrain(rounds=2, episodes=20, probes=4, epochs=20 if kind == "discrete" else 60, hidden=64)
+    settings = Pretrain(rounds=2, episodes=20, probes=4, epochs=20 if kind == "discrete" else 60, hidden=64,
+                        probe=probe, loss=loss)
     fitted = pretrain(agent.policy, type(road)(), victim, threat, objective, free, settings, 0)
     after = target_share()
     if kind == "discrete":
@@ -273,7 +275,38 @@ def test_pretraining_mistakes_are_one_line_errors(trained, tmp_path: Path, capsy
     assert "drop --victim-action" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1",
                                                      "--victim-action"])
     assert "do not have" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1"])  # CartPole: no FASTER
+    assert "--pretrain-probe applies with --pretrain-rounds" in _error(capsys, [*base, "--steps", "8",
+                                                                                 "--pretrain-probe", "vertices"])
+    assert "invalid choice: 'corners'" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1",
+                                                          "--pretrain-probe", "corners"])
     assert not (tmp_path / "a").exists()  # refused before anything is written
+
+
+def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversary_s_own() -> None:
+    """`--pretrain-probe vertices`: every probe is a vertex (+-1 per coordinate, before eps and
+    the mask); the second half keep most of the adversary's signs (0-30 % flipped, 15 % on
+    average), the first half are random (50 % agree); "ball" probes are inside, not on vertices."""
+    from zodrive.agents.amortized import Pretrain, probe_noise
+    from zodrive.errors import ZodriveError
+
+    rng = np.random.default_rng(0)
+    free = np.arange(5, 25)
+    action = rng.uniform(-1.0, 1.0, size=len(free))
+    noise = probe_noise("vertices", action, free, 400, (5, 5), rng).reshape(400, -1)
+    assert set(np.unique(noise)) == {-1.0, 1.0}
+    agree = (noise[:, free] == np.sign(action)).mean(axis=1)
+    assert 0.45 < agree[:200].mean() < 0.55 and 0.8 < agree[200:].mean() < 0.9
+    ball = probe_noise("ball", action, free, 400, (5, 5), rng)
+    assert np.abs(ball).max() <= 1.0 and np.mean(np.abs(ball) == 1.0) == 0.0
+    with pytest.raises(ZodriveError, match="probe must be one of ball, vertices"):
+        Pretrain(probe="corners")
+    with pytest.raises(ZodriveError, match="loss must be one of scores, decisions"):
+        Pretrain(loss="argmax")
+    from zodrive.agents.amortized import check
+    from zodrive.attacks.objectives import make_objective
+
+    with pytest.raises(ZodriveError, match="decisions fits a discrete victim's chosen action"):
+        check(Pretrain(loss="decisions"), "continuous", make_objective("continuous", "1,0.5"))
 
 
 def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
@@ -281,6 +314,10 @@ def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
 
     rounds = [{"round": 0, "steps": 9, "victim_return": 1.5, "target_share": 0.25, "surrogate_agreement": 0.9}]
     discrete = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds})
+    assert "4 random points per visited state, uniform in the ball" in discrete[0]
+    vertices = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds,
+                                "settings": {"probes": 8, "probe": "vertices"}})
+    assert "8 random points per visited state, on the ball's vertices" in vertices[0]
     assert "by a margin of 0.3" in discrete[0] and "on 25.0% of steps" in discrete[1] and "90.0%" in discrete[1]
     rounds = [{**rounds[0], "surrogate_rmse": 0.12}]
     del rounds[0]["surrogate_agreement"]

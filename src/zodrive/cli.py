@@ -324,6 +324,14 @@ def build_parser() -> argparse.ArgumentParser:
                           "distilling a surrogate from counted victim queries, fitting the mean action to make the "
                           "surrogate take the target action (zodrive.agents.amortized)")
     atk.add_argument("--pretrain-episodes", type=_positive_int, help="episodes driven per round (default 10)")
+    atk.add_argument("--pretrain-probe", choices=("ball", "vertices"),  # amortized.PROBES (torch-free here)
+                     help="where the surrogate's random queries are drawn around each visited state: uniformly in "
+                          "the eps-ball (default) or on its vertices, half near the adversary's own")
+    atk.add_argument("--pretrain-loss", choices=("scores", "decisions"),  # amortized.LOSSES
+                     help="the surrogate's fit: MSE on the victim's scores (default), or, for a discrete victim, that "
+                          "plus cross-entropy on its chosen action")
+    atk.add_argument("--pretrain-probes", type=_nonnegative_int,
+                     help="random eps-ball points queried per visited state for the surrogate (default 4)")
     atk.add_argument("--pretrain-margin", type=_nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default 1)")
@@ -651,7 +659,9 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     from zodrive.agents.amortized import Pretrain, surrogate_fit
 
     preset = _preset_of(args)
-    given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin))
+    given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin),
+                                            ("probe", args.pretrain_probe), ("probes", args.pretrain_probes),
+                                            ("loss", args.pretrain_loss))
              if value is not None}
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
     if pretrain is None and given:

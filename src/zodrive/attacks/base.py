@@ -17,12 +17,15 @@ inside a `ThreatModel`, talking to the victim only through a `QueryOracle`. The 
 An attack only says how to start (`init`), what to query around the base point
 (`propose`) and where to go next (`step`). The objective is the paper's Eq. 8:
 L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
-False`) get the exact gradient of L1 at the base point instead of probes.
+False`) get the exact gradient of L1 at the base point instead of probes. Two attacks are no
+search and bring their own `perturb` (`search = False`): the learned adversary
+(`attacks.learned`) and vertex hold (`attacks.hold`).
 """
 
 from __future__ import annotations
 
 import abc
+import inspect
 from dataclasses import dataclass, field
 from typing import Callable, ClassVar, Sequence
 
@@ -83,6 +86,8 @@ class Attack(abc.ABC):
 
     name: ClassVar[str]
     black_box: ClassVar[bool] = True
+    search: ClassVar[bool] = True  # runs the driver below (T iterations of q proposals); False: its own perturb
+    queries_clean: ClassVar[bool] = True  # asks the victim about the clean observation (so a base rate is known)
     reference: ClassVar[str] = ""
 
     def __init__(
@@ -144,6 +149,16 @@ class Attack(abc.ABC):
         # (max_change); a row of NaN has none (its episode has just begun)
         self._carry: np.ndarray | None = None
         self._fed: np.ndarray | None = None
+
+    def refuse_search_options(self, why: str, reads: tuple[str, ...] = ()) -> None:
+        """An attack that is no search (its own `perturb`) reads none of the search options but
+        `reads`: one given anyway would be ignored, which is an error."""
+        for option, default in SEARCH_DEFAULTS.items():
+            if option not in reads and getattr(self, option) != default:
+                raise ZodriveError(f"attack {self.name}: {option} has no effect ({why})")
+
+    def check_objective(self, objective: Objective) -> None:
+        """A one-line error for an objective this attack cannot pursue (every search can)."""
 
     def reseed(self, seed: int | Sequence[int]) -> None:
         """Restart the random streams (per episode, for reproducible episodes): one seed for
@@ -427,6 +442,12 @@ class Attack(abc.ABC):
         return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
                             iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
                             linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
+
+
+# the search options and their defaults, read from `Attack` itself (mu and step_size are read by
+# the searches that use them only, so they are not checked)
+SEARCH_DEFAULTS = {name: p.default for name, p in inspect.signature(Attack.__init__).parameters.items()
+                   if p.kind is p.KEYWORD_ONLY and name not in ("mu", "step_size")}
 
 
 def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.ndarray:

@@ -21,7 +21,6 @@ success is reported: judge it by the return.
 
 from __future__ import annotations
 
-import inspect
 import json
 from pathlib import Path
 from typing import Any
@@ -40,10 +39,6 @@ NAME = "learned"
 META_FILE = "adversary.json"
 FORMAT = 1  # bumped if what adversary.json means changes
 
-# what a learned attack accepts of the search attacks' options: their defaults, read from `Attack`
-# itself (anything else would be ignored, which is an error); mu and step_size are never read here
-_SEARCH_DEFAULTS = {name: p.default for name, p in inspect.signature(Attack.__init__).parameters.items()
-                    if p.kind is p.KEYWORD_ONLY and name not in ("mu", "step_size")}
 
 
 def free_coordinates(threat: ThreatModel, obs_shape: tuple[int, ...]) -> np.ndarray:
@@ -124,14 +119,12 @@ class LearnedAdversary(Attack):
     Queries per environment step: 0, or 1 with `victim_action` (the clean observation)."""
 
     name = NAME
+    search = False
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         super().__init__(threat, **kwargs)
-        for option, default in _SEARCH_DEFAULTS.items():
-            if getattr(self, option) != default:
-                raise ZodriveError(f"attack learned: {option} has no effect (the perturbation is the trained "
-                                   "adversary's output, not a search)")
+        self.refuse_search_options("the perturbation is the trained adversary's output, not a search")
         if adversary is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR "
                                "(a folder written by `zodrive attack-train`)")

@@ -6,6 +6,7 @@ from typing import Any
 
 from zodrive.attacks.base import Attack
 from zodrive.attacks.coordinate import CoordinateFD
+from zodrive.attacks.hold import VertexHold
 from zodrive.attacks.nes import NES
 from zodrive.attacks.noise import UniformNoise
 from zodrive.attacks.pgd import FGSM, PGD
@@ -18,14 +19,14 @@ from zodrive.errors import ZodriveError
 
 ATTACKS: dict[str, type[Attack]] = {
     cls.name: cls
-    for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD)
+    for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD, VertexHold)
 }
 
 
 KNOWN = (*ATTACKS, "learned:DIR")
-"""Every attack name: the search attacks above and the learned adversary (`learned`, read from
-a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has no place in the
-registry of attacks that run from nothing but their options."""
+"""Every attack name: the attacks above (nine searches and vertex hold) and the learned adversary
+(`learned`, read from a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has
+no place in the registry of attacks that run from nothing but their options."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:

@@ -165,6 +165,7 @@ class AttackSpec:
             attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)
         objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
+        attack.check_objective(objective)
         if self.timing is not None and victim.kind != "discrete":
             raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")
         if not attack.black_box and victim.differentiable is None:

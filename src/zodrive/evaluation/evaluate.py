@@ -379,6 +379,9 @@ def summarize(
         applicable = sum(r["applicable"] for r in records)
         successes = sum(r["successes"] for r in records)
         learned = job.attack["attack"] == "learned"  # no per-step goal: no success rate, no base rate
+        from zodrive.attacks.registry import ATTACKS
+
+        blind = job.attack["attack"] in ATTACKS and not ATTACKS[job.attack["attack"]].queries_clean
         summary.update(
             attack=job.attack["attack"],
             # paper mode is unconstrained: eps sets no budget (it only sizes random starting points)
@@ -389,7 +392,9 @@ def summarize(
             attack_success_rate=None if learned else successes / applicable if applicable else float("nan"),
             attack_success_ci95=None if learned else list(ratio_ci([r["successes"] for r in records],
                                                                    [r["applicable"] for r in records])),
-            target_base_rate=None if learned else 1.0 - applicable / steps_total if steps_total else float("nan"),
+            # an attack that never asks about the clean observation knows no base rate: its success is
+            # the share of all attacked steps on which the victim took the target
+            target_base_rate=None if learned or blind else 1.0 - applicable / steps_total if steps_total else float("nan"),
             queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
             max_linf=float(max(r["max_linf"] for r in records)),
             attack_config=job.attack,

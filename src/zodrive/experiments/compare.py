@@ -124,7 +124,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if budgets else "")]
     for r in rows:
         success = "–" if r["attack_success_rate"] is None else \
-            f"{r['attack_success_rate']:.1%} ({r['target_base_rate']:.1%})"
+            f"{r['attack_success_rate']:.1%} ({or_dash(r['target_base_rate'], '{:.1%}')})"
         budget = f"{or_dash(r.get('query_budget'), '{:d}')} | " if budgets else ""
         lines.append(f"| {_system(r)} | {r['attack']} | {or_dash(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "

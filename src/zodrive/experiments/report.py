@@ -76,7 +76,7 @@ def _success(r: dict[str, Any]) -> str:
     if rate is None:
         return "–"
     shown = "n/a" if rate != rate else f"{rate:.1%}"  # NaN: the clean policy always chose the target
-    return f"{shown} ({r['target_base_rate']:.1%})"
+    return f"{shown} ({_fmt(r['target_base_rate'], '{:.1%}')})"  # no base rate: the clean observation unasked
 
 
 def table_markdown(records: list[dict[str, Any]]) -> str:

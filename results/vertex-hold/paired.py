@@ -1,0 +1,50 @@
+"""Vertex hold (1 query per step) against the strongest per-step attack and the learned adversary on the
+same 100 seeds (100000-100099): mean of (vertex hold - other) return per seed with its bootstrap 95 % CI
+(`zodrive.evaluation.stats.paired_difference_ci`); positive: vertex hold left the victim more return (it
+is weaker). The other cells are the ones results/learned-adversary/paired.py compares (the shielded
+rows: results/shield). Usage: python results/vertex-hold/paired.py > results/vertex-hold/paired.txt"""
+import json
+from pathlib import Path
+
+from zodrive.evaluation.stats import paired_difference_ci
+
+H = Path("results/vertex-hold/cells")
+C, R = Path("results/learned-adversary/cells"), Path("results/robustness-100")
+K, S = Path("results/close-rules/attacked"), Path("results/shield/cells-v5")
+PAIRS = [  # (vertex-hold cell, other cell)
+    ("dqn-driver-eps0.02", R / "dqn-driver-pgd-eps0.02"), ("dqn-driver-eps0.02", C / "dqn-driver-amortized-eps0.02-100"),
+    ("dqn-driver-eps0.05", C / "dqn-driver-pgd-eps0.05-100"), ("dqn-driver-eps0.05", C / "dqn-driver-amortized-eps0.05-100"),
+    ("dqn-driver-eps0.2", C / "dqn-driver-random-search-eps0.2-100"),
+    ("dqn-driver-eps0.2", C / "dqn-driver-amortized-eps0.2-100"),
+    ("dqn-robust-eps0.02", R / "dqn-robust-pgd-eps0.02"), ("dqn-robust-eps0.02", C / "dqn-robust-amortized-eps0.02-100"),
+    ("dqn-robust-eps0.05", R / "dqn-robust-random-search-eps0.05"),
+    ("dqn-robust-eps0.05", C / "dqn-robust-amortized-eps0.05-100"),
+    ("dqn-close-eps0.02", K / "random-search-eps0.02"), ("dqn-close-eps0.02", K / "amortized-eps0.02"),
+    ("dqn-close-eps0.05", K / "random-search-eps0.05"), ("dqn-close-eps0.05", K / "amortized-eps0.05"),
+    ("ddpg-driver-eps0.2", C / "ddpg-driver-random-search-eps0.2-100"), ("ddpg-driver-eps0.2", C / "ppo-ddpg-driver-eps0.2-100"),
+    ("ddpg-driver-eps0.05", C / "ddpg-driver-random-search-eps0.05-100"),
+    ("ddpg-driver-eps0.05", C / "ppo-ddpg-driver-eps0.05-seed1-100"),
+    ("ddpg-robust-eps0.05", C / "ddpg-robust-random-search-eps0.05-100"),
+    ("ddpg-robust-eps0.05", C / "ppo-ddpg-robust-eps0.05-100"),
+    ("td3-finetuned-eps0.2", C / "td3-finetuned-random-search-eps0.2-100"),
+    ("td3-finetuned-eps0.2", C / "ppo-td3-finetuned-eps0.2-100"),
+    # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
+    ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
+    ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),
+    ("dqn-driver+shield@0.05-eps0.05", S / "dqn-driver+shield@0.05-pgd-eps0.05-300"),
+    ("dqn-driver+shield@0.05-eps0.05", S / "baseline-slower-300"),
+    ("dqn-close+shield@0.02-eps0.02", K / "v5-shield@0.02-random-search-eps0.02"),
+    ("dqn-close+shield@0.02-eps0.02", S / "baseline-slower-300"),
+]
+
+
+def returns(cell: Path) -> dict[int, float]:
+    rows = (json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line)
+    return {row["seed"]: row["return"] for row in rows}
+
+
+for hold, other in PAIRS:
+    a, b = returns(H / hold), returns(other)
+    seeds = sorted(set(a) & set(b))
+    diff, low, high = paired_difference_ci([a[s] for s in seeds], [b[s] for s in seeds])
+    print(f"vertex-hold {hold} - {other.parent.name}/{other.name}: {diff:+.2f} [{low:+.2f}, {high:+.2f}] over {len(seeds)} seeds")

@@ -1,0 +1,105 @@
+"""Vertex hold: a decision-based attack at one query per step that keeps what works.
+
+Decision-based access (the victim's answer only; Brendel, Rauber, Bethge, "Decision-Based
+Adversarial Attacks", ICLR 2018) and one perturbation kept over many steps (CopyCAT: Hussenot,
+Geist, Pietquin, "Taking Control of Neural Policies with Constant Attacks", AAMAS 2020) come
+from the literature; the rule is zodrive's. Each step, per environment row:
+
+    feed the perturbation held from the last step if there is one, else a random vertex
+    (+-eps on every free coordinate) of the L-inf ball, projected into the threat model;
+    query the victim once on what was fed (what a real attacker sees as the car's next move);
+    hold that perturbation for the next step if the victim took the target action, else drop it.
+
+Why it exists: on some victims the target action is reachable from many vertices of the ball,
+and a vertex that works at one step still works at the next (models/dqn-close at eps 0.02:
+38-44 % of random vertices, 95 % still working a step later; `results/learned-adversary`).
+There a search (tens of queries per step) is not needed; where the target is rarely reachable
+this way (the DQN driver at eps 0.02) this attack does nearly nothing. The clean observation
+is never queried, so no base rate is known: its success is the share of steps on which the
+victim took the target under attack.
+
+Queries per environment step: 1.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from zodrive.attacks.base import Attack, AttackResult
+from zodrive.attacks.objectives import Objective
+from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.threat import ThreatModel, distortion
+from zodrive.errors import ZodriveError
+
+
+class VertexHold(Attack):
+    name = "vertex-hold"
+    search = False
+    queries_clean = False
+    reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
+                 "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
+
+    def __init__(self, threat: ThreatModel, **kwargs: Any) -> None:
+        super().__init__(threat, **kwargs)
+        self.refuse_search_options("vertex hold queries one point per step: no search", reads=("seed",))
+        if threat.norm != "linf":
+            raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
+
+    def check_objective(self, objective: Objective) -> None:
+        if not objective.targeted:
+            raise ZodriveError("attack vertex-hold holds a perturbation while the victim takes the target action: "
+                               "give it a target (target=auto is the paper's)")
+
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return 1
+
+    def queries_per_step(self) -> int:
+        return 1
+
+    def first_iteration_cost(self) -> int:
+        return 1
+
+    def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
+        raise AssertionError("vertex hold takes no search step")  # perturb is its own
+
+    def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
+                ) -> AttackResult:
+        """The step above for clean observations `x0` (N, *obs); a row whose episode budget
+        cannot pay the one query is fed its clean observation and holds nothing."""
+        self.check_objective(objective)
+        n, shape = len(x0), tuple(x0.shape[1:])
+        dim = int(np.prod(shape))
+        x0 = np.asarray(x0, dtype=np.float32)
+        flat0 = x0.reshape(n, dim)
+        oracle.begin_step(rows=n)
+        self._streams(n)
+        everyone = np.arange(n)
+        live = oracle.remaining(everyone) >= 1
+        if not live.any():
+            self._carry = np.full((n, dim), np.nan, dtype=np.float32)
+            return self._untouched(x0, oracle)
+        held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
+            np.full((n, dim), np.nan, dtype=np.float32)
+        fresh = np.flatnonzero(np.isnan(held).any(axis=1) & live)
+        delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
+        if fresh.size:
+            eps = np.float32(self.threat.eps)
+            mask = self.threat.mask(shape).reshape(-1)
+            delta[fresh] = self.draw(fresh, lambda g: g.choice(np.array([-eps, eps], dtype=np.float32), size=dim)) * mask
+        fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
+        asked = np.flatnonzero(live)
+        answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
+        out = np.full((n, answered.shape[1]), np.nan, dtype=np.float32)
+        out[asked] = answered
+        took = np.zeros(n, dtype=bool)
+        out_t = torch.from_numpy(answered)
+        took[asked] = objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
+        x_adv = np.where(live.reshape(n, *([1] * len(shape))), fed, x0)
+        self._carry = np.where(took[:, None], (x_adv - x0).reshape(n, dim), np.nan).astype(np.float32)
+        linf, l2 = distortion(x_adv, x0)
+        return AttackResult(x_adv=x_adv, success=took, already=np.zeros(n, dtype=bool),  # clean never asked
+                            iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
+                            adv_outputs=out, clean_outputs=np.full_like(out, np.nan))

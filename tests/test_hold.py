@@ -1,0 +1,119 @@
+"""Vertex hold (`attacks.hold`): one counted query per step, never the clean observation; a
+perturbation kept while the victim takes the target, a fresh vertex after a step it did not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from toys import context, linear_victim, observations
+from zodrive.attacks import AttackSpec
+from zodrive.attacks.victim import Victim
+from zodrive.errors import ZodriveError
+
+EPS = 0.1
+
+
+def gate_victim(seen: list[np.ndarray]) -> Victim:
+    """Takes FASTER (3) exactly when vehicle 1's x is above 0, else IDLE (1); keeps every batch."""
+
+    def query(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float32)
+        seen.append(x.copy())
+        out = np.zeros((len(x), 5), dtype=np.float32)
+        out[:, 1] = 0.5
+        out[:, 3] = np.where(x[:, 1, 1] > 0, 1.0, 0.0)
+        return out
+
+    return Victim(query=query, kind="discrete", obs_shape=(5, 5))
+
+
+def build(victim: Victim, **kw):
+    return AttackSpec(attack="vertex-hold", eps=EPS, **kw).build(victim, **context("discrete"))
+
+
+def test_it_holds_what_works_and_redraws_what_does_not() -> None:
+    """At x = 0 on the gate coordinate half the vertices open the gate. Until one does, every
+    step draws a new vertex; from then on the same perturbation is fed at every step."""
+    seen: list[np.ndarray] = []
+    attack, objective, oracle = build(gate_victim(seen))
+    x0 = observations(1, seed=3)
+    x0[0, 1, 1] = 0.0
+    attack.reseed(0)  # a seed whose first three vertices miss
+    fed, took = [], []
+    for _ in range(12):
+        result = attack.perturb(x0, oracle, objective)
+        fed.append(result.x_adv[0] - x0[0])
+        took.append(bool(result.success[0]))
+    first = took.index(True)
+    assert first == 3
+    assert all(took[first:]) and not any(took[:first])
+    assert all(np.array_equal(d, fed[first]) for d in fed[first:])  # held
+    assert all(not np.array_equal(fed[i], fed[i + 1]) for i in range(first))  # redrawn after a miss
+
+
+def test_one_counted_query_per_row_per_step_on_a_vertex_and_never_the_clean_observation() -> None:
+    seen: list[np.ndarray] = []
+    attack, objective, oracle = build(gate_victim(seen))
+    x0 = observations(6, seed=4)
+    attack.reseed(list(range(6)))
+    for _ in range(5):
+        result = attack.perturb(x0, oracle, objective)
+        assert np.array_equal(result.queries, np.ones(6))
+        delta = result.x_adv - x0
+        np.testing.assert_array_equal(delta[:, :, 0], 0.0)  # presence is frozen
+        inside = np.abs(x0[:, :, 1:]) < 1 - EPS  # not clipped by the box: exactly on a vertex
+        np.testing.assert_allclose(np.abs(delta[:, :, 1:])[inside], EPS, rtol=1e-5)
+        assert np.isnan(result.clean_outputs).all() and not result.already.any()
+        np.testing.assert_array_equal(result.success, result.adv_outputs.argmax(1) == 3)
+    sent = np.concatenate(seen)
+    assert oracle.total_queries == len(sent) - oracle.calibration_queries == 30
+    asked = np.concatenate(seen[-5:])  # the attack's own calls, after the oracle's calibration
+    assert [len(batch) for batch in seen[-5:]] == [6] * 5 and not any(np.array_equal(s, x) for s in asked for x in x0)
+
+
+def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them() -> None:
+    x0 = observations(4, seed=5)
+    victim = linear_victim(seed=2)
+
+    def run(rows: list[int]) -> np.ndarray:
+        attack, objective, oracle = build(victim)
+        attack.reseed([11 + r for r in rows])
+        return np.stack([attack.perturb(x0[rows], oracle, objective).x_adv for _ in range(6)])
+
+    together = run([0, 1, 2, 3])
+    for r in range(4):
+        np.testing.assert_array_equal(together[:, r], run([r])[:, 0])
+    np.testing.assert_array_equal(together, run([0, 1, 2, 3]))
+
+
+def test_a_spent_episode_budget_feeds_the_clean_observation() -> None:
+    seen: list[np.ndarray] = []
+    attack, objective, oracle = build(gate_victim(seen), episode_query_budget=3)
+    x0 = observations(1, seed=6)
+    attack.reseed(1)
+    results = [attack.perturb(x0, oracle, objective) for _ in range(5)]
+    assert [int(r.queries[0]) for r in results] == [1, 1, 1, 0, 0]
+    np.testing.assert_array_equal(results[-1].x_adv, x0)
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"target": "none"}, "give it a target"),
+    ({"norm": "l2"}, "use norm linf"),
+    ({"steps": 20}, "steps has no effect"),
+    ({"warm_start": True}, "warm_start has no effect"),
+])
+def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str) -> None:
+    with pytest.raises(ZodriveError, match=message):
+        build(linear_victim(), **options)
+
+
+def test_the_summary_says_no_base_rate_is_known() -> None:
+    from zodrive.evaluation.report import format_summary
+
+    summary = {"episodes": 2, "seed": 1, "mean_return": 1.0, "ci95": [0.5, 1.5], "max_return": 2.0,
+               "collision_rate": 0.5, "mean_length": 10.0, "attack": "vertex-hold", "eps": 0.02, "norm": "linf",
+               "mode": "budgeted", "target": "auto", "attack_success_rate": 0.75, "target_base_rate": None,
+               "queries_per_step": 1.0, "max_linf": 0.02, "attack_config": {}}
+    text = format_summary(summary)
+    assert "the target taken on 75.0% of steps" in text and "no base rate" in text and "1.0 queries/step" in text
