@@ -98,14 +98,38 @@ def test_a_spent_episode_budget_feeds_the_clean_observation() -> None:
 
 
 @pytest.mark.parametrize(("options", "message"), [
-    ({"target": "none"}, "give it a target"),
+    ({"target": "none"}, "give it a fixed target"),
+    ({"target": "worst"}, "not none or worst"),  # its success reads the clean outputs, never asked
     ({"norm": "l2"}, "use norm linf"),
     ({"steps": 20}, "steps has no effect"),
     ({"warm_start": True}, "warm_start has no effect"),
+    ({"mu": 0.3}, "mu has no effect"),
+    ({"kappa": 5.0}, "kappa has no effect"),
 ])
 def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str) -> None:
     with pytest.raises(ZodriveError, match=message):
         build(linear_victim(), **options)
+    if "norm" not in options and "steps" not in options and "warm_start" not in options:
+        with pytest.raises(ZodriveError, match=message):  # and before any episode runs (`zodrive compare`)
+            AttackSpec(attack="vertex-hold", eps=EPS, **options).check()
+
+
+def test_the_vertex_is_held_whole_where_the_box_clipped_it() -> None:
+    """A coordinate at the box's edge clips the vertex at one step; once the observation has moved
+    away, the held vertex is fed whole (eps), not the clipped remainder (0)."""
+    seen: list[np.ndarray] = []
+    attack, objective, oracle = build(gate_victim(seen))
+    x0 = observations(1, seed=3)
+    x0[0, 1, 1], x0[0, 2, 2] = 0.0, 1.0  # the gate, and a value at the box's upper edge
+    attack.reseed(3)  # a seed whose winning vertex is +eps at the edge coordinate
+    while not attack.perturb(x0, oracle, objective).success[0]:
+        pass
+    clipped = attack.perturb(x0, oracle, objective)  # held: the same vertex again
+    assert clipped.success[0] and clipped.x_adv[0, 2, 2] == 1.0  # clipped at the edge (this seed's sign is +)
+    moved = x0.copy()
+    moved[0, 2, 2] = 0.5
+    whole = attack.perturb(moved, oracle, objective)
+    assert whole.x_adv[0, 2, 2] == pytest.approx(0.5 + EPS)
 
 
 def test_the_summary_says_no_base_rate_is_known() -> None:

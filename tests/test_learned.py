@@ -296,6 +296,7 @@ def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversar
     assert set(np.unique(noise)) == {-1.0, 1.0}
     agree = (noise[:, free] == np.sign(action)).mean(axis=1)
     assert 0.45 < agree[:200].mean() < 0.55 and 0.8 < agree[200:].mean() < 0.9
+    assert probe_noise("vertices", action, free, 0, (5, 5), rng).shape == (0, 5, 5)  # --pretrain-probes 0
     ball = probe_noise("ball", action, free, 400, (5, 5), rng)
     assert np.abs(ball).max() <= 1.0 and np.mean(np.abs(ball) == 1.0) == 0.0
     with pytest.raises(ZodriveError, match="probe must be one of ball, vertices"):

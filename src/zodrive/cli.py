@@ -804,8 +804,13 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.tol is not None and model_kind(model) == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol
+    from zodrive.attacks.registry import ATTACKS
+
     for name in args.attack:
-        load_attack(name)  # an unknown attack is an error before any episode runs
+        spec = load_attack(name)  # an unknown attack is an error before any episode runs
+        if spec.attack not in ATTACKS or not ATTACKS[spec.attack].search:
+            raise ZodriveError(f"certify attacks every state on its own, untargeted, beside its certificate: "
+                               f"{spec.attack} is no per-state search (use random-search, zo-signsgd, pgd, ...)")
     result = certify_model(model, preset, args.eps, episodes=args.episodes,
                            seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
                            attacks=tuple(args.attack))

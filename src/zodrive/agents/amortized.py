@@ -50,6 +50,8 @@ def probe_noise(kind: str, action: np.ndarray, free: np.ndarray, n: int, shape: 
     dim = int(np.prod(shape))
     if kind == "ball":
         return rng.uniform(-1.0, 1.0, size=(n, *shape)).astype(np.float32)
+    if n == 0:
+        return np.zeros((0, *shape), dtype=np.float32)
     signs = rng.choice(np.array([-1.0, 1.0], dtype=np.float32), size=(n, dim))
     own = np.sign(np.asarray(action, dtype=np.float32).reshape(-1))
     own = np.where(own == 0, signs[0, free], own)
@@ -233,7 +235,8 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
         surrogate.requires_grad_(True)
         rounds.append({"round": r, "episodes": settings.episodes, "steps": steps,
                        "victim_return": float(np.mean(returns)), "target_share": hits / max(steps, 1),
-                       "queries": int(oracle.total_queries), "surrogate_mse": round(mse, 4),
+                       "queries": int(oracle.total_queries),
+                       ("surrogate_mse" if settings.loss == "scores" else "surrogate_loss"): round(mse, 4),  # + CE
                        ("surrogate_agreement" if discrete else "surrogate_rmse"): round(agree, 4),
                        "adversary_loss": round(fit, 4), "surrogate_target_share": round(won, 4)})
     return {"rounds": rounds, "queries": int(oracle.total_queries), "margin": kappa, "settings": settings.__dict__}

@@ -5,8 +5,8 @@ Adversarial Attacks", ICLR 2018) and one perturbation kept over many steps (Copy
 Geist, Pietquin, "Taking Control of Neural Policies with Constant Attacks", AAMAS 2020) come
 from the literature; the rule is zodrive's. Each step, per environment row:
 
-    feed the perturbation held from the last step if there is one, else a random vertex
-    (+-eps on every free coordinate) of the L-inf ball, projected into the threat model;
+    feed the vertex held from the last step if there is one, else a random vertex (+-eps on
+    every free coordinate) of the L-inf ball, projected into the threat model (the box may clip it);
     query the victim once on what was fed (what a real attacker sees as the car's next move);
     hold that perturbation for the next step if the victim took the target action, else drop it.
 
@@ -35,6 +35,11 @@ from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
 
+NEEDS_TARGET = ("attack vertex-hold holds a perturbation while the victim takes a fixed target action and never "
+                "queries the clean observation: give it a fixed target (target=auto is the paper's; not none or worst)")
+UNUSED = ("loss", "weight", "kappa", "mu", "step_size")  # `AttackSpec` options it never reads (`tol` it does)
+
+
 class VertexHold(Attack):
     name = "vertex-hold"
     search = False
@@ -49,9 +54,8 @@ class VertexHold(Attack):
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
 
     def check_objective(self, objective: Objective) -> None:
-        if not objective.targeted:
-            raise ZodriveError("attack vertex-hold holds a perturbation while the victim takes the target action: "
-                               "give it a target (target=auto is the paper's)")
+        if objective.reads_clean:
+            raise ZodriveError(NEEDS_TARGET)
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1
@@ -98,7 +102,9 @@ class VertexHold(Attack):
         out_t = torch.from_numpy(answered)
         took[asked] = objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
         x_adv = np.where(live.reshape(n, *([1] * len(shape))), fed, x0)
-        self._carry = np.where(took[:, None], (x_adv - x0).reshape(n, dim), np.nan).astype(np.float32)
+        # the vertex itself is held, not its projection: a coordinate the box clipped at this step
+        # is whole again at the next one if the observation has moved away from the edge
+        self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
         linf, l2 = distortion(x_adv, x0)
         return AttackResult(x_adv=x_adv, success=took, already=np.zeros(n, dtype=bool),  # clean never asked
                             iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,

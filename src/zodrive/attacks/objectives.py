@@ -35,6 +35,9 @@ class Objective:
 
     weight: float = 1.0  # the paper's constant `a`
     targeted: bool = True
+    reads_clean: ClassVar[bool] = False
+    """True where `success` depends on the clean outputs (untargeted, the victim's worst action):
+    an attack that never queries the clean observation cannot judge it."""
     flat_at_clean: ClassVar[bool] = False
     """True where the loss is stationary at the clean observation (its gradient there is zero), so a
     gradient step from the clean point never moves (`PGD` then steps randomly)."""
@@ -79,6 +82,8 @@ class DiscreteTargeted(Objective):
 class DiscreteUntargeted(Objective):
     """Make a discrete victim pick anything but its clean action (margin loss)."""
 
+    reads_clean: ClassVar[bool] = True
+
     targeted: bool = False
     kappa: float = 0.01
 
@@ -96,6 +101,8 @@ class DiscreteWorst(Objective):
     """Make a discrete victim pick the action it values least on the clean observation (its
     own "worst action", per step): harm chosen by the victim's values, not fixed in advance.
     Margin loss as `DiscreteTargeted`."""
+
+    reads_clean: ClassVar[bool] = True
 
     kappa: float = 0.01
 
@@ -138,6 +145,8 @@ class ContinuousTargeted(Objective):
 @dataclass(frozen=True)
 class ContinuousUntargeted(Objective):
     """Push a continuous victim's action away from its clean action (Eq. 6, maximized)."""
+
+    reads_clean: ClassVar[bool] = True
 
     targeted: bool = False
     flat_at_clean: ClassVar[bool] = True  # the distance to the clean action is minimal there

@@ -120,8 +120,24 @@ class AttackSpec:
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
+        self._check_unread()
         self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=()),  # type: ignore[arg-type]
                                        self.steps))
+
+    def _check_unread(self) -> None:
+        """The attacks that are no search read few of the spec's options: one given is an error."""
+        from zodrive.attacks import hold
+
+        if self.attack == LEARNED:
+            self._check_learned()
+        elif self.attack == hold.VertexHold.name:
+            default = AttackSpec()
+            for option in hold.UNUSED:
+                if getattr(self, option) != getattr(default, option):
+                    raise ZodriveError(f"attack vertex-hold: {option} has no effect (it queries one point per step "
+                                       "and only asks whether the victim took the target)")
+            if self.target is None or str(self.target).lower() in ("none", "untargeted", "worst"):
+                raise ZodriveError(hold.NEEDS_TARGET)
 
     def _check_learned(self) -> None:
         """A learned adversary chooses its own perturbation: an objective option would be ignored."""
@@ -153,8 +169,7 @@ class AttackSpec:
             if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
                 raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
             victim = decision_only(victim)
-        if self.attack == LEARNED:
-            self._check_learned()
+        self._check_unread()
         threat = self.threat(features, bounds)
         width = threat.high - threat.low
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
