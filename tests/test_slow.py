@@ -55,6 +55,19 @@ def test_the_committed_fitted_adversary_gives_its_committed_episodes(tmp_path: P
         assert row["pct_of_max"] == committed[row["seed"]]["pct_of_max"] and row["queries"] == 0, row["seed"]
 
 
+def test_vertex_hold_gives_its_committed_episodes(tmp_path: Path) -> None:
+    """`--attack vertex-hold` on models/dqn-close at eps 0.02 replays the first episodes of its committed
+    cell (results/vertex-hold), number for number, at one query per step."""
+    cell = ROOT / "results" / "vertex-hold" / "cells" / "dqn-close-eps0.02"
+    committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
+    out = tmp_path / "cell"
+    assert main(["evaluate", str(ROOT / "models" / "dqn-close"), "--attack", "vertex-hold", "--eps", "0.02",
+                 "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    for row in map(json.loads, (out / "episodes.jsonl").read_text().splitlines()):
+        mine = committed[row["seed"]]
+        assert row["pct_of_max"] == mine["pct_of_max"] and row["queries"] == mine["queries"] == row["length"], row
+
+
 def test_attack_train_with_a_fitted_start_on_highway(tmp_path: Path) -> None:
     """The whole path on the real environment: a fitted start alone (`--steps 0`) is a usable
     adversary folder whose training queries are counted (5 per step driven: the decision and 4
