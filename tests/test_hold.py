@@ -141,3 +141,16 @@ def test_the_summary_says_no_base_rate_is_known() -> None:
                "queries_per_step": 1.0, "max_linf": 0.02, "attack_config": {}}
     text = format_summary(summary)
     assert "the target taken on 75.0% of steps" in text and "no base rate" in text and "1.0 queries/step" in text
+
+
+def test_a_default_compare_grid_leaves_out_what_cannot_take_its_options() -> None:
+    """`zodrive compare` without --attacks runs every attack that takes --attack-set: vertex-hold
+    is left out (and named) with an untargeted objective or a search option, kept otherwise."""
+    from zodrive.attacks.registry import ATTACKS
+    from zodrive.experiments.compare import default_attacks
+
+    assert default_attacks([]) == (list(ATTACKS), {})
+    names, left_out = default_attacks(["target=none"])
+    assert "vertex-hold" not in names and "random-search" in names and "fixed target" in left_out["vertex-hold"]
+    names, left_out = default_attacks(["steps=50"])
+    assert set(left_out) == {"vertex-hold"} and "steps has no effect" in left_out["vertex-hold"]

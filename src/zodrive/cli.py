@@ -369,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
     cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
-    cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack")
+    cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack that takes the --attack-set options (the others are named)")
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
@@ -741,11 +741,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from zodrive.attacks.registry import ATTACKS
-    from zodrive.experiments.compare import compare, markdown, plot_budget_curves, plot_robustness
+    from zodrive.experiments.compare import compare, default_attacks, markdown, plot_budget_curves, plot_robustness
 
     defenses = [None if d == "none" else d for d in args.defense or ["none"]]
-    rows = compare(args.models, args.attacks or list(ATTACKS), args.eps, args.episodes, args.out,
+    attacks = args.attacks
+    if not attacks:  # every attack that takes the --attack-set options; the others are named
+        attacks, left_out = default_attacks(args.attack_set)
+        for name, why in left_out.items():
+            print(f"({name} left out of the default attacks: {why})", file=sys.stderr)
+    rows = compare(args.models, attacks, args.eps, args.episodes, args.out,
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
                    backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
                    attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds,

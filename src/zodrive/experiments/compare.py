@@ -102,6 +102,23 @@ def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:
     write_json(path, grid)
 
 
+def default_attacks(attack_set: list[str] | None = None) -> tuple[list[str], dict[str, str]]:
+    """Every registered attack that takes `attack_set` (the grid without `--attacks`), and why each
+    of the others does not (vertex-hold with `target=none`, say): a default grid leaves an attack
+    out, where one named in `--attacks` is an error."""
+    from zodrive.attacks.registry import ATTACKS
+
+    names, left_out = [], {}
+    for name in ATTACKS:
+        try:
+            load_attack(name, attack_set).check()
+        except ZodriveError as err:
+            left_out[name] = str(err)
+        else:
+            names.append(name)
+    return names, left_out
+
+
 def _black_box(attack: str, attack_set: list[str] | None) -> bool:
     from zodrive.attacks.registry import ATTACKS
 
