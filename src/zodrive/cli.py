@@ -369,7 +369,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
     cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
-    cmp_.add_argument("--attacks", nargs="+", default=None, help="default: every registered attack that takes the --attack-set options (the others are named)")
+    cmp_.add_argument("--attacks", nargs="+", default=None,
+                      help="default: every registered attack that takes the --attack-set options (the others are named)")
     cmp_.add_argument("--eps", nargs="+", type=float, default=[0.2])
     cmp_.add_argument("--query-budgets", nargs="+", type=_positive_int, default=None,
                       help="per-step query budgets, one cell each (default: no cap)")
