@@ -28,6 +28,10 @@ PAIRS = [  # (vertex-hold cell, other cell)
     ("ddpg-robust-eps0.05", C / "ppo-ddpg-robust-eps0.05-100"),
     ("td3-finetuned-eps0.2", C / "td3-finetuned-random-search-eps0.2-100"),
     ("td3-finetuned-eps0.2", C / "ppo-td3-finetuned-eps0.2-100"),
+    # attack seeds 1 and 2 (run-seeds.sh) where vertex hold matters
+    *[(f"{cell}-seed{s}", other) for s in (1, 2) for cell, other in (
+        ("dqn-close-eps0.02", K / "random-search-eps0.02"), ("dqn-close-eps0.05", K / "random-search-eps0.05"),
+        ("dqn-driver-eps0.2", C / "dqn-driver-random-search-eps0.2-100"))],
     # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
     ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
     ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),
