@@ -792,6 +792,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_certify(args: argparse.Namespace) -> int:
+    from zodrive.attacks.registry import ATTACKS
     from zodrive.agents.loading import model_kind
     from zodrive.agents.policies import is_sb3_zip
     from zodrive.attacks.spec import load_attack
@@ -809,8 +810,6 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.tol is not None and model_kind(model) == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol
-    from zodrive.attacks.registry import ATTACKS
-
     for name in args.attack:
         spec = load_attack(name)  # an unknown attack is an error before any episode runs
         if spec.attack not in ATTACKS or not ATTACKS[spec.attack].search:

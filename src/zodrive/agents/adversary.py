@@ -170,8 +170,9 @@ def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
     settings = fitted.get("settings") or {}
     where = "on the ball's vertices" if settings.get("probe") == "vertices" else "uniform in the ball"
     lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
-             f"victim queries ({settings.get('probes', 4)} random points per visited state, {where}), the mean action fitted to make it take the target action{by}; "
-             f"{fitted['wall_time_s']} s. Per round (driving with the previous round's fit):"]
+             f"victim queries ({settings.get('probes', 4)} random points per visited state, {where}), the mean "
+             f"action fitted to make it take the target action{by}; {fitted['wall_time_s']} s. Per round (driving "
+             "with the previous round's fit):"]
     for r in fitted["rounds"]:
         lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
                      f"taken on {r['target_share']:.1%} of steps; {surrogate_fit(r)}")

@@ -194,14 +194,14 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 top2 = np.sort(Y.numpy(), axis=1)[:, -2:]
                 width = float(np.median(top2[:, 1] - top2[:, 0]))  # the victim's typical decision gap
         scale = Y.std().clamp(min=1e-6)
-        chosen_ = Y.argmax(1)
+        decisions = Y.argmax(1)  # the victim's chosen actions (discrete), for the "decisions" loss
 
         def surrogate_loss(i: torch.Tensor) -> torch.Tensor:
             out = surrogate(X[i])
             mse = (((out - Y[i]) / scale) ** 2).mean()
             if settings.loss == "scores":
                 return mse
-            return mse + torch.nn.functional.cross_entropy(out, chosen_[i])
+            return mse + torch.nn.functional.cross_entropy(out, decisions[i])
 
         mse = _fit(list(surrogate.parameters()), surrogate_loss, len(X), settings.epochs, gen)
         with torch.no_grad():  # discrete: the share of points where it picks the victim's action; continuous: RMSE

@@ -88,6 +88,8 @@ class Attack(abc.ABC):
     black_box: ClassVar[bool] = True
     search: ClassVar[bool] = True  # runs the driver below (T iterations of q proposals); False: its own perturb
     queries_clean: ClassVar[bool] = True  # asks the victim about the clean observation (so a base rate is known)
+    no_search: ClassVar[str] = ""  # an attack that is no search (`search = False`): why the search options do nothing
+    unread: ClassVar[tuple[str, ...]] = ()  # `AttackSpec` objective options it never reads (giving one is an error)
     reference: ClassVar[str] = ""
 
     def __init__(
@@ -150,15 +152,18 @@ class Attack(abc.ABC):
         self._carry: np.ndarray | None = None
         self._fed: np.ndarray | None = None
 
-    def refuse_search_options(self, why: str, reads: tuple[str, ...] = ()) -> None:
+    def refuse_search_options(self, reads: tuple[str, ...] = ()) -> None:
         """An attack that is no search (its own `perturb`) reads none of the search options but
         `reads`: one given anyway would be ignored, which is an error."""
         for option, default in SEARCH_DEFAULTS.items():
             if option not in reads and getattr(self, option) != default:
-                raise ZodriveError(f"attack {self.name}: {option} has no effect ({why})")
+                raise ZodriveError(f"attack {self.name}: {option} has no effect ({self.no_search})")
 
-    def check_objective(self, objective: Objective) -> None:
-        """A one-line error for an objective this attack cannot pursue (every search can)."""
+    @classmethod
+    def check_objective(cls, objective: Objective) -> None:
+        """An attack that never asks about the clean observation cannot judge a goal defined by it."""
+        if not cls.queries_clean and objective.reads_clean:
+            raise ZodriveError(needs_fixed_target(cls.name))
 
     def reseed(self, seed: int | Sequence[int]) -> None:
         """Restart the random streams (per episode, for reproducible episodes): one seed for
@@ -442,6 +447,13 @@ class Attack(abc.ABC):
         return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
                             iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
                             linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
+
+
+def needs_fixed_target(name: str) -> str:
+    """The error for an untargeted or worst-action goal given to an attack that never queries the
+    clean observation (`Attack.queries_clean` False)."""
+    return (f"attack {name} never queries the clean observation, so it cannot judge a goal defined by it: give it a "
+            "fixed target (target=auto is the paper's; not none or worst)")
 
 
 # the search options and their defaults, read from `Attack` itself (mu and step_size are read by

@@ -35,27 +35,20 @@ from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
 
-NEEDS_TARGET = ("attack vertex-hold holds a perturbation while the victim takes a fixed target action and never "
-                "queries the clean observation: give it a fixed target (target=auto is the paper's; not none or worst)")
-UNUSED = ("loss", "weight", "kappa", "mu", "step_size")  # `AttackSpec` options it never reads (`tol` it does)
-
-
 class VertexHold(Attack):
     name = "vertex-hold"
     search = False
     queries_clean = False
+    no_search = "vertex hold queries one point per step and only asks whether the victim took the target"
+    unread = ("loss", "weight", "kappa", "mu", "step_size")  # (`tol` it reads: a continuous target's tolerance)
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
 
     def __init__(self, threat: ThreatModel, **kwargs: Any) -> None:
         super().__init__(threat, **kwargs)
-        self.refuse_search_options("vertex hold queries one point per step: no search", reads=("seed",))
+        self.refuse_search_options(reads=("seed",))
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
-
-    def check_objective(self, objective: Objective) -> None:
-        if objective.reads_clean:
-            raise ZodriveError(NEEDS_TARGET)
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1

@@ -120,11 +120,13 @@ class LearnedAdversary(Attack):
 
     name = NAME
     search = False
+    no_search = "the adversary was trained to lower the victim's return; it has no per-step objective or search"
+    unread = ("target", "loss", "weight", "kappa", "tol", "mu", "step_size")
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         super().__init__(threat, **kwargs)
-        self.refuse_search_options("the perturbation is the trained adversary's output, not a search")
+        self.refuse_search_options()
         if adversary is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR "
                                "(a folder written by `zodrive attack-train`)")

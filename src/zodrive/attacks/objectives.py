@@ -162,6 +162,20 @@ class ContinuousUntargeted(Objective):
 DISCRETE_TARGETS = {"LANE_LEFT": 0, "IDLE": 1, "LANE_RIGHT": 2, "FASTER": 3, "SLOWER": 4}
 
 
+def _is_untargeted(target: Any) -> bool:
+    return target is None or (isinstance(target, str) and target.lower() in ("none", "untargeted"))
+
+
+def _is_worst(target: Any) -> bool:
+    return isinstance(target, str) and target.lower() == "worst"
+
+
+def target_reads_clean(target: Any) -> bool:
+    """Whether the objective `make_objective` builds for `target` has `reads_clean` (untargeted or
+    the victim's worst action), without a victim: for checks before any episode runs."""
+    return _is_untargeted(target) or _is_worst(target)
+
+
 def make_objective(
     kind: str,
     target: str | int | Sequence[float] | None,
@@ -183,8 +197,7 @@ def make_objective(
     [-1, 1] per dimension).
     """
     names = {str(n).upper(): i for i, n in enumerate(action_names)} if action_names else DISCRETE_TARGETS
-    untargeted = target is None or (isinstance(target, str) and target.lower() in ("none", "untargeted"))
-    worst = isinstance(target, str) and target.lower() == "worst"
+    untargeted, worst = _is_untargeted(target), _is_worst(target)
     if kind == "discrete":
         if untargeted:
             return DiscreteUntargeted(weight=weight, kappa=kappa)

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 from zodrive.attacks.victim import Victim, decision_only
-from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack
-from zodrive.attacks.objectives import Objective, make_objective
+from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack, needs_fixed_target
+from zodrive.attacks.objectives import Objective, make_objective, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, make_attack
 from zodrive.attacks.threat import ThreatModel
@@ -125,27 +125,19 @@ class AttackSpec:
                                        self.steps))
 
     def _check_unread(self) -> None:
-        """The attacks that are no search read few of the spec's options: one given is an error."""
-        from zodrive.attacks import hold
+        """An objective option the attack never reads is an error, and so is a goal defined by the
+        clean observation for an attack that never queries it (`Attack.unread`, `queries_clean`)."""
+        from zodrive.attacks.learned import LearnedAdversary
 
-        if self.attack == LEARNED:
-            self._check_learned()
-        elif self.attack == hold.VertexHold.name:
-            default = AttackSpec()
-            for option in hold.UNUSED:
-                if getattr(self, option) != getattr(default, option):
-                    raise ZodriveError(f"attack vertex-hold: {option} has no effect (it queries one point per step "
-                                       "and only asks whether the victim took the target)")
-            if self.target is None or str(self.target).lower() in ("none", "untargeted", "worst"):
-                raise ZodriveError(hold.NEEDS_TARGET)
-
-    def _check_learned(self) -> None:
-        """A learned adversary chooses its own perturbation: an objective option would be ignored."""
+        cls = LearnedAdversary if self.attack == LEARNED else ATTACKS.get(self.attack)
+        if cls is None:
+            return  # an unknown attack: building it says so
         default = AttackSpec()
-        for option in ("target", "loss", "weight", "kappa", "tol", "mu", "step_size"):
+        for option in cls.unread:
             if getattr(self, option) != getattr(default, option):
-                raise ZodriveError(f"attack learned: {option} has no effect (the adversary was trained to lower "
-                                   "the victim's return; it has no per-step objective)")
+                raise ZodriveError(f"attack {cls.name}: {option} has no effect ({cls.no_search})")
+        if not cls.queries_clean and target_reads_clean(self.target):
+            raise ZodriveError(needs_fixed_target(cls.name))
 
     def _check_budgets(self, attack: Attack) -> None:
         one = attack.first_iteration_cost()
