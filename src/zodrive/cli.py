@@ -61,6 +61,14 @@ _seed = _int_at_least(0, "a seed (an integer >= 0)")
 _nonnegative_int = _int_at_least(0, "an integer >= 0")
 
 
+def _probability_below_one(text: str) -> float:
+    """An argparse type: a number in [0, 1)."""
+    value = _nonnegative_float(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text}")
+    return value
+
+
 def _bounds(text: str) -> tuple[float, float]:
     """An argparse type: `LOW,HIGH` with LOW < HIGH."""
     try:
@@ -354,6 +362,26 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_flags(atk, trust=False)
     atk.add_argument("--force", action="store_true", help="overwrite an adversary already in --out")
     atk.add_argument("--no-progress", action="store_true")
+
+    pick = sub.add_parser("picker-train", help="fit a picker for vertex hold from counted victim queries: which "
+                                                "random vertex to feed; use it with --attack vertex-hold:DIR")
+    from zodrive.agents.picker import PickerFit  # torch-free
+
+    pick.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
+    pick.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
+    pick.add_argument("--out", type=Path, required=True, help="the picker's folder")
+    pick.add_argument("--seed", type=_seed, default=0, help="fit seed: training episodes 10000*seed + 1000*round + i")
+    for flag, kind, what in (("rounds", _positive_int, "rounds of driving under vertex hold, querying, refitting"),
+                             ("episodes", _positive_int, "training episodes driven per round"),
+                             ("probes", _positive_int, "random vertices queried at every state met"),
+                             ("epochs", _positive_int, "passes over the labelled vertices per round"),
+                             ("width", _positive_int, "hidden units of each of the MLP's two layers"),
+                             ("candidates", _positive_int, "random vertices ranked at attack time when one is needed"),
+                             ("switch", _probability_below_one, "a held vertex the picker rates below this is replaced "
+                                                                "(0: never)")):
+        pick.add_argument(f"--{flag}", type=kind, help=f"{what} [{getattr(PickerFit, flag)}]")
+    _scenario_flags(pick, trust=False)
+    pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
     rep.add_argument("--out", type=Path, required=True)
@@ -686,6 +714,19 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_picker_train(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from zodrive.agents.picker import PickerFit, picker_train
+
+    given = {k: getattr(args, k) for k in ("rounds", "episodes", "probes", "epochs", "width", "candidates", "switch")
+             if getattr(args, k) is not None}
+    path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
+                        seed=args.seed, force=args.force, report=lambda line: print(line, flush=True))
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g})")
+    return 0
+
+
 def cmd_robust_train(args: argparse.Namespace) -> int:
     from zodrive.defense.robust import robust_train
 
@@ -864,7 +905,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"env": cmd_env, "baselines": cmd_baselines, "train": cmd_train, "evaluate": cmd_evaluate, "render": cmd_render, "card": cmd_card,
-            "adv-train": cmd_adv_train, "attack-train": cmd_attack_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
+            "adv-train": cmd_adv_train, "attack-train": cmd_attack_train, "picker-train": cmd_picker_train, "select": cmd_select, "export": cmd_export, "robust-train": cmd_robust_train, "reproduce": cmd_reproduce,
             "demo": cmd_demo, "compare": cmd_compare, "curves": cmd_curves, "certify": cmd_certify}
 
 
@@ -911,6 +952,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         hint = {"train": "run the same command with --resume to continue from the newest checkpoint",
                 "adv-train": "the run folder is incomplete: rerun with --force",
                 "attack-train": "the adversary folder is incomplete: rerun with --force",
+                "picker-train": "the picker folder is incomplete: rerun with --force",
                 "robust-train": "the run folder is incomplete: rerun with --force"}.get(
             command, "run the same command again to resume")
         print(f"zodrive: interrupted; results written so far are kept ({hint})", file=sys.stderr)

@@ -18,7 +18,12 @@ this way (the DQN driver at eps 0.02) this attack does nearly nothing. The clean
 is never queried, so no base rate is known: its success is the share of steps on which the
 victim took the target under attack.
 
-Queries per environment step: 1.
+`vertex-hold:DIR` picks the fresh vertex instead of drawing it blind: of `candidates` random vertices,
+the one a picker fitted offline from counted queries (`zodrive picker-train`,
+`zodrive.attacks.picker`) rates most likely to make the victim take the target; a held vertex the
+picker rates below its `switch` at the new state is replaced the same way. The picker runs locally.
+
+Queries per environment step: 1 (with a picker too).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import torch
 from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.picker import Picker, objective_target
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
@@ -44,11 +50,20 @@ class VertexHold(Attack):
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
 
-    def __init__(self, threat: ThreatModel, **kwargs: Any) -> None:
+    def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
+        """`adversary`: a picker's folder (`vertex-hold:DIR`), else vertices are drawn blind."""
         super().__init__(threat, **kwargs)
         self.refuse_search_options(reads=("seed",))
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
+        self.picker: Picker | None = None
+        self.picker_target: Any = None
+        if adversary is not None:
+            picker, meta = Picker.load(adversary)
+            self.use_picker(picker, meta["target"])
+            if (float(meta["eps"]), meta["norm"], list(meta["frozen"])) != (threat.eps, threat.norm, list(threat.frozen)):
+                raise ZodriveError(f"picker {adversary} was fitted for eps {meta['eps']:g} with {meta['frozen']} frozen, "
+                                   f"not eps {threat.eps:g} with {list(threat.frozen)} frozen")
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1
@@ -58,6 +73,16 @@ class VertexHold(Attack):
 
     def first_iteration_cost(self) -> int:
         return 1
+
+    def use_picker(self, picker: Picker, target: Any) -> None:
+        """Pick fresh vertices with `picker`, fitted for `target` (`objective_target`); also used while one is fitted."""
+        self.picker, self.picker_target = picker, target
+
+    def check_objective(self, objective: Objective) -> None:
+        super().check_objective(objective)
+        if self.picker is not None and objective_target(objective) != self.picker_target:
+            raise ZodriveError(f"the picker ranks vertices for target {self.picker_target!r}, not "
+                               f"{objective_target(objective)!r}: fit one for this target")
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         raise AssertionError("vertex hold takes no search step")  # perturb is its own
@@ -80,13 +105,16 @@ class VertexHold(Attack):
             return self._untouched(x0, oracle)
         held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
             np.full((n, dim), np.nan, dtype=np.float32)
-        fresh = np.flatnonzero(np.isnan(held).any(axis=1) & live)
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
-        if fresh.size:
-            eps = np.float32(self.threat.eps)
-            mask = self.threat.mask(shape).reshape(-1)
-            delta[fresh] = self.draw(fresh, lambda g: g.choice(np.array([-eps, eps], dtype=np.float32), size=dim)) * mask
         fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
+        stale = np.isnan(held).any(axis=1)
+        if self.picker is not None and self.picker.switch > 0 and (~stale).any():
+            kept = np.flatnonzero(~stale)  # a held vertex the picker rates below `switch` here is replaced
+            stale[kept] = self.picker.scores(fed[kept]) < self.picker.switch
+        fresh = np.flatnonzero(stale & live)
+        if fresh.size:
+            delta[fresh] = self._fresh(flat0[fresh], fresh, shape)
+            fed[fresh] = self.threat.project((flat0[fresh] + delta[fresh]).reshape(-1, *shape), x0[fresh])
         asked = np.flatnonzero(live)
         answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
         out = np.full((n, answered.shape[1]), np.nan, dtype=np.float32)
@@ -102,3 +130,18 @@ class VertexHold(Attack):
         return AttackResult(x_adv=x_adv, success=took, already=np.zeros(n, dtype=bool),  # clean never asked
                             iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
+
+    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`): a random
+        one, or with a picker the best-rated of `candidates` random ones at the row's observation."""
+        eps = np.float32(self.threat.eps)
+        mask = self.threat.mask(shape).reshape(-1)
+        dim = flat0.shape[1]
+        signs = np.array([-eps, eps], dtype=np.float32)
+        if self.picker is None:
+            return self.draw(rows, lambda g: g.choice(signs, size=dim)) * mask
+        k = self.picker.candidates
+        drawn = self.draw(rows, lambda g: g.choice(signs, size=(k, dim))) * mask  # (rows, k, dim)
+        base = np.repeat(flat0, k, axis=0).reshape(-1, *shape)
+        rated = self.picker.scores(self.threat.project(base + drawn.reshape(-1, *shape), base)).reshape(len(rows), k)
+        return drawn[np.arange(len(rows)), rated.argmax(axis=1)]

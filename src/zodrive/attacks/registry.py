@@ -23,7 +23,7 @@ ATTACKS: dict[str, type[Attack]] = {
 }
 
 
-KNOWN = (*ATTACKS, "learned:DIR")
+KNOWN = (*ATTACKS, "learned:DIR", "vertex-hold:DIR")
 """Every attack name: the attacks above (nine searches and vertex hold) and the learned adversary
 (`learned`, read from a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has
 no place in the registry of attacks that run from nothing but their options."""
@@ -35,8 +35,8 @@ def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
 
     if name == NAME:
         return LearnedAdversary(threat, **hyper)
-    if hyper.pop("adversary", None) is not None:
-        raise ZodriveError(f"adversary (a trained adversary's folder) applies to attack learned, not {name}")
+    if name != "vertex-hold" and hyper.pop("adversary", None) is not None:  # vertex-hold:DIR reads a picker
+        raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR and vertex-hold:DIR, not {name}")
     try:
         cls = ATTACKS[name]
     except KeyError:

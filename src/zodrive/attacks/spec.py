@@ -19,6 +19,8 @@ from zodrive.errors import ZodriveError
 log = logging.getLogger(__name__)
 
 LEARNED = "learned"
+FOLDER_ATTACKS = (LEARNED, "vertex-hold")
+"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, vertex hold's picker."""
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 DEFAULT_FROZEN = ("presence",)
 
@@ -53,7 +55,7 @@ class AttackSpec:
     access: str = "score"                 # what a query returns: score (Q-values / action) | decision (action only)
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
-    adversary: str | None = None          # learned: the trained adversary's folder (`zodrive attack-train`)
+    adversary: str | None = None          # learned:DIR / vertex-hold:DIR: the trained adversary / picker folder
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
@@ -182,12 +184,15 @@ class AttackSpec:
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
-    and `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`)."""
+    `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`) and `vertex-hold:DIR`
+    vertex hold with the picker fitted into DIR (`zodrive picker-train`)."""
     from zodrive.config import available
 
-    if name.startswith(LEARNED + ":") or name == LEARNED:
-        folder = name.partition(":")[2]
-        data: dict[str, Any] = {"attack": LEARNED, "adversary": folder or None}
+    head, colon, folder = name.partition(":")
+    if name == LEARNED or (colon and head in FOLDER_ATTACKS):
+        if colon and not folder:
+            raise ZodriveError(f"attack {name!r} names no folder: {head}:DIR")
+        data: dict[str, Any] = {"attack": head, "adversary": folder or None}
         for text in overrides or []:
             from zodrive.config import deep_merge, parse_override
 

@@ -67,7 +67,8 @@ class EvalJob:
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
         if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
-            key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
+            weights = "picker.pt" if attack.get("attack") == "vertex-hold" else "model.zip"
+            key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / weights)
         if self.defense is not None:
             from zodrive.defense import defense_version
 
@@ -248,6 +249,10 @@ def evaluate(
         if job.attack.get("adversary") is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
         check_adversary(job.attack["adversary"], model_file=job.model, preset=job.preset, defense=job.defense)
+    if job.attack is not None and job.attack.get("attack") == "vertex-hold" and job.attack.get("adversary") is not None:
+        from zodrive.attacks.picker import check_picker
+
+        check_picker(job.attack["adversary"], model_file=job.model, preset=job.preset, defense=job.defense)
     done: dict[int, dict[str, Any]] = {}
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -31,7 +31,7 @@ def format_summary(summary: dict[str, Any]) -> str:
             + (f"{summary['norm']}, eps={summary['eps']}, budgeted" if summary.get("eps") is not None
                else "unconstrained: paper mode, no budget")
             + (f", adversary {(summary.get('attack_config') or {}).get('adversary')})" if summary["attack"] == "learned"
-               else f", target={summary['target']})") + _options(summary.get("attack_config") or {})
+               else f", target={summary['target']}" + _picker(summary) + ")") + _options(summary.get("attack_config") or {})
         )
         if summary["attack_success_rate"] is None:  # a learned adversary: no per-step goal
             lines.append(f"attack success: n/a (the adversary lowers the return over the episode, no per-step "
@@ -47,6 +47,12 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
             )
     return "\n".join(lines)
+
+
+def _picker(summary: dict[str, Any]) -> str:
+    """`, picker DIR` for vertex hold with a picker (`vertex-hold:DIR`), else nothing."""
+    folder = (summary.get("attack_config") or {}).get("adversary")
+    return f", picker {folder}" if summary.get("attack") == "vertex-hold" and folder else ""
 
 
 def _options(config: dict) -> str:

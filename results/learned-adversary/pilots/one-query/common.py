@@ -1,0 +1,79 @@
+"""Shared by the probes of this folder (not product code): the victim, its threat model, and a driving loop
+in which an attacker picks each step's fed observation from the clean one and from whether the victim took
+the target action at the last step (the one answer a one-query attacker gets)."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from zodrive.agents.policies import load_victim
+from zodrive.attacks.spec import load_attack
+from zodrive.attacks.threat import ThreatModel
+from zodrive.attacks.victim import Victim
+from zodrive.envs import attack_context, load_preset, make_env
+
+FASTER = 3
+Chooser = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
+"""(clean observation (1, *obs), per-episode memory) -> the observation fed to the victim; the memory
+holds "missed" (the victim did not take the target at the last step) and whatever the chooser keeps."""
+
+
+def setup(model: str, eps: float) -> tuple[dict[str, Any], Victim, Any, ThreatModel]:
+    """The discrete preset, the victim, one environment and the L-inf threat model every attack uses."""
+    preset = load_preset("discrete")
+    ctx = attack_context(preset)
+    victim = load_victim(model, preset)
+    spec = load_attack("random-search", [f"eps={eps}"])  # only for its threat model
+    attack, _, _ = spec.build(victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    return preset, victim, make_env(preset), attack.threat
+
+
+def drive(env: Any, victim: Victim, seed0: int, episodes: int, choose: Chooser, *,
+          target: Callable[[np.ndarray], int] = lambda x: FASTER,
+          states: list[np.ndarray] | None = None) -> dict[str, Any]:
+    """`episodes` episodes from seed `seed0`; the victim acts on what `choose` feeds it (its one query).
+    `target(x)` is the action wanted at clean observation x. Returns the mean return, the crashes, and per
+    target action how often it was wanted and taken. `states` collects the clean observations."""
+    returns, crashes, wanted, taken, actions = [], 0, {}, {}, np.zeros(5, int)
+    for e in range(episodes):
+        obs, _ = env.reset(seed=seed0 + e)
+        done, total, memory = False, 0.0, {"missed": False}
+        while not done:
+            x = np.asarray(obs, np.float32)[None]
+            if states is not None:
+                states.append(x[0])
+            t = target(x)
+            memory["target"] = t
+            act = int(victim.query(choose(x, memory))[0].argmax())
+            memory["missed"] = act != t
+            wanted[t] = wanted.get(t, 0) + 1
+            taken[t] = taken.get(t, 0) + int(act == t)
+            actions[act] += 1
+            obs, reward, terminated, truncated, info = env.step(act)
+            total += reward
+            done = terminated or truncated
+        returns.append(total)
+        crashes += bool(info.get("crashed"))
+    return {"return": float(np.mean(returns)), "crashes": crashes, "episodes": episodes, "returns": returns,
+            "taken": {t: f"{taken[t]}/{wanted[t]}" for t in sorted(wanted)},
+            "action_share": np.round(actions / actions.sum(), 3).tolist()}
+
+
+def show(label: str, r: dict[str, Any]) -> None:
+    print(f"  {label}: return {r['return']:.2f}, crashed {r['crashes']}/{r['episodes']}, target taken "
+          f"{r['taken']} (action: taken/wanted), action share {r['action_share']}")
+
+
+def vertex_hold(threat: ThreatModel, shape: tuple[int, ...], rng: np.random.Generator) -> Chooser:
+    """`--attack vertex-hold`'s rule: keep the vertex while the victim takes the target (and the target
+    stays the same), else a fresh random vertex of the L-inf ball, projected."""
+    mask = threat.mask(shape)
+
+    def choose(x: np.ndarray, memory: dict[str, Any]) -> np.ndarray:
+        if memory.get("held") is None or memory["missed"] or memory.get("held_for") != memory["target"]:
+            memory["held"] = threat.eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=shape) * mask
+            memory["held_for"] = memory["target"]
+        return threat.project(x + memory["held"], x)
+    return choose

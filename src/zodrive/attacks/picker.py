@@ -1,0 +1,104 @@
+"""A picker for vertex hold (`--attack vertex-hold:DIR`): which random vertex to feed when one is needed.
+
+Vertex hold feeds a random vertex of the L-inf ball after every step on which the victim did not take
+the target, and holds one that works. A picker is a small MLP fitted offline, from counted training
+queries (`zodrive picker-train`, `zodrive.agents.picker`), to the probability that the victim takes
+the target on an observation; at attack time it ranks `candidates` random vertices by that
+probability and the best one is fed. It also drops a held vertex that it rates below `switch` at the
+new state. Scoring is local: the attack still makes one victim query per step. The surrogate only ranks random vertices
+and is never optimized against, unlike the fitted adversary's (`zodrive.agents.amortized`). That
+optimization finds the surrogate's errors on models/dqn-close (results/learned-adversary).
+
+The folder holds `picker.json` (what it was fitted against, its settings) and `picker.pt` (the MLP's
+weights: a dict of tensors read with `torch.load(weights_only=True)`, so nothing is unpickled).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from zodrive.errors import ZodriveError
+
+META_FILE = "picker.json"
+WEIGHTS_FILE = "picker.pt"
+FORMAT = 1
+KEYS = ("format", "victim", "victim_sha256", "preset", "eps", "norm", "frozen", "target", "obs_shape", "width",
+        "candidates", "switch")
+
+
+def network(inputs: int, width: int) -> torch.nn.Sequential:
+    """The picker's MLP: the flattened fed observation -> the logit of "the victim takes the target"."""
+    return torch.nn.Sequential(torch.nn.Linear(inputs, width), torch.nn.ReLU(), torch.nn.Linear(width, width),
+                               torch.nn.ReLU(), torch.nn.Linear(width, 1))
+
+
+class Picker:
+    """Ranks fed observations by the fitted probability that the victim takes the target."""
+
+    def __init__(self, net: torch.nn.Module, candidates: int, switch: float) -> None:
+        self.net, self.candidates, self.switch = net.eval(), int(candidates), float(switch)
+
+    def scores(self, fed: np.ndarray) -> np.ndarray:
+        """(N, *obs) observations -> (N,) probabilities."""
+        flat = torch.from_numpy(np.ascontiguousarray(fed, dtype=np.float32).reshape(len(fed), -1))
+        with torch.no_grad():
+            return torch.sigmoid(self.net(flat)).squeeze(1).numpy()
+
+    @classmethod
+    def load(cls, folder: str | Path) -> tuple["Picker", dict[str, Any]]:
+        """The picker in `folder` and its description, or a one-line error."""
+        meta = read_meta(folder)
+        try:
+            state = torch.load(Path(folder) / WEIGHTS_FILE, map_location="cpu", weights_only=True)
+        except Exception as exc:  # a truncated or foreign file; weights_only refuses anything but tensors
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} is not a picker's weights ({type(exc).__name__})") from None
+        net = network(int(np.prod(meta["obs_shape"])), int(meta["width"]))
+        try:
+            net.load_state_dict(state)
+        except (RuntimeError, TypeError, AttributeError):
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} does not fit the network {META_FILE} describes") from None
+        return cls(net, meta["candidates"], meta["switch"]), meta
+
+
+def read_meta(folder: str | Path) -> dict[str, Any]:
+    """A picker's `picker.json`, or a one-line error saying what is missing."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise ZodriveError(f"picker folder not found: {path} (fit one with `zodrive picker-train`)")
+    for name in (META_FILE, WEIGHTS_FILE):
+        if not (path / name).is_file():
+            raise ZodriveError(f"{path} is not a picker (no {name}; fit one with `zodrive picker-train`)")
+    try:
+        meta = json.loads((path / META_FILE).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ZodriveError(f"{path / META_FILE} is not valid JSON") from None
+    if not isinstance(meta, dict) or any(k not in meta for k in KEYS) or meta["format"] != FORMAT:
+        raise ZodriveError(f"{path / META_FILE} is not a picker description zodrive {FORMAT} reads")
+    return meta
+
+
+def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
+    """Refuse a picker fitted against another model file or preset, or run behind a defense (one line;
+    the budget and the target are checked where the attack is built, `VertexHold`)."""
+    from zodrive.agents.safe_load import sha256
+
+    meta = read_meta(folder)
+    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
+        raise ZodriveError(f"picker {folder} was fitted against {meta['victim']} (SHA-256 {meta['victim_sha256'][:12]}..), "
+                           f"not {model_file}: fit one against this model")
+    if meta["preset"] != preset:
+        raise ZodriveError(f"picker {folder} was fitted on preset {meta['preset'].get('name')!r} with other settings "
+                           "than this evaluation's: fit one for this preset")
+    if defense is not None:
+        raise ZodriveError("a picker is fitted against the undefended model: drop --defense or use vertex-hold")
+
+
+def objective_target(objective: Any) -> Any:
+    """What a picker records of its objective's target: the action index, or the action as a list."""
+    target = getattr(objective, "target", None)
+    return [float(v) for v in target] if isinstance(target, (tuple, list, np.ndarray)) else target
