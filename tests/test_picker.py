@@ -38,7 +38,7 @@ def gate_victim(always: bool = False) -> Victim:
 
 
 def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps: float = EPS, target: int = 3,
-                weights: bytes | None = None) -> Path:
+                weights: bytes | None = None, **fields) -> Path:
     """A picker folder whose network rates an observation by vehicle 1's x: logit = 50 x."""
     net = network(25, 2)
     with torch.no_grad():
@@ -55,8 +55,8 @@ def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps:
     else:
         (folder / WEIGHTS_FILE).write_bytes(weights)
     meta = {"format": FORMAT, "victim": "toy", "victim_sha256": "0" * 64, "preset": {"name": "toy"}, "eps": eps,
-            "norm": "linf", "frozen": ["presence"], "target": target, "obs_shape": [5, 5], "width": 2,
-            "candidates": candidates, "switch": switch}
+            "norm": "linf", "frozen": ["presence"], "target": target, "tol": None, "obs_shape": [5, 5], "width": 2,
+            "candidates": candidates, "switch": switch, **fields}
     (folder / META_FILE).write_text(json.dumps(meta))
     return folder
 
@@ -100,8 +100,9 @@ def test_a_held_vertex_the_picker_rates_low_is_replaced_only_with_a_switch(tmp_p
         assert (not np.allclose(first, second)) is replaced
 
 
-def test_rows_in_lockstep_get_what_one_row_runs_get(tmp_path: Path) -> None:
-    folder = gate_picker(tmp_path / "p")
+@pytest.mark.parametrize("switch", [0.0, 0.5])
+def test_rows_in_lockstep_get_what_one_row_runs_get(tmp_path: Path, switch: float) -> None:
+    folder = gate_picker(tmp_path / "p", switch=switch)
     x0 = observations(4, seed=5)
     victim = linear_victim(seed=2)
 
@@ -116,9 +117,9 @@ def test_rows_in_lockstep_get_what_one_row_runs_get(tmp_path: Path) -> None:
 
 
 def test_a_picker_fitted_for_something_else_is_a_one_line_error(tmp_path: Path) -> None:
-    with pytest.raises(ZodriveError, match="fitted for eps 0.05"):
+    with pytest.raises(ZodriveError, match="fitted for eps 0.05, not 0.1"):
         build(gate_victim(), gate_picker(tmp_path / "eps", eps=0.05))
-    with pytest.raises(ZodriveError, match="ranks vertices for target 0, not 3"):
+    with pytest.raises(ZodriveError, match="ranks vertices for {'target': 0, 'tol': None}, not {'target': 3"):
         build(gate_victim(), gate_picker(tmp_path / "target", target=0))
     with pytest.raises(ZodriveError, match="is not a picker"):
         build(gate_victim(), tmp_path / "eps" / "..")
@@ -127,6 +128,20 @@ def test_a_picker_fitted_for_something_else_is_a_one_line_error(tmp_path: Path) 
     with pytest.raises(ZodriveError, match="applies to learned:DIR and vertex-hold:DIR, not zo-signsgd"):
         AttackSpec(attack="zo-signsgd", adversary=str(tmp_path)).build(gate_victim(), **context("discrete"))
     assert load_attack(f"vertex-hold:{tmp_path}").adversary == str(tmp_path)
+    for name, bad in (("candidates", 0), ("switch", "a"), ("switch", 1.5), ("width", 10**6), ("obs_shape", "ab"),
+                      ("victim_sha256", 5), ("frozen", 3)):
+        with pytest.raises(ZodriveError, match="wrong type or out of range"):
+            build(gate_victim(), gate_picker(tmp_path / f"bad-{name}", **{name: bad}))
+    AttackSpec(attack="vertex-hold", eps=EPS, adversary=str(gate_picker(tmp_path / "ok"))).check()  # `compare`'s check
+
+
+def test_the_evaluation_key_changes_with_the_pickers_settings(tmp_path: Path) -> None:
+    """Refitting a picker with other `candidates` or `switch` can leave its weights unchanged: the
+    key of an evaluation covers the description too, so a resumed run never mixes two attacks."""
+    from zodrive.attacks.picker import digest
+
+    assert digest(gate_picker(tmp_path / "a")) != digest(gate_picker(tmp_path / "b", switch=0.5))
+    assert digest(gate_picker(tmp_path / "a")) == digest(gate_picker(tmp_path / "c"))
 
 
 class _Payload:

@@ -468,8 +468,8 @@ def _backend_flags(parser: argparse.ArgumentParser) -> None:
 
 def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("attack (black-box unless the name says otherwise)")
-    group.add_argument("--attack", help="attack config name/YAML, registry name, or learned:DIR (an adversary "
-                                        "trained by attack-train)")
+    group.add_argument("--attack", help="attack config name/YAML, registry name, learned:DIR (an adversary "
+                                        "trained by attack-train) or vertex-hold:DIR (a picker fitted by picker-train)")
     group.add_argument("--eps", type=float)
     group.add_argument("--norm", choices=["linf", "l2"])
     group.add_argument("--mode", choices=["budgeted", "paper"])
@@ -637,7 +637,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from zodrive.agents.policies import make_policy_env
+    from zodrive.agents.policies import make_policy_env, policy_ref
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
 
@@ -646,6 +646,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     preset = _preset_of(args)
     _check_trust(args)
     _check_loss(args, spec, preset)
+    if spec is not None:
+        from zodrive.evaluation.evaluate import check_trained_folder
+
+        check_trained_folder(spec.to_dict(), policy_ref(str(args.model)), preset, args.defense)
     victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense,
                                   trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
@@ -723,7 +727,11 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
              if getattr(args, k) is not None}
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
                         seed=args.seed, force=args.force, report=lambda line: print(line, flush=True))
-    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g})")
+    scenario = "".join([f" --preset {args.preset}" if args.preset else "",
+                        *(f" --env-set {item}" for item in args.env_set),
+                        f" --env-id {args.env_id}" if args.env_id else "",
+                        f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{scenario})")
     return 0
 
 
@@ -952,7 +960,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         hint = {"train": "run the same command with --resume to continue from the newest checkpoint",
                 "adv-train": "the run folder is incomplete: rerun with --force",
                 "attack-train": "the adversary folder is incomplete: rerun with --force",
-                "picker-train": "the picker folder is incomplete: rerun with --force",
+                "picker-train": "a picker is written at the end: rerun (with --force if --out holds files)",
                 "robust-train": "the run folder is incomplete: rerun with --force"}.get(
             command, "run the same command again to resume")
         print(f"zodrive: interrupted; results written so far are kept ({hint})", file=sys.stderr)

@@ -7,8 +7,9 @@ episodes under vertex hold, blind in round 0 and with the picker fitted so far a
 state it meets, `probes` random vertices are queried, and the MLP is refitted on the labels of all
 rounds. Refitting on the states the attack itself leads to is DAgger's remedy for a learner that
 changes its own inputs (Ross et al., AISTATS 2011). Every victim call goes through one `QueryOracle`
-and is counted in train.json. Training seeds are 10000 * seed + 1000 * round + episode: disjoint
-from the tuning (900000..) and evaluation (100000..) seeds for seeds 0-8.
+and is counted in train.json. Training episodes use environment seeds 10000 * seed + 1000 * round +
+episode, below 50000 for seeds 0-4: zodrive's training range (`zodrive.seeds`), apart from tuning and
+evaluation seeds.
 """
 
 from __future__ import annotations
@@ -45,21 +46,21 @@ class PickerFit:
     switch: float = 0.3     # a held vertex rated below this at the new state is replaced
 
     def check(self) -> None:
-        for name in ("rounds", "episodes", "probes", "epochs", "width", "candidates"):
+        from zodrive.attacks.picker import MAX_CANDIDATES, MAX_WIDTH
+
+        for name, most in (("rounds", 10), ("episodes", 1000), ("probes", 1_000_000), ("epochs", 1000),
+                           ("width", MAX_WIDTH), ("candidates", MAX_CANDIDATES)):
             value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 1):
-                raise ZodriveError(f"picker {name} must be an integer >= 1, not {value!r}")
-        if self.rounds > 10 or self.episodes > 1000:
-            raise ZodriveError("picker rounds must be <= 10 and episodes <= 1000 (training seeds are "
-                               "10000 * seed + 1000 * round + episode)")
-        if not (isinstance(self.switch, float) and 0.0 <= self.switch < 1.0):
+            if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= most):
+                raise ZodriveError(f"picker {name} must be an integer from 1 to {most}, not {value!r}")
+        if not (isinstance(self.switch, (int, float)) and not isinstance(self.switch, bool) and 0 <= self.switch < 1):
             raise ZodriveError(f"picker switch must be a probability in [0, 1), not {self.switch!r}")
 
 
-def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, epochs: int, seed: int) -> float:
-    """Binary cross-entropy on all but a held-out share; returns the held-out accuracy."""
+def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Tensor, epochs: int) -> float:
+    """Binary cross-entropy on the rows not `held` out; returns the accuracy on the held-out rows."""
     import torch
-    held = torch.from_numpy(np.random.default_rng(seed).random(len(x)) < HELD_OUT)
+
     fit_x, fit_y = x[~held], y[~held]
     opt = torch.optim.Adam(net.parameters(), LEARNING_RATE)
     net.train()
@@ -91,6 +92,9 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     from zodrive.runinfo import write_atomic, write_json, write_run_info
 
     fit.check()
+    if not (isinstance(seed, int) and 0 <= seed <= 4):
+        raise ZodriveError(f"picker seed must be 0-4, not {seed!r}: its training episodes (10000 * seed + ...) "
+                           "stay below 50000, apart from tuning and evaluation seeds")
     if not (isinstance(eps, float) and np.isfinite(eps) and eps > 0):
         raise ZodriveError(f"eps must be > 0, not {eps}")
     if not is_sb3_zip(model):
@@ -112,6 +116,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     signs = np.array([-eps, eps], dtype=np.float32)
     xs: list[np.ndarray] = []
     ys: list[np.ndarray] = []
+    held: list[np.ndarray] = []  # each labelled vertex is held out, or not, once: when it is labelled
     rounds: list[dict[str, Any]] = []
     start = time.perf_counter()
     for r in range(fit.rounds):
@@ -140,8 +145,9 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
             returns.append(total)
         x_all = torch.from_numpy(np.concatenate(xs))
         y_all = torch.from_numpy(np.concatenate(ys).astype(np.float32))
-        accuracy = _fit(net, x_all, y_all, fit.epochs, seed * 100 + r)
-        attack.use_picker(Picker(net, fit.candidates, fit.switch), objective_target(objective))  # type: ignore[attr-defined]
+        held.append(rng.random(len(y_all) - sum(map(len, held))) < HELD_OUT)
+        accuracy = _fit(net, x_all, y_all, torch.from_numpy(np.concatenate(held)), fit.epochs)
+        attack.use_picker(Picker(net, fit.candidates, float(fit.switch)), objective_target(objective))  # type: ignore[attr-defined]
         rounds.append({"round": r, "episodes": fit.episodes, "steps": steps, "victim_return": float(np.mean(returns)),
                        "target_share": taken / max(steps, 1), "labelled": len(y_all),
                        "label_share": float(y_all.mean()), "held_out_accuracy": accuracy,
@@ -158,8 +164,8 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     tmp.replace(out / WEIGHTS_FILE)
     meta = {"format": FORMAT, "victim": str(model), "victim_sha256": sha256(Path(policy_ref(model))),
             "preset": preset, "eps": eps, "norm": threat.norm, "frozen": list(threat.frozen),
-            "target": objective_target(objective), "obs_shape": list(shape), "width": fit.width,
-            "candidates": fit.candidates, "switch": fit.switch}
+            **objective_target(objective), "obs_shape": list(shape), "width": fit.width,
+            "candidates": fit.candidates, "switch": float(fit.switch)}
     train = {"kind": "picker for vertex hold", "victim": str(model), "eps": eps, "seed": seed, "fit": asdict(fit),
              "rounds": rounds, "victim_queries": int(oracle.total_queries),
              "wall_time_s": round(time.perf_counter() - start, 1)}
@@ -191,5 +197,6 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round; "
         f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
         *[f"  - {round_line(r)}" for r in train["rounds"]], "",
-        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}`", "",
+        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}` on the preset "
+        "it was fitted on (config.yaml: a picker is refused elsewhere)", "",
     ])

@@ -58,12 +58,13 @@ class VertexHold(Attack):
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
         self.picker: Picker | None = None
         self.picker_target: Any = None
+        self.picker_frozen: list[str] | None = None
         if adversary is not None:
             picker, meta = Picker.load(adversary)
-            self.use_picker(picker, meta["target"])
-            if (float(meta["eps"]), meta["norm"], list(meta["frozen"])) != (threat.eps, threat.norm, list(threat.frozen)):
-                raise ZodriveError(f"picker {adversary} was fitted for eps {meta['eps']:g} with {meta['frozen']} frozen, "
-                                   f"not eps {threat.eps:g} with {list(threat.frozen)} frozen")
+            self.use_picker(picker, {"target": meta["target"], "tol": meta["tol"]})
+            if float(meta["eps"]) != threat.eps:
+                raise ZodriveError(f"picker {adversary} was fitted for eps {meta['eps']:g}, not {threat.eps:g}")
+            self.picker_frozen = sorted(meta["frozen"])  # checked by `check_objective`, once the mask is the real one
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1
@@ -74,15 +75,19 @@ class VertexHold(Attack):
     def first_iteration_cost(self) -> int:
         return 1
 
-    def use_picker(self, picker: Picker, target: Any) -> None:
-        """Pick fresh vertices with `picker`, fitted for `target` (`objective_target`); also used while one is fitted."""
-        self.picker, self.picker_target = picker, target
+    def use_picker(self, picker: Picker, goal: dict[str, Any]) -> None:
+        """Pick fresh vertices with `picker`, fitted for `goal` (`objective_target`); also used while one is fitted."""
+        self.picker, self.picker_target = picker, goal
 
     def check_objective(self, objective: Objective) -> None:
+        """Also, with a picker: the goal and the frozen features it was fitted for (`AttackSpec.build`
+        calls this with the victim's objective and the real threat model; `AttackSpec.check` knows neither)."""
         super().check_objective(objective)
+        if self.picker is not None and self.picker_frozen is not None and self.picker_frozen != sorted(self.threat.frozen):
+            raise ZodriveError(f"the picker was fitted with {self.picker_frozen} frozen, not {sorted(self.threat.frozen)}")
         if self.picker is not None and objective_target(objective) != self.picker_target:
-            raise ZodriveError(f"the picker ranks vertices for target {self.picker_target!r}, not "
-                               f"{objective_target(objective)!r}: fit one for this target")
+            raise ZodriveError(f"the picker ranks vertices for {self.picker_target}, not "
+                               f"{objective_target(objective)}: fit one for this target")
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         raise AssertionError("vertex hold takes no search step")  # perturb is its own
@@ -108,12 +113,16 @@ class VertexHold(Attack):
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
         fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
         stale = np.isnan(held).any(axis=1)
-        if self.picker is not None and self.picker.switch > 0 and (~stale).any():
-            kept = np.flatnonzero(~stale)  # a held vertex the picker rates below `switch` here is replaced
-            stale[kept] = self.picker.scores(fed[kept]) < self.picker.switch
+        rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
+        if self.picker is not None and self.picker.switch > 0:
+            for r in np.flatnonzero(~stale & live):  # one call per row: lockstep = one-row runs
+                rating[r] = self.picker.scores(fed[r:r + 1])[0]
+            stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
         fresh = np.flatnonzero(stale & live)
         if fresh.size:
-            delta[fresh] = self._fresh(flat0[fresh], fresh, shape)
+            drawn, rated = self._fresh(flat0[fresh], fresh, shape)
+            take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
+            delta[fresh[take]] = drawn[take]
             fed[fresh] = self.threat.project((flat0[fresh] + delta[fresh]).reshape(-1, *shape), x0[fresh])
         asked = np.flatnonzero(live)
         answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
@@ -131,17 +140,21 @@ class VertexHold(Attack):
                             iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
-    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-        """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`): a random
-        one, or with a picker the best-rated of `candidates` random ones at the row's observation."""
+    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`) and its rating:
+        a random one (rated +inf), or with a picker the best-rated of `candidates` random ones at the
+        row's observation (one picker call per row)."""
         eps = np.float32(self.threat.eps)
         mask = self.threat.mask(shape).reshape(-1)
         dim = flat0.shape[1]
         signs = np.array([-eps, eps], dtype=np.float32)
         if self.picker is None:
-            return self.draw(rows, lambda g: g.choice(signs, size=dim)) * mask
+            return self.draw(rows, lambda g: g.choice(signs, size=dim)) * mask, np.full(len(rows), np.inf)
         k = self.picker.candidates
         drawn = self.draw(rows, lambda g: g.choice(signs, size=(k, dim))) * mask  # (rows, k, dim)
-        base = np.repeat(flat0, k, axis=0).reshape(-1, *shape)
-        rated = self.picker.scores(self.threat.project(base + drawn.reshape(-1, *shape), base)).reshape(len(rows), k)
-        return drawn[np.arange(len(rows)), rated.argmax(axis=1)]
+        best, rated = np.empty((len(rows), dim), dtype=np.float32), np.empty(len(rows))
+        for i in range(len(rows)):
+            base = np.repeat(flat0[i:i + 1], k, axis=0).reshape(-1, *shape)
+            scores = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base))
+            best[i], rated[i] = drawn[i, int(scores.argmax())], float(scores.max())
+        return best, rated

@@ -27,8 +27,9 @@ from zodrive.errors import ZodriveError
 META_FILE = "picker.json"
 WEIGHTS_FILE = "picker.pt"
 FORMAT = 1
-KEYS = ("format", "victim", "victim_sha256", "preset", "eps", "norm", "frozen", "target", "obs_shape", "width",
+KEYS = ("format", "victim", "victim_sha256", "preset", "eps", "norm", "frozen", "target", "tol", "obs_shape", "width",
         "candidates", "switch")
+MAX_WIDTH, MAX_CANDIDATES = 4096, 4096  # a stranger's description cannot make the loader allocate more
 
 
 def network(inputs: int, width: int) -> torch.nn.Sequential:
@@ -44,8 +45,13 @@ class Picker:
         self.net, self.candidates, self.switch = net.eval(), int(candidates), float(switch)
 
     def scores(self, fed: np.ndarray) -> np.ndarray:
-        """(N, *obs) observations -> (N,) probabilities."""
+        """(N, *obs) observations -> (N,) probabilities, in one network call: a row's score depends on
+        the batch it is in (floating point), so callers that need lockstep = one-row runs call this
+        once per environment row (`VertexHold`)."""
         flat = torch.from_numpy(np.ascontiguousarray(fed, dtype=np.float32).reshape(len(fed), -1))
+        if flat.shape[1] != self.net[0].in_features:
+            raise ZodriveError(f"the picker reads observations of {self.net[0].in_features} values, not "
+                               f"{flat.shape[1]}: fit one for this observation")
         with torch.no_grad():
             return torch.sigmoid(self.net(flat)).squeeze(1).numpy()
 
@@ -79,7 +85,31 @@ def read_meta(folder: str | Path) -> dict[str, Any]:
         raise ZodriveError(f"{path / META_FILE} is not valid JSON") from None
     if not isinstance(meta, dict) or any(k not in meta for k in KEYS) or meta["format"] != FORMAT:
         raise ZodriveError(f"{path / META_FILE} is not a picker description zodrive {FORMAT} reads")
+    if not _well_typed(meta):
+        raise ZodriveError(f"{path / META_FILE} holds a value of the wrong type or out of range")
     return meta
+
+
+def _count(value: Any, most: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= most
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
+
+
+def _well_typed(meta: dict[str, Any]) -> bool:
+    """Every field a picker's description gives has the type and range zodrive writes."""
+    target = meta["target"]
+    return (isinstance(meta["victim"], str) and isinstance(meta["victim_sha256"], str) and isinstance(meta["preset"], dict)
+            and _number(meta["eps"]) and meta["eps"] > 0 and meta["norm"] == "linf"
+            and isinstance(meta["frozen"], list) and all(isinstance(f, str) for f in meta["frozen"])
+            and (_count(target, 10_000) or target == 0 or (isinstance(target, list) and all(_number(v) for v in target)))
+            and (meta["tol"] is None or (_number(meta["tol"]) and meta["tol"] >= 0))
+            and isinstance(meta["obs_shape"], list) and all(_count(d, 10_000) for d in meta["obs_shape"])
+            and _count(int(np.prod(meta["obs_shape"])) if meta["obs_shape"] else 0, 1_000_000)
+            and _count(meta["width"], MAX_WIDTH) and _count(meta["candidates"], MAX_CANDIDATES)
+            and _number(meta["switch"]) and 0 <= meta["switch"] < 1)
 
 
 def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
@@ -98,7 +128,17 @@ def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any],
         raise ZodriveError("a picker is fitted against the undefended model: drop --defense or use vertex-hold")
 
 
-def objective_target(objective: Any) -> Any:
-    """What a picker records of its objective's target: the action index, or the action as a list."""
+def digest(folder: str | Path) -> str:
+    """The SHA-256 of a picker's weights and description together: what an evaluation's key records (a
+    refitted picker, or one with other `candidates` or `switch`, is another attack)."""
+    from zodrive.agents.safe_load import sha256
+
+    return "sha256:" + sha256(Path(folder) / WEIGHTS_FILE) + "+" + sha256(Path(folder) / META_FILE)
+
+
+def objective_target(objective: Any) -> dict[str, Any]:
+    """What a picker records of its objective's goal: the target (the action index, or the action as a
+    list) and, for a continuous target, the tolerance within which it counts as taken."""
     target = getattr(objective, "target", None)
-    return [float(v) for v in target] if isinstance(target, (tuple, list, np.ndarray)) else target
+    return {"target": [float(v) for v in target] if isinstance(target, (tuple, list, np.ndarray)) else target,
+            "tol": float(objective.tol) if isinstance(target, (tuple, list, np.ndarray)) else None}

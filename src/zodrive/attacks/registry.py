@@ -24,9 +24,10 @@ ATTACKS: dict[str, type[Attack]] = {
 
 
 KNOWN = (*ATTACKS, "learned:DIR", "vertex-hold:DIR")
-"""Every attack name: the attacks above (nine searches and vertex hold) and the learned adversary
+"""Every attack name: the attacks above (nine searches and vertex hold), the learned adversary
 (`learned`, read from a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has
-no place in the registry of attacks that run from nothing but their options."""
+no place in the registry of attacks that run from nothing but their options, and vertex hold with a
+picker (`vertex-hold:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:

@@ -64,6 +64,9 @@ def adversarial_train(
     if spec is not None:  # the whole attack is checked before the run folder exists
         from zodrive.envs import attack_context
 
+        if spec.adversary is not None:  # fitted against one model file, while this run changes the model
+            raise ZodriveError(f"adv-train trains against attacks that adapt to the changing model; "
+                               f"{spec.attack}:{spec.adversary} was fitted against one fixed model file")
         spec.build(victim, **attack_context(preset))
     out.mkdir(parents=True, exist_ok=True)
     method = setup(model) if setup is not None else None

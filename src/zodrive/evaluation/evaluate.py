@@ -67,8 +67,12 @@ class EvalJob:
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
         if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
-            weights = "picker.pt" if attack.get("attack") == "vertex-hold" else "model.zip"
-            key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / weights)
+            if attack.get("attack") == "vertex-hold":
+                from zodrive.attacks.picker import digest
+
+                key["adversary"] = digest(attack["adversary"])
+            else:
+                key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
             from zodrive.defense import defense_version
 
@@ -225,6 +229,21 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int,
                             raise future.exception()
 
 
+def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any], defense: str | None) -> None:
+    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s picker) fitted against
+    another model file, preset or defense: one line saying which."""
+    if attack is not None and attack.get("attack") == "learned":
+        from zodrive.attacks.learned import check_adversary
+
+        if attack.get("adversary") is None:
+            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
+        check_adversary(attack["adversary"], model_file=model, preset=preset, defense=defense)
+    if attack is not None and attack.get("attack") == "vertex-hold" and attack.get("adversary") is not None:
+        from zodrive.attacks.picker import check_picker
+
+        check_picker(attack["adversary"], model_file=model, preset=preset, defense=defense)
+
+
 def evaluate(
     job: EvalJob,
     episodes: int,
@@ -243,16 +262,7 @@ def evaluate(
     if envs < 1:
         raise ZodriveError(f"envs must be >= 1, not {envs}")
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
-    if job.attack is not None and job.attack.get("attack") == "learned":
-        from zodrive.attacks.learned import check_adversary
-
-        if job.attack.get("adversary") is None:
-            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
-        check_adversary(job.attack["adversary"], model_file=job.model, preset=job.preset, defense=job.defense)
-    if job.attack is not None and job.attack.get("attack") == "vertex-hold" and job.attack.get("adversary") is not None:
-        from zodrive.attacks.picker import check_picker
-
-        check_picker(job.attack["adversary"], model_file=job.model, preset=job.preset, defense=job.defense)
+    check_trained_folder(job.attack, job.model, job.preset, job.defense)
     done: dict[int, dict[str, Any]] = {}
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -116,6 +116,9 @@ def default_attacks(attack_set: list[str] | None = None) -> tuple[list[str], dic
             left_out[name] = str(err)
         else:
             names.append(name)
+    if not names:
+        raise ZodriveError("no attack takes these --attack-set options: "
+                           + "; ".join(f"{name}: {why}" for name, why in left_out.items())[:400])
     return names, left_out
 
 
