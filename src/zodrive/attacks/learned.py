@@ -92,18 +92,24 @@ def read_meta(folder: str | Path) -> dict[str, Any]:
     return meta
 
 
+def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str, preset: dict[str, Any]) -> None:
+    """Refuse a trained folder (its description `meta`) made against another model file (by SHA-256) or
+    preset: one line, "`what` against ..., not ...: `verb` one against this model"."""
+    from zodrive.agents.safe_load import sha256
+
+    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
+        raise ZodriveError(f"{what} against {meta.get('victim', '?')} (SHA-256 {meta['victim_sha256'][:12]}..), "
+                           f"not {model_file}: {verb} one against this model")
+    if meta["preset"] != preset:
+        raise ZodriveError(f"{what} on preset {meta['preset'].get('name')!r} with other settings than this "
+                           f"evaluation's: {verb} one for this preset")
+
+
 def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
     """Refuse to run an adversary against another system than the one it was trained on
     (another model file, preset or defense): one line saying which."""
-    from zodrive.agents.safe_load import sha256
-
     meta = read_meta(folder)
-    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
-        raise ZodriveError(f"adversary {folder} was trained against {meta.get('victim', '?')} (SHA-256 "
-                           f"{meta['victim_sha256'][:12]}..), not {model_file}: train one against this model")
-    if meta["preset"] != preset:
-        raise ZodriveError(f"adversary {folder} was trained on preset {meta['preset'].get('name')!r} with other "
-                           "settings than this evaluation's: train one for this preset")
+    check_fitted_against(meta, f"adversary {folder} was trained", "train", model_file=model_file, preset=preset)
     if meta["defense"] != defense:
         raise ZodriveError(f"adversary {folder} was trained against the victim with defense "
                            f"{meta['defense'] or 'none'}, not {defense or 'none'}: train one against this system")

@@ -115,15 +115,9 @@ def _well_typed(meta: dict[str, Any]) -> bool:
 def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
     """Refuse a picker fitted against another model file or preset, or run behind a defense (one line;
     the budget and the target are checked where the attack is built, `VertexHold`)."""
-    from zodrive.agents.safe_load import sha256
+    from zodrive.attacks.learned import check_fitted_against
 
-    meta = read_meta(folder)
-    if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
-        raise ZodriveError(f"picker {folder} was fitted against {meta['victim']} (SHA-256 {meta['victim_sha256'][:12]}..), "
-                           f"not {model_file}: fit one against this model")
-    if meta["preset"] != preset:
-        raise ZodriveError(f"picker {folder} was fitted on preset {meta['preset'].get('name')!r} with other settings "
-                           "than this evaluation's: fit one for this preset")
+    check_fitted_against(read_meta(folder), f"picker {folder} was fitted", "fit", model_file=model_file, preset=preset)
     if defense is not None:
         raise ZodriveError("a picker is fitted against the undefended model: drop --defense or use vertex-hold")
 
