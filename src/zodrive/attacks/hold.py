@@ -57,7 +57,7 @@ class VertexHold(Attack):
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
         self.picker: Picker | None = None
-        self.picker_target: Any = None
+        self.picker_goal: Any = None
         self.picker_frozen: list[str] | None = None
         if adversary is not None:
             picker, meta = Picker.load(adversary)
@@ -77,7 +77,7 @@ class VertexHold(Attack):
 
     def use_picker(self, picker: Picker, goal: dict[str, Any]) -> None:
         """Pick fresh vertices with `picker`, fitted for `goal` (`objective_target`); also used while one is fitted."""
-        self.picker, self.picker_target = picker, goal
+        self.picker, self.picker_goal = picker, goal
 
     def check_objective(self, objective: Objective) -> None:
         """Also, with a picker: the goal and the frozen features it was fitted for (`AttackSpec.build`
@@ -85,8 +85,8 @@ class VertexHold(Attack):
         super().check_objective(objective)
         if self.picker is not None and self.picker_frozen is not None and self.picker_frozen != sorted(self.threat.frozen):
             raise ZodriveError(f"the picker was fitted with {self.picker_frozen} frozen, not {sorted(self.threat.frozen)}")
-        if self.picker is not None and objective_target(objective) != self.picker_target:
-            raise ZodriveError(f"the picker ranks vertices for {self.picker_target}, not "
+        if self.picker is not None and objective_target(objective) != self.picker_goal:
+            raise ZodriveError(f"the picker ranks vertices for {self.picker_goal}, not "
                                f"{objective_target(objective)}: fit one for this target")
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
