@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from toys import CONTEXT, context, counting_victim, linear_victim, observations
 from zodrive.attacks.victim import Victim
@@ -94,6 +95,36 @@ def test_untargeted_and_targeted_objectives(target: str) -> None:
     else:
         assert np.all(adv_action[hit] == 3)
     assert hit.mean() > 0.3
+
+
+@pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd"])
+def test_an_avoid_target_keeps_the_victim_off_that_action_and_never_reads_the_clean_output(name: str) -> None:
+    victim = linear_victim(seed=4)
+    x0 = observations(64)
+    avoid = int(np.bincount(victim.query(x0).argmax(1), minlength=5).argmax())  # the toy's most frequent action
+    spec = AttackSpec(attack=name, target=f"not:{avoid}", eps=0.4, steps=30)
+    attack, objective, oracle = spec.build(victim, **context("discrete"))
+    assert not objective.reads_clean and objective.loss(torch.zeros(1, 1, 5), torch.full((1, 5), float("nan"))).isfinite().all()
+    result = attack.perturb(x0, oracle, objective)
+    adv_action = victim.query(result.x_adv).argmax(1)
+    clean_avoid = victim.query(x0).argmax(1) == avoid
+    np.testing.assert_array_equal(result.already, ~clean_avoid)  # nothing to do where it already avoids it
+    np.testing.assert_array_equal(result.success[clean_avoid], adv_action[clean_avoid] != avoid)
+    assert result.success[clean_avoid].mean() > 0.5  # it moved most of those off the avoided action
+    named = AttackSpec(attack=name, target="not:FASTER").build(victim, **context("discrete"))[1]
+    assert named.avoid == 3
+
+
+@pytest.mark.parametrize("target, message", [("not:FLY", "unknown target 'not:FLY'"), ("not:7", r"7 \('not:7'\) is out of range 0..4"),
+                                             ("not:", "unknown target 'not:'")])
+def test_a_bad_avoid_target_is_a_one_line_error(target: str, message: str) -> None:
+    with pytest.raises(ZodriveError, match=message):
+        AttackSpec(attack="zo-signsgd", target=target).build(linear_victim(), **context("discrete"))
+    with pytest.raises(ZodriveError, match="acts continuously"):
+        AttackSpec(attack="zo-signsgd", target="not:FASTER").build(linear_victim(kind="continuous"),
+                                                                   **context("continuous"))
+    with pytest.raises(ZodriveError, match="only the margin loss"):
+        AttackSpec(attack="zo-signsgd", target="not:SLOWER", loss="paper").build(linear_victim(), **context("discrete"))
 
 
 def test_oracle_counts_every_query_exactly() -> None:

@@ -37,7 +37,7 @@ ATTACK = {
     "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise", "learned", "learned:{tmp}"],
     "--eps": EPS,
     "--norm": ["linf", "l2", "l3"], "--mode": ["budgeted", "paper", "x"], "--steps": ["1", "2", "0", "x"],
-    "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9"],
+    "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9", "not:SLOWER", "not:x"],
     "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
     "--timing": ["0.5", "2"], "--max-change": ["0.01", "-1"], "--access": ["score", "decision", "x"],
     "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"], "--episode-query-budget": ["10", "0"],
@@ -71,6 +71,9 @@ COMMANDS = {
     "card": ({"--note": ["x"], "--force": [None]}, False),
     "curves": ({"--bin": NUMBERS, "--plot": ["{tmp}/c.png", "{tmp}/c.txt"]}, False),
     "env": ({}, False),
+    "picker-train": ({"--eps": EPS, "--out": ["{tmp}/pk", "/proc/pk"], "--seed": ["0", "4", "5", "x"],
+                      "--target": ATTACK["--target"], "--rounds": NUMBERS, "--switch": ["0.3", "1", "x"],
+                      "--candidates": NUMBERS, "--preset": COMMON["--preset"], "--force": [None]}, True),
     "certify": ({"--eps": EPS, "--episodes": ["1", "0", "x"], "--preset": COMMON["--preset"], "--tol": EPS,
                  "--out": ["{tmp}/ce", "/proc/ce"], "--force": [None]}, True),
 }
@@ -103,6 +106,7 @@ def argv(draw) -> list[str]:  # noqa: ANN001
 @given(args=argv())
 def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) -> None:
     import zodrive.agents.adversary as adversary
+    import zodrive.agents.picker as picker
     import zodrive.agents.training as training
     import zodrive.defense.adversarial as adversarial
     import zodrive.defense.robust as robust
@@ -112,6 +116,7 @@ def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) 
     from zodrive.cli import main
 
     for module, name in ((training, "train"), (adversary, "attack_train"), (adversarial, "adversarial_train"), (robust, "robust_train"),
+                         (picker, "picker_train"),
                          (compare, "compare"), (reproduce, "reproduce"), (select, "select_checkpoint")):
         monkeypatch.setattr(module, name, _stub)
     with tempfile.TemporaryDirectory() as tmp:

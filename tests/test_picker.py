@@ -37,7 +37,7 @@ def gate_victim(always: bool = False) -> Victim:
     return Victim(query=query, kind="discrete", obs_shape=(5, 5))
 
 
-def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps: float = EPS, target: int = 3,
+def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps: float = EPS, target: int | str = 3,
                 weights: bytes | None = None, **fields) -> Path:
     """A picker folder whose network rates an observation by vehicle 1's x: logit = 50 x."""
     net = network(25, 2)
@@ -129,10 +129,25 @@ def test_a_picker_fitted_for_something_else_is_a_one_line_error(tmp_path: Path) 
         AttackSpec(attack="zo-signsgd", adversary=str(tmp_path)).build(gate_victim(), **context("discrete"))
     assert load_attack(f"vertex-hold:{tmp_path}").adversary == str(tmp_path)
     for name, bad in (("candidates", 0), ("switch", "a"), ("switch", 1.5), ("width", 10**6), ("obs_shape", "ab"),
-                      ("victim_sha256", 5), ("frozen", 3)):
+                      ("victim_sha256", 5), ("frozen", 3), ("target", "not:SLOWER"), ("target", "FASTER")):
         with pytest.raises(ZodriveError, match="wrong type or out of range"):
             build(gate_victim(), gate_picker(tmp_path / f"bad-{name}", **{name: bad}))
     AttackSpec(attack="vertex-hold", eps=EPS, adversary=str(gate_picker(tmp_path / "ok"))).check()  # `compare`'s check
+
+
+def test_a_picker_for_an_action_to_avoid_serves_that_target_only(tmp_path: Path) -> None:
+    """The gate victim takes IDLE (1) below the gate: a picker fitted for not:IDLE opens the gate as one
+    for FASTER does, and each is refused for the other's target."""
+    avoid = gate_picker(tmp_path / "avoid", target="not:1")
+    x0 = observations(8, seed=3)
+    x0[:, 1, 1] = 0.0  # on the gate: half the vertices open it
+    attack, objective, oracle = build(gate_victim(), avoid, target="not:IDLE")
+    attack.reseed(0)
+    assert attack.perturb(x0, oracle, objective).success.all()
+    with pytest.raises(ZodriveError, match="ranks vertices for {'target': 'not:1', 'tol': None}, not {'target': 3"):
+        build(gate_victim(), avoid)
+    with pytest.raises(ZodriveError, match="ranks vertices for {'target': 3, 'tol': None}, not {'target': 'not:1'"):
+        build(gate_victim(), gate_picker(tmp_path / "faster"), target="not:IDLE")
 
 
 def test_the_evaluation_key_changes_with_the_pickers_settings(tmp_path: Path) -> None:
@@ -184,3 +199,11 @@ def test_picker_train_writes_a_folder_vertex_hold_reads_and_never_overwrites_it(
                  "--episodes", "1", "--no-progress", *short]) == 2
     assert "was fitted against" in capsys.readouterr().err
     assert main([*fit[:-2], "--switch", "1", *short]) == 2  # argparse: not a probability below 1
+    capsys.readouterr()
+    avoid = tmp_path / "avoid"
+    assert main([*fit[:5], str(avoid), *fit[6:], "--target", "not:SLOWER"]) == 0
+    assert f"--attack vertex-hold:{avoid} --eps 0.02 --target not:SLOWER" in capsys.readouterr().out
+    assert json.loads((avoid / META_FILE).read_text())["target"] == "not:4"
+    assert "--target not:SLOWER" in (avoid / "CARD.md").read_text()
+    assert main(["evaluate", model, "--attack", f"vertex-hold:{avoid}", "--eps", "0.02", "--episodes", "1",
+                 "--target", "not:SLOWER", "--out", str(tmp_path / "eval-avoid"), "--no-progress", *short]) == 0

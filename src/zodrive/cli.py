@@ -371,6 +371,8 @@ def build_parser() -> argparse.ArgumentParser:
     pick.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
     pick.add_argument("--out", type=Path, required=True, help="the picker's folder")
     pick.add_argument("--seed", type=_seed, default=0, help="fit seed: training episodes 10000*seed + 1000*round + i")
+    pick.add_argument("--target", default="auto", help="what the picker rates vertices for, as evaluate's --target: "
+                                                       "auto (FASTER / '1,0.5'), an action name or index, or not:ACTION")
     for flag, kind, what in (("rounds", _positive_int, "rounds of driving under vertex hold, querying, refitting"),
                              ("episodes", _positive_int, "training episodes driven per round"),
                              ("probes", _positive_int, "random vertices queried at every state met"),
@@ -478,7 +480,8 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mu", type=float)
     group.add_argument("--step-size", type=float)
     group.add_argument("--l2-weight", type=float)
-    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto, none (untargeted) or worst (discrete)")
+    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto, none (untargeted), worst or "
+                                        "not:ACTION (discrete: any action but that one, e.g. not:SLOWER)")
     group.add_argument("--loss", choices=["margin", "paper"])
     group.add_argument("--query-budget", type=int, help="max queries per environment step")
     group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
@@ -726,12 +729,13 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
     given = {k: getattr(args, k) for k in ("rounds", "episodes", "probes", "epochs", "width", "candidates", "switch")
              if getattr(args, k) is not None}
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
-                        seed=args.seed, force=args.force, report=lambda line: print(line, flush=True))
+                        seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
     scenario = "".join([f" --preset {args.preset}" if args.preset else "",
                         *(f" --env-set {item}" for item in args.env_set),
                         f" --env-id {args.env_id}" if args.env_id else "",
                         f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
-    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{scenario})")
+    target = "" if args.target == "auto" else f" --target {args.target}"
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{target}{scenario})")
     return 0
 
 

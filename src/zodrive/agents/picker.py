@@ -77,9 +77,10 @@ def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Ten
 
 
 def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit: PickerFit = PickerFit(), *,
-                 seed: int = 0, force: bool = False, report: Callable[[str], None] | None = None) -> Path:
-    """Fit a picker against `model` (a model file) at L-inf `eps` for the search attacks' default
-    target, write the folder `out` and return it. `report` receives a line per round."""
+                 seed: int = 0, target: Any = "auto", force: bool = False,
+                 report: Callable[[str], None] | None = None) -> Path:
+    """Fit a picker against `model` (a model file) at L-inf `eps` for `target` (as `--target`: auto is
+    the search attacks' default), write the folder `out` and return it. `report` receives a line per round."""
     import torch
 
     from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, Picker, network, objective_target
@@ -103,7 +104,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     check_run_folder(out, resume=False, force=force, resumable=False)
     victim = load_policy(model, preset, None)  # the safe loader
     context = attack_context(preset)
-    spec = AttackSpec(attack="vertex-hold", eps=eps, seed=seed)
+    spec = AttackSpec(attack="vertex-hold", eps=eps, seed=seed, target=target)
     attack, objective, oracle = spec.build(victim, context["features"], context["bounds"], context["n_actions"],
                                            context.get("action_names"), context.get("action_bounds"))
     threat = attack.threat
@@ -158,7 +159,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     out.mkdir(parents=True, exist_ok=True)
     for stale in (WEIGHTS_FILE, META_FILE, "train.json", "CARD.md"):
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
-    write_run_info(out, {"victim": str(model), "preset": preset, "eps": eps, "fit": asdict(fit)}, seed)
+    write_run_info(out, {"victim": str(model), "preset": preset, "eps": eps, "target": target, "fit": asdict(fit)}, seed)
     tmp = out / f".{WEIGHTS_FILE}.tmp"
     torch.save(net.state_dict(), tmp)
     tmp.replace(out / WEIGHTS_FILE)
@@ -166,7 +167,8 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
             "preset": preset, "eps": eps, "norm": threat.norm, "frozen": list(threat.frozen),
             **objective_target(objective), "obs_shape": list(shape), "width": fit.width,
             "candidates": fit.candidates, "switch": float(fit.switch)}
-    train = {"kind": "picker for vertex hold", "victim": str(model), "eps": eps, "seed": seed, "fit": asdict(fit),
+    train = {"kind": "picker for vertex hold", "victim": str(model), "eps": eps, "seed": seed, "target": target,
+             "fit": asdict(fit),
              "rounds": rounds, "victim_queries": int(oracle.total_queries),
              "wall_time_s": round(time.perf_counter() - start, 1)}
     write_json(out / "train.json", train)
@@ -197,6 +199,7 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round; "
         f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
         *[f"  - {round_line(r)}" for r in train["rounds"]], "",
-        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}` on the preset "
+        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}"
+        f"{'' if train['target'] == 'auto' else ' --target ' + str(train['target'])}` on the preset "
         "it was fitted on (config.yaml: a picker is refused elsewhere)", "",
     ])

@@ -453,7 +453,7 @@ def needs_fixed_target(name: str) -> str:
     """The error for an untargeted or worst-action goal given to an attack that never queries the
     clean observation (`Attack.queries_clean` False)."""
     return (f"attack {name} never queries the clean observation, so it cannot judge a goal defined by it: give it a "
-            "fixed target (target=auto is the paper's; not none or worst)")
+            "fixed target (auto is the paper's; an action, or not:ACTION; not none or worst)")
 
 
 # the search options and their defaults, read from `Attack` itself (mu and step_size are read by

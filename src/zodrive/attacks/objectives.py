@@ -97,6 +97,25 @@ class DiscreteUntargeted(Objective):
 
 
 @dataclass(frozen=True)
+class DiscreteAvoid(Objective):
+    """Keep a discrete victim from picking `avoid` (`--target not:SLOWER`: do not brake), whatever it
+    picks instead. Fixed in advance like a target, so the clean output is never read; a search on a
+    victim that rarely takes one harmful action can often still stop the one that saves it.
+
+    Margin loss: max(Q_avoid - max_{j!=avoid} Q_j + kappa, 0), zero once another action wins by kappa."""
+
+    targeted: bool = False  # no action to drive the victim to (a fitted start has nothing to fit)
+    avoid: int = 4
+    kappa: float = 0.01
+
+    def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return self.weight * torch.clamp(out[..., self.avoid] - _others_max(out, self.avoid) + self.kappa, min=0.0)
+
+    def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
+        return out.argmax(dim=-1) != self.avoid
+
+
+@dataclass(frozen=True)
 class DiscreteWorst(Objective):
     """Make a discrete victim pick the action it values least on the clean observation (its
     own "worst action", per step): harm chosen by the victim's values, not fixed in advance.
@@ -170,6 +189,32 @@ def _is_worst(target: Any) -> bool:
     return isinstance(target, str) and target.lower() == "worst"
 
 
+AVOID = "not:"
+"""`--target not:ACTION` (a name or an index): any action but that one (`DiscreteAvoid`)."""
+
+
+def _action_index(target: str | int, names: dict[str, int], n_actions: int | None, given: str | None = None) -> int:
+    """A discrete action given by name or index, checked against the scenario's actions (`given`: the
+    target as written, for the error)."""
+    if isinstance(target, str):
+        name = target.upper()
+        if name.lstrip("-").isdigit():
+            index = int(name)
+        elif name in names:
+            index = names[name]
+        else:
+            raise ZodriveError(f"unknown target {given or target!r} (known: {', '.join(names)} or an index"
+                               f"{'' if given is None else ', after not:'})")
+    elif isinstance(target, int) and not isinstance(target, bool):
+        index = int(target)
+    else:
+        raise ZodriveError(f"a discrete victim needs an action target, not {target!r}")
+    if not 0 <= index < (n_actions or 5):
+        raise ZodriveError(f"target action {index}{'' if given is None else f' ({given!r})'} is out of range "
+                           f"0..{(n_actions or 5) - 1}")
+    return index
+
+
 def target_reads_clean(target: Any) -> bool:
     """Whether the objective `make_objective` builds for `target` has `reads_clean` (untargeted or
     the victim's worst action), without a victim: for checks before any episode runs."""
@@ -191,8 +236,8 @@ def make_objective(
     """Build the objective for a victim kind (`discrete`/`continuous`) and a target.
 
     `target=None` or `"none"` means untargeted; `"worst"` (discrete) the action the victim
-    values least on the clean observation, per step. Discrete targets are an index or an
-    action name (FASTER; `action_names` name the scenario's actions, highway-v0's meta-actions
+    values least on the clean observation, per step; `"not:ACTION"` (discrete) any action but that
+    one. Discrete targets are an index or an action name (FASTER; `action_names` name the scenario's actions, highway-v0's meta-actions
     by default); continuous targets a sequence like [1, 0.5] inside `action_bounds` (default
     [-1, 1] per dimension).
     """
@@ -205,25 +250,19 @@ def make_objective(
             return DiscreteWorst(weight=weight, kappa=kappa)
         if loss not in DQN_LOSSES:
             raise ZodriveError(f"unknown DQN loss {loss!r} (known: {', '.join(DQN_LOSSES)})")
-        if isinstance(target, str):
-            name = target.upper()
-            if name.lstrip("-").isdigit():
-                index = int(name)
-            elif name in names:
-                index = names[name]
-            else:
-                raise ZodriveError(f"unknown target {target!r} (known: {', '.join(names)} or an index)")
-        elif isinstance(target, (int,)) and not isinstance(target, bool):
-            index = int(target)
-        else:
-            raise ZodriveError(f"a discrete victim needs an action target, not {target!r}")
-        if not 0 <= index < (n_actions or 5):
-            raise ZodriveError(f"target action {index} is out of range 0..{(n_actions or 5) - 1}")
+        if isinstance(target, str) and target.lower().startswith(AVOID):
+            if loss != "margin":
+                raise ZodriveError(f"target {target} (any action but one) has only the margin loss, not {loss!r}")
+            return DiscreteAvoid(weight=weight, avoid=_action_index(target[len(AVOID):], names, n_actions, target),
+                                 kappa=kappa)
+        index = _action_index(target, names, n_actions)  # type: ignore[arg-type]
         return DiscreteTargeted(weight=weight, target=index, kind=loss, kappa=kappa)
     if untargeted:
         return ContinuousUntargeted(weight=weight, tol=tol)
     if worst:
         raise ZodriveError("target 'worst' needs action values (a discrete victim); a continuous one has none")
+    if isinstance(target, str) and target.lower().startswith(AVOID):
+        raise ZodriveError(f"target {target} names a discrete action to avoid; this victim acts continuously")
     if isinstance(target, str):
         try:
             target = [float(v) for v in target.replace("[", "").replace("]", "").split(",")]

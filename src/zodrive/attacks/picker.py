@@ -16,12 +16,14 @@ weights: a dict of tensors read with `torch.load(weights_only=True)`, so nothing
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+from zodrive.attacks.objectives import AVOID, DiscreteAvoid
 from zodrive.errors import ZodriveError
 
 META_FILE = "picker.json"
@@ -104,7 +106,8 @@ def _well_typed(meta: dict[str, Any]) -> bool:
     return (isinstance(meta["victim"], str) and isinstance(meta["victim_sha256"], str) and isinstance(meta["preset"], dict)
             and _number(meta["eps"]) and meta["eps"] > 0 and meta["norm"] == "linf"
             and isinstance(meta["frozen"], list) and all(isinstance(f, str) for f in meta["frozen"])
-            and (_count(target, 10_000) or target == 0 or (isinstance(target, list) and all(_number(v) for v in target)))
+            and (_count(target, 10_000) or target == 0 or (isinstance(target, list) and all(_number(v) for v in target))
+                 or (isinstance(target, str) and re.fullmatch(AVOID + r"\d{1,4}", target) is not None))
             and (meta["tol"] is None or (_number(meta["tol"]) and meta["tol"] >= 0))
             and isinstance(meta["obs_shape"], list) and all(_count(d, 10_000) for d in meta["obs_shape"])
             and _count(int(np.prod(meta["obs_shape"])) if meta["obs_shape"] else 0, 1_000_000)
@@ -131,8 +134,11 @@ def digest(folder: str | Path) -> str:
 
 
 def objective_target(objective: Any) -> dict[str, Any]:
-    """What a picker records of its objective's goal: the target (the action index, or the action as a
-    list) and, for a continuous target, the tolerance within which it counts as taken."""
+    """What a picker records of its objective's goal: the target (the action index, "not:INDEX" for an
+    action to avoid, or the action as a list) and, for a continuous target, the tolerance within which
+    it counts as taken."""
+    if isinstance(objective, DiscreteAvoid):
+        return {"target": f"{AVOID}{objective.avoid}", "tol": None}
     target = getattr(objective, "target", None)
     return {"target": [float(v) for v in target] if isinstance(target, (tuple, list, np.ndarray)) else target,
             "tol": float(objective.tol) if isinstance(target, (tuple, list, np.ndarray)) else None}

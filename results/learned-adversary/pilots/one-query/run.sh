@@ -17,3 +17,13 @@ run universal-dqn-close universal.py models/dqn-close 0.02 &
 run universal-dqn-robust universal.py models/dqn-robust 0.05 --under $A
 wait
 run closed-loop-dqn-robust closed_loop.py models/dqn-robust 0.05 $A
+# The harm on dqn-robust at eps 0.05 is FASTER, not "any action but braking" (--target not:SLOWER), even for
+# random search: vertex hold and random search with either target, 30 tuning episodes, in runs/avoid (not committed)
+evaluate() {  # OUT ATTACK TARGET [OPTIONS...]
+  out=$1 attack=$2 target=$3; shift 3
+  cmd="zodrive evaluate models/dqn-robust --attack $attack --eps 0.05 $* --target $target --episodes 30 --seed 900000 --workers 1 --no-progress --out runs/avoid/$out"
+  { echo "\$ $cmd"; $cmd 2>&1; } > $P/avoid-$out.txt
+}
+evaluate hold-robust-0.05 vertex-hold not:SLOWER
+evaluate rs-robust-0.05-FASTER random-search FASTER --patience 10
+evaluate rs-robust-0.05-not-SLOWER random-search not:SLOWER --patience 10
