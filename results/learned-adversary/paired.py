@@ -23,6 +23,11 @@ PAIRS = [  # (learned cell, per-step cell)
     (C / "ppo-ddpg-robust-eps0.05-100", C / "ddpg-robust-random-search-eps0.05-100"),
     (C / "ppo-td3-finetuned-eps0.2-100", C / "td3-finetuned-random-search-eps0.2-100"),
     *[(K / f"amortized-eps{e}", K / f"random-search-eps{e}") for e in ("0.02", "0.05")],  # models/dqn-close
+    # training seeds 1 and 2 of the fitted start on dqn-robust (run-seeds-robust.sh), and random search's
+    # attack seeds 1 and 2 at eps 0.05 (run-rs-seeds-robust.sh), each against the other side's seed 0
+    *[(C / f"dqn-robust-amortized-eps0.02-seed{s}-100", R / "dqn-robust-pgd-eps0.02") for s in (1, 2)],
+    *[(C / f"dqn-robust-amortized-eps0.05-seed{s}-100", R / "dqn-robust-random-search-eps0.05") for s in (1, 2)],
+    *[(C / "dqn-robust-amortized-eps0.05-100", C / f"dqn-robust-random-search-eps0.05-seed{s}-100") for s in (1, 2)],
 ]
 
 

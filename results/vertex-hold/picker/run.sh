@@ -2,16 +2,18 @@
 # Vertex hold with a picker (`zodrive picker-train`, then `--attack vertex-hold:DIR`, 1 query per step):
 # fit with seed SEED against MODEL at EPS into results/vertex-hold/picker/NAME-seedSEED, then evaluate it on
 # 100 episodes, seeds 100000-100099, into cells/NAME-seedSEED. Each command's printed output is in the .txt beside.
-# Usage: bash results/vertex-hold/picker/run.sh NAME MODEL EPS SEED   (e.g. dqn-close models/dqn-close 0.02 0)
+# Usage: bash results/vertex-hold/picker/run.sh NAME MODEL EPS SEED [PICKER-TRAIN OPTIONS]
+#   dqn-close models/dqn-close 0.02 0                                 (seeds 0, 1, 2)
+#   dqn-driver models/dqn-driver 0.02 0 --probes 128 --switch 0       (450-step episodes; see README.md)
 set -u
 cd "$(dirname "$0")/../../.."
 . .venv/bin/activate
-name=$1; model=$2; eps=$3; seed=$4
+name=$1; model=$2; eps=$3; seed=$4; shift 4
 P=results/vertex-hold/picker
 out=$P/$name-eps$eps-seed$seed
 if [ ! -f $out/picker.pt ]; then
-  echo "\$ zodrive picker-train $model --eps $eps --seed $seed --out $out" > $out.txt
-  zodrive picker-train $model --eps $eps --seed $seed --out $out >> $out.txt 2>&1 || exit 1
+  echo "\$ zodrive picker-train $model --eps $eps --seed $seed --out $out $*" > $out.txt
+  zodrive picker-train $model --eps $eps --seed $seed --out $out "$@" >> $out.txt 2>&1 || exit 1
 fi
 mkdir -p $P/cells
 cell=$P/cells/$name-eps$eps-seed$seed
