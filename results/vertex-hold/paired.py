@@ -36,8 +36,9 @@ PAIRS = [  # (vertex-hold cell, other cell)
     *[(Path("../picker/cells") / f"dqn-close-eps0.02-seed{s}", other) for s in (0, 1, 2)
       if (H / "../picker/cells" / f"dqn-close-eps0.02-seed{s}" / "episodes.jsonl").is_file()
       for other in (K / "random-search-eps0.02", H / "dqn-close-eps0.02")],
-    *[(Path("../picker/cells/dqn-driver-eps0.02-seed0"), other) for other in (R / "dqn-driver-pgd-eps0.02",
-      H / "dqn-driver-eps0.02") if (H / "../picker/cells/dqn-driver-eps0.02-seed0/episodes.jsonl").is_file()],
+    *[(Path(f"../picker/cells/dqn-driver-eps0.02-seed{s}"), other) for s in (0, 1, 2)
+      if (H / f"../picker/cells/dqn-driver-eps0.02-seed{s}/episodes.jsonl").is_file()
+      for other in (R / "dqn-driver-pgd-eps0.02", H / "dqn-driver-eps0.02")],
     # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
     ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
     ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),
