@@ -31,7 +31,8 @@ PAIRS = [  # (vertex-hold cell, other cell)
     # attack seeds 1 and 2 (run-seeds.sh) where vertex hold matters
     *[(f"{cell}-seed{s}", other) for s in (1, 2) for cell, other in (
         ("dqn-close-eps0.02", K / "random-search-eps0.02"), ("dqn-close-eps0.05", K / "random-search-eps0.05"),
-        ("dqn-driver-eps0.2", C / "dqn-driver-random-search-eps0.2-100"))],
+        ("dqn-driver-eps0.2", C / "dqn-driver-random-search-eps0.2-100"),
+        ("dqn-driver-eps0.02", R / "dqn-driver-pgd-eps0.02"))],
     # with a picker (picker/run.sh; fit seeds 0, 1 and 2 where run): against random search and vertex hold blind
     *[(Path("../picker/cells") / f"dqn-close-eps0.02-seed{s}", other) for s in (0, 1, 2)
       if (H / "../picker/cells" / f"dqn-close-eps0.02-seed{s}" / "episodes.jsonl").is_file()

@@ -1,6 +1,7 @@
 #!/bin/bash
-# Vertex hold is random (its vertices): the three cells where it matters, again with attack seeds 1
-# and 2 (run.sh used 0), 100 episodes on seeds 100000-100099, into cells/NAME-seedS. Two lanes; resumable.
+# Vertex hold is random (its vertices): the cells where it matters, again with attack seeds 1 and 2
+# (run.sh used 0), 100 episodes on seeds 100000-100099, into cells/NAME-seedS. Two lanes; resumable.
+# The DQN driver at eps 0.02 was added for the pickers' comparison (picker/README.md).
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate
@@ -16,5 +17,6 @@ lane() {
   cell dqn-close-eps0.02-seed$s models/dqn-close --eps 0.02 --attack-seed $s
   cell dqn-close-eps0.05-seed$s models/dqn-close --eps 0.05 --attack-seed $s
   cell dqn-driver-eps0.2-seed$s models/dqn-driver --eps 0.2 --attack-seed $s
+  cell dqn-driver-eps0.02-seed$s models/dqn-driver --eps 0.02 --attack-seed $s
 }
 lane 1 & lane 2; wait
