@@ -59,6 +59,7 @@ class VertexHold(Attack):
         self.picker: Picker | None = None
         self.picker_goal: Any = None
         self.picker_frozen: list[str] | None = None
+        self._checked: Objective | None = None  # the objective the picker was last checked against
         if adversary is not None:
             picker, meta = Picker.load(adversary)
             self.use_picker(picker, {"target": meta["target"], "tol": meta["tol"]})
@@ -77,17 +78,20 @@ class VertexHold(Attack):
 
     def use_picker(self, picker: Picker, goal: dict[str, Any]) -> None:
         """Pick fresh vertices with `picker`, fitted for `goal` (`objective_target`); also used while one is fitted."""
-        self.picker, self.picker_goal = picker, goal
+        self.picker, self.picker_goal, self._checked = picker, goal, None
 
     def check_objective(self, objective: Objective) -> None:
         """Also, with a picker: the goal and the frozen features it was fitted for (`AttackSpec.build`
         calls this with the victim's objective and the real threat model; `AttackSpec.check` knows neither)."""
         super().check_objective(objective)
-        if self.picker is not None and self.picker_frozen is not None and self.picker_frozen != sorted(self.threat.frozen):
+        if self.picker is None or objective is self._checked:  # `perturb` checks every step: once is enough
+            return
+        if self.picker_frozen is not None and self.picker_frozen != sorted(self.threat.frozen):
             raise ZodriveError(f"the picker was fitted with {self.picker_frozen} frozen, not {sorted(self.threat.frozen)}")
-        if self.picker is not None and objective_target(objective) != self.picker_goal:
+        if objective_target(objective) != self.picker_goal:
             raise ZodriveError(f"the picker ranks vertices for {self.picker_goal}, not "
                                f"{objective_target(objective)}: fit one for this target")
+        self._checked = objective
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         raise AssertionError("vertex hold takes no search step")  # perturb is its own
@@ -111,19 +115,20 @@ class VertexHold(Attack):
         held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
             np.full((n, dim), np.nan, dtype=np.float32)
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
-        fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
         stale = np.isnan(held).any(axis=1)
         rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
         if self.picker is not None and self.picker.switch > 0:
             for r in np.flatnonzero(~stale & live):  # one call per row: lockstep = one-row runs
-                rating[r] = self.picker.scores(fed[r:r + 1])[0]
+                rating[r] = self.picker.scores(self.threat.project((flat0[r] + delta[r]).reshape(1, *shape),
+                                                                   x0[r:r + 1]))[0]
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
         fresh = np.flatnonzero(stale & live)
         if fresh.size:
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
-            fed[fresh] = self.threat.project((flat0[fresh] + delta[fresh]).reshape(-1, *shape), x0[fresh])
+        # projected once, every vertex final (the L-inf projection is elementwise: row by row is the same)
+        fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
         asked = np.flatnonzero(live)
         answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
         out = np.full((n, answered.shape[1]), np.nan, dtype=np.float32)

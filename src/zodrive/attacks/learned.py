@@ -73,23 +73,33 @@ def adversary_input(x0: np.ndarray, clean: np.ndarray | None, kind: str) -> np.n
     return flat if clean is None else np.concatenate([flat, encode_outputs(clean, kind)], axis=1)
 
 
-def read_meta(folder: str | Path) -> dict[str, Any]:
-    """A trained adversary's `adversary.json`, or a one-line error saying what is missing."""
+def read_description(folder: str | Path, files: tuple[str, str], keys: tuple[str, ...], fmt: int, *, kind: str,
+                     being: str, how: str) -> dict[str, Any]:
+    """A trained folder's JSON description (`files`: it, then the weights beside it) with every key of
+    `keys` and format `fmt`, or a one-line error saying what is missing: "`kind` folder not found",
+    "... is not `being` (no ...; `how`)", e.g. kind "picker", being "a picker", how "fit one with ..."."""
     path = Path(folder)
     if not path.is_dir():
-        raise ZodriveError(f"adversary folder not found: {path} (train one with `zodrive attack-train`)")
-    for name in (META_FILE, "model.zip"):
+        raise ZodriveError(f"{kind} folder not found: {path} ({how})")
+    for name in files:
         if not (path / name).is_file():
-            raise ZodriveError(f"{path} is not a trained adversary (no {name}; train one with `zodrive attack-train`)")
+            raise ZodriveError(f"{path} is not {being} (no {name}; {how})")
     try:
-        meta = json.loads((path / META_FILE).read_text())
+        meta = json.loads((path / files[0]).read_text())
     except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ZodriveError(f"{path / META_FILE} is not valid JSON") from None
+        raise ZodriveError(f"{path / files[0]} is not valid JSON") from None
+    if not isinstance(meta, dict) or any(k not in meta for k in keys) or meta["format"] != fmt:
+        raise ZodriveError(f"{path / files[0]} is not {'an' if kind[0] in 'aeiou' else 'a'} {kind} description "
+                           f"zodrive {fmt} reads")
+    return meta
+
+
+def read_meta(folder: str | Path) -> dict[str, Any]:
+    """A trained adversary's `adversary.json`, or a one-line error saying what is missing."""
     keys = ("format", "eps", "norm", "frozen", "victim_action", "kind", "obs_shape", "action_dim", "victim_sha256",
             "preset", "defense")
-    if not isinstance(meta, dict) or any(k not in meta for k in keys) or meta["format"] != FORMAT:
-        raise ZodriveError(f"{path / META_FILE} is not an adversary description zodrive {FORMAT} reads")
-    return meta
+    return read_description(folder, (META_FILE, "model.zip"), keys, FORMAT, kind="adversary",
+                            being="a trained adversary", how="train one with `zodrive attack-train`")
 
 
 def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str, preset: dict[str, Any]) -> None:

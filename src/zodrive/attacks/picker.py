@@ -15,7 +15,6 @@ weights: a dict of tensors read with `torch.load(weights_only=True)`, so nothing
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 from typing import Any
@@ -74,21 +73,13 @@ class Picker:
 
 
 def read_meta(folder: str | Path) -> dict[str, Any]:
-    """A picker's `picker.json`, or a one-line error saying what is missing."""
-    path = Path(folder)
-    if not path.is_dir():
-        raise ZodriveError(f"picker folder not found: {path} (fit one with `zodrive picker-train`)")
-    for name in (META_FILE, WEIGHTS_FILE):
-        if not (path / name).is_file():
-            raise ZodriveError(f"{path} is not a picker (no {name}; fit one with `zodrive picker-train`)")
-    try:
-        meta = json.loads((path / META_FILE).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ZodriveError(f"{path / META_FILE} is not valid JSON") from None
-    if not isinstance(meta, dict) or any(k not in meta for k in KEYS) or meta["format"] != FORMAT:
-        raise ZodriveError(f"{path / META_FILE} is not a picker description zodrive {FORMAT} reads")
+    """A picker's `picker.json`, typed and bounded, or a one-line error saying what is missing."""
+    from zodrive.attacks.learned import read_description
+
+    meta = read_description(folder, (META_FILE, WEIGHTS_FILE), KEYS, FORMAT, kind="picker", being="a picker",
+                            how="fit one with `zodrive picker-train`")
     if not _well_typed(meta):
-        raise ZodriveError(f"{path / META_FILE} holds a value of the wrong type or out of range")
+        raise ZodriveError(f"{Path(folder) / META_FILE} holds a value of the wrong type or out of range")
     return meta
 
 
@@ -140,5 +131,6 @@ def objective_target(objective: Any) -> dict[str, Any]:
     if isinstance(objective, DiscreteAvoid):
         return {"target": f"{AVOID}{objective.avoid}", "tol": None}
     target = getattr(objective, "target", None)
-    return {"target": [float(v) for v in target] if isinstance(target, (tuple, list, np.ndarray)) else target,
-            "tol": float(objective.tol) if isinstance(target, (tuple, list, np.ndarray)) else None}
+    if isinstance(target, (tuple, list, np.ndarray)):
+        return {"target": [float(v) for v in target], "tol": float(objective.tol)}
+    return {"target": target, "tol": None}
