@@ -115,6 +115,44 @@ def test_an_avoid_target_keeps_the_victim_off_that_action_and_never_reads_the_cl
     assert named.avoid == 3
 
 
+@pytest.mark.parametrize("name", ["random-search", "pgd"])
+def test_a_fallback_target_keeps_the_victim_off_an_action_where_the_target_is_out_of_reach(name: str) -> None:
+    """`--target T,not:A`: success is still T; where T is not reached, the fed point's action is A less often than
+    with T alone; and the loss is T's margin loss plus A's avoid loss."""
+    victim = linear_victim(seed=4)
+    x0 = observations(64)
+    counts = np.bincount(victim.query(x0).argmax(1), minlength=5)
+    avoid, target = int(counts.argmax()), int(np.argsort(counts)[1])  # the most frequent action; a rare one
+    fed_avoided = {}
+    for goal in (f"{target}", f"{target},not:{avoid}"):
+        attack, objective, oracle = AttackSpec(attack=name, target=goal, eps=0.05, steps=30).build(victim, **context("discrete"))
+        result = attack.perturb(x0, oracle, objective)
+        adv_action = victim.query(result.x_adv).argmax(1)
+        np.testing.assert_array_equal(result.success | result.already, adv_action == target)
+        missed = ~(result.success | result.already)
+        assert missed.mean() > 0.5  # the target is mostly out of reach at this budget
+        fed_avoided[goal] = float((adv_action[missed] == avoid).mean())
+    assert fed_avoided[f"{target},not:{avoid}"] < fed_avoided[f"{target}"], fed_avoided
+    q = torch.randn(8, 3, 5)
+    both = AttackSpec(target="FASTER,not:SLOWER").build(victim, **context("discrete"))[1]
+    alone = AttackSpec(target="FASTER").build(victim, **context("discrete"))[1]
+    off = AttackSpec(target="not:SLOWER").build(victim, **context("discrete"))[1]
+    assert (both.target, both.avoid) == (3, 4) and not both.reads_clean
+    torch.testing.assert_close(both.loss(q, q[:, 0]), alone.loss(q, q[:, 0]) + off.loss(q, q[:, 0]))
+    torch.testing.assert_close(both.success(q, q[:, 0]), alone.success(q, q[:, 0]))
+
+
+@pytest.mark.parametrize("target, message", [("FASTER,SLOWER", "ACTION,not:ACTION"), ("not:IDLE,not:SLOWER", "ACTION,not:ACTION"),
+                                             ("FASTER,not:SLOWER,not:IDLE", "ACTION,not:ACTION"),
+                                             ("FASTER,not:FASTER", "avoids the action it aims at"),
+                                             ("FASTER,not:FLY", "unknown target 'FASTER,not:FLY'")])
+def test_a_bad_fallback_target_is_a_one_line_error(target: str, message: str) -> None:
+    with pytest.raises(ZodriveError, match=message):
+        AttackSpec(attack="random-search", target=target).build(linear_victim(), **context("discrete"))
+    with pytest.raises(ZodriveError, match="only the margin loss"):
+        AttackSpec(attack="zo-signsgd", target="FASTER,not:SLOWER", loss="paper").build(linear_victim(), **context("discrete"))
+
+
 @pytest.mark.parametrize("target, message", [("not:FLY", "unknown target 'not:FLY'"), ("not:7", r"7 \('not:7'\) is out of range 0..4"),
                                              ("not:", "unknown target 'not:'")])
 def test_a_bad_avoid_target_is_a_one_line_error(target: str, message: str) -> None:

@@ -105,6 +105,7 @@ def test_a_spent_episode_budget_feeds_the_clean_observation() -> None:
     ({"warm_start": True}, "warm_start has no effect"),
     ({"mu": 0.3}, "mu has no effect"),
     ({"kappa": 5.0}, "kappa has no effect"),
+    ({"target": "FASTER,not:SLOWER"}, "the fallback of target FASTER,not:SLOWER would be ignored"),
 ])
 def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str) -> None:
     with pytest.raises(ZodriveError, match=message):

@@ -282,6 +282,24 @@ def test_pretraining_mistakes_are_one_line_errors(trained, tmp_path: Path, capsy
     assert not (tmp_path / "a").exists()  # refused before anything is written
 
 
+def test_attack_train_target_is_the_fitted_start_s_and_is_recorded(trained, tmp_path: Path, capsys) -> None:
+    """`attack-train --target` sets the per-step target the start is fitted to (here CartPole's action 1, else not
+    0), recorded in train.json, run.json and the card; without --pretrain-rounds it would do nothing: an error."""
+    victim, _, _ = trained
+    base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--no-progress"]
+    assert "--target is the per-step target of the fitted start" in _error(capsys, [*base, "--steps", "8", "--target",
+                                                                                    "1", "--out", str(tmp_path / "a")])
+    assert "unknown target 'FLY'" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1", "--target", "FLY",
+                                                     "--out", str(tmp_path / "a")])
+    assert not (tmp_path / "a").exists()
+    out = tmp_path / "b"
+    assert main([*base, "--steps", "0", "--pretrain-rounds", "1", "--pretrain-episodes", "1", "--target", "1,not:0",
+                 "--out", str(out)]) == 0
+    assert json.loads((out / "train.json").read_text())["pretrain"]["target"] == "1,not:0"
+    assert "target: 1,not:0" in (out / "config.yaml").read_text()
+    assert "(target: 1,not:0)" in (out / "CARD.md").read_text()
+
+
 def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversary_s_own() -> None:
     """`--pretrain-probe vertices`: every probe is a vertex (+-1 per coordinate, before eps and
     the mask); the second half keep most of the adversary's signs (0-30 % flipped, 15 % on

@@ -343,6 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--pretrain-margin", type=_nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default 1)")
+    atk.add_argument("--target", help="with --pretrain-rounds: the per-step target the start is fitted to, as "
+                                       "evaluate's --target (default auto: FASTER / '1,0.5'); e.g. FASTER,not:SLOWER")
     atk.add_argument("--explore-std", type=_positive_float,
                      help="PPO's exploration: a Gaussian of this std per action dimension (in units of eps), "
                           "redrawn every step, instead of the default gSDE noise (whose std on the highway "
@@ -480,8 +482,9 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mu", type=float)
     group.add_argument("--step-size", type=float)
     group.add_argument("--l2-weight", type=float)
-    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto, none (untargeted), worst or "
-                                        "not:ACTION (discrete: any action but that one, e.g. not:SLOWER)")
+    group.add_argument("--target", help="FASTER, an action index, '1,0.5', auto, none (untargeted), worst, "
+                                        "not:ACTION (discrete: any action but that one, e.g. not:SLOWER) or "
+                                        "ACTION,not:ACTION (the action, else at least not the other: FASTER,not:SLOWER)")
     group.add_argument("--loss", choices=["margin", "paper"])
     group.add_argument("--query-budget", type=int, help="max queries per environment step")
     group.add_argument("--early-stop", dest="early_stop", action="store_true", default=None)
@@ -702,11 +705,13 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
     if pretrain is None and given:
         raise ZodriveError(f"--pretrain-{next(iter(given))} applies with --pretrain-rounds")
+    if pretrain is None and args.target is not None:
+        raise ZodriveError("--target is the per-step target of the fitted start; it applies with --pretrain-rounds")
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
                         victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
-                        explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force,
+                        target=args.target or "auto", explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force,
                         progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):

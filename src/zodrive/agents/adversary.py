@@ -171,7 +171,8 @@ def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
     where = "on the ball's vertices" if settings.get("probe") == "vertices" else "uniform in the ball"
     lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
              f"victim queries ({settings.get('probes', 4)} random points per visited state, {where}), the mean "
-             f"action fitted to make it take the target action{by}; {fitted['wall_time_s']} s. Per round (driving "
+             f"action fitted to make it take the target action{by} (target: {fitted.get('target', 'auto')}); "
+             f"{fitted['wall_time_s']} s. Per round (driving "
              "with the previous round's fit):"]
     for r in fitted["rounds"]:
         lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
@@ -192,6 +193,7 @@ def attack_train(
     victim_action: bool = False,
     reward: str = "minus",
     pretrain: Pretrain | None = None,
+    target: str = "auto",
     explore_std: float | None = None,
     critic_warmup: int = 0,
     force: bool = False,
@@ -199,7 +201,8 @@ def attack_train(
 ) -> Path:
     """Train a learned adversary against `model` (behind `defense`) at L-inf `eps` for `steps`
     environment steps of PPO (0 allowed after `pretrain`: the fitted start alone), first fitting
-    its mean action as an amortized transfer attack with `pretrain` (`zodrive.agents.amortized`);
+    its mean action as an amortized transfer attack with `pretrain` (`zodrive.agents.amortized`)
+    towards `target` (as evaluate's --target; auto: the search attacks' default);
     `explore_std`: PPO explores with a Gaussian of that std per action dimension, redrawn every
     step, instead of gSDE (a fitted start's mean survives noise on that scale, not at the box's
     corners); `critic_warmup`: the first that many of the `steps` update PPO's value function
@@ -225,6 +228,9 @@ def attack_train(
     if not (isinstance(critic_warmup, int) and 0 <= critic_warmup < max(steps, 1)):
         raise ZodriveError(f"--critic-warmup {critic_warmup} must be below --steps {steps}: "
                            "PPO's actor would never train")
+    if pretrain is None and target != "auto":
+        raise ZodriveError(f"--target {target} is the per-step target of the fitted start; it applies with "
+                           "--pretrain-rounds (PPO alone lowers the victim's return, with no per-step target)")
     if pretrain is not None and victim_action:
         raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
@@ -245,7 +251,7 @@ def attack_train(
     threat = spec.threat(context["features"], context["bounds"])
     objective = None
     if pretrain is not None:  # the per-step objective the start is fitted to: every search attack's default
-        objective = AttackSpec(eps=float(eps)).objective(victim.kind, context["n_actions"], context.get("action_names"),
+        objective = AttackSpec(eps=float(eps), target=target).objective(victim.kind, context["n_actions"], context.get("action_names"),
                                                          context.get("action_bounds"))
         check(pretrain, victim.kind, objective)
     file = Path(policy_ref(model))
@@ -278,7 +284,7 @@ def attack_train(
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
                          "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
                          "log_std_init": log_std, "explore_std": explore_std, "critic_warmup": critic_warmup,
-                         "pretrain": pretrain and pretrain.__dict__}, seed)
+                         "pretrain": pretrain and pretrain.__dict__, "target": target}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))
     venv = DummyVecEnv([lambda: env])
     venv.seed(seed)
@@ -291,6 +297,7 @@ def attack_train(
         fitted = fit_start(agent.policy, with_env, victim, threat, objective, inner.free, pretrain, seed)
         with_env.close()
         fitted["wall_time_s"] = round(time.perf_counter() - start, 1)
+        fitted["target"] = target
     start = time.perf_counter()
     if critic_warmup:  # the value function learns the fitted start's returns; the actor stays as fitted
         actor = [*agent.policy.mlp_extractor.policy_net.parameters(), *agent.policy.action_net.parameters(),

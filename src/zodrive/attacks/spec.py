@@ -9,7 +9,7 @@ from typing import Any, Sequence
 
 from zodrive.attacks.victim import Victim, decision_only
 from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack, needs_fixed_target
-from zodrive.attacks.objectives import Objective, make_objective, target_reads_clean
+from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, make_attack
 from zodrive.attacks.threat import ThreatModel
@@ -140,6 +140,9 @@ class AttackSpec:
                 raise ZodriveError(f"attack {cls.name}: {option} has no effect ({cls.no_search})")
         if not cls.queries_clean and target_reads_clean(self.target):
             raise ZodriveError(needs_fixed_target(cls.name))
+        if "loss" in cls.unread and target_has_fallback(self.target):
+            raise ZodriveError(f"attack {cls.name} reads no loss, so the fallback of target {self.target} would be "
+                               "ignored: give the target alone")
 
     def _check_budgets(self, attack: Attack) -> None:
         one = attack.first_iteration_cost()
