@@ -10,6 +10,7 @@ from zodrive.evaluation.stats import paired_difference_ci
 
 C, R = Path("results/learned-adversary/cells"), Path("results/robustness-100")
 K = Path("results/close-rules/attacked")
+SEEDS = ("", "-seed1", "-seed2")  # a cell's suffix for training (or attack) seeds 0, 1, 2
 PAIRS = [  # (learned cell, per-step cell)
     (C / "dqn-driver-amortized-eps0.05-100", C / "dqn-driver-pgd-eps0.05-100"),
     (C / "dqn-driver-amortized-eps0.2-100", C / "dqn-driver-random-search-eps0.2-100"),
@@ -28,6 +29,23 @@ PAIRS = [  # (learned cell, per-step cell)
     *[(C / f"dqn-robust-amortized-eps0.02-seed{s}-100", R / "dqn-robust-pgd-eps0.02") for s in (1, 2)],
     *[(C / f"dqn-robust-amortized-eps0.05-seed{s}-100", R / "dqn-robust-random-search-eps0.05") for s in (1, 2)],
     *[(C / "dqn-robust-amortized-eps0.05-100", C / f"dqn-robust-random-search-eps0.05-seed{s}-100") for s in (1, 2)],
+    # the fallback target FASTER,not:SLOWER (run-fallback.sh, run-fallback-fitted.sh): each per-step attack with it
+    # against itself without it; then the one-query attacks against the strongest per-step attack
+    *[(C / f"dqn-robust-random-search-fallback-eps0.05{t}-100", R / "dqn-robust-random-search-eps0.05") for t in SEEDS],
+    (C / "dqn-robust-pgd-fallback-eps0.02-100", R / "dqn-robust-pgd-eps0.02"),
+    (C / "dqn-driver-pgd-fallback-eps0.02-100", R / "dqn-driver-pgd-eps0.02"),
+    (C / "dqn-driver-pgd-fallback-eps0.05-100", C / "dqn-driver-pgd-eps0.05-100"),
+    *[(C / f"dqn-robust-amortized-fallback-eps{e}{t}-100", C / f"dqn-robust-amortized-eps{e}{t}-100")
+      for e in ("0.02", "0.05") for t in SEEDS],
+    (C / "dqn-driver-amortized-fallback-eps0.02-100", C / "dqn-driver-amortized-eps0.02-100"),
+    *[(C / f"dqn-robust-amortized-fallback-eps0.05{t}-100", C / "dqn-robust-random-search-fallback-eps0.05-100")
+      for t in SEEDS],
+    *[(C / "dqn-robust-amortized-fallback-eps0.05-100", C / f"dqn-robust-random-search-fallback-eps0.05{t}-100")
+      for t in SEEDS[1:]],
+    *[(C / f"dqn-robust-amortized{f}-eps0.02{t}-100", C / "dqn-robust-pgd-fallback-eps0.02-100")
+      for f in ("", "-fallback") for t in SEEDS],
+    *[(C / f"dqn-driver-amortized-fallback-eps0.02{t}-100", C / "dqn-driver-pgd-fallback-eps0.02-100") for t in SEEDS],
+    (C / "dqn-driver-amortized-eps0.02-100", C / "dqn-driver-pgd-fallback-eps0.02-100"),
 ]
 
 

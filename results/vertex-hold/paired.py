@@ -39,7 +39,11 @@ PAIRS = [  # (vertex-hold cell, other cell)
       for other in (K / "random-search-eps0.02", H / "dqn-close-eps0.02")],
     *[(Path(f"../picker/cells/dqn-driver-eps0.02-seed{s}"), other) for s in (0, 1, 2)
       if (H / f"../picker/cells/dqn-driver-eps0.02-seed{s}/episodes.jsonl").is_file()
-      for other in (R / "dqn-driver-pgd-eps0.02", H / "dqn-driver-eps0.02")],
+      for other in (R / "dqn-driver-pgd-eps0.02", H / "dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100")],
+    # against PGD with the fallback target FASTER,not:SLOWER (results/learned-adversary/run-fallback.sh)
+    ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
+    ("dqn-robust-eps0.02", C / "dqn-robust-pgd-fallback-eps0.02-100"),
+    ("dqn-robust-eps0.05", C / "dqn-robust-random-search-fallback-eps0.05-100"),
     # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
     ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
     ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),

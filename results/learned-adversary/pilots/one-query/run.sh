@@ -27,3 +27,6 @@ evaluate() {  # OUT ATTACK TARGET [OPTIONS...]
 evaluate hold-robust-0.05 vertex-hold not:SLOWER
 evaluate rs-robust-0.05-FASTER random-search FASTER --patience 10
 evaluate rs-robust-0.05-not-SLOWER random-search not:SLOWER --patience 10
+# Do the fitted start's three training seeds reach FASTER on different states? One query per step: the next
+# adversary takes over after a miss (2026-11-26)
+run ensemble-dqn-robust ensemble.py models/dqn-robust 0.05 $A $A-seed1 $A-seed2
