@@ -287,7 +287,7 @@ def test_attack_train_target_is_the_fitted_start_s_and_is_recorded(trained, tmp_
     0), recorded in train.json, run.json and the card; without --pretrain-rounds it would do nothing: an error."""
     victim, _, _ = trained
     base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--no-progress"]
-    assert "--target is the per-step target of the fitted start" in _error(capsys, [*base, "--steps", "8", "--target",
+    assert "--target 1 is the per-step target of the fitted start" in _error(capsys, [*base, "--steps", "8", "--target",
                                                                                     "1", "--out", str(tmp_path / "a")])
     assert "unknown target 'FLY'" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1", "--target", "FLY",
                                                      "--out", str(tmp_path / "a")])

@@ -705,14 +705,12 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
     if pretrain is None and given:
         raise ZodriveError(f"--pretrain-{next(iter(given))} applies with --pretrain-rounds")
-    if pretrain is None and args.target is not None:
-        raise ZodriveError("--target is the per-step target of the fitted start; it applies with --pretrain-rounds")
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
                         victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
-                        target=args.target or "auto", explore_std=args.explore_std, critic_warmup=args.critic_warmup or 0, force=args.force,
-                        progress_bar=not args.no_progress)
+                        target=args.target or "auto", explore_std=args.explore_std,
+                        critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):
         print(f"pretrain round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "

@@ -251,8 +251,8 @@ def attack_train(
     threat = spec.threat(context["features"], context["bounds"])
     objective = None
     if pretrain is not None:  # the per-step objective the start is fitted to: every search attack's default
-        objective = AttackSpec(eps=float(eps), target=target).objective(victim.kind, context["n_actions"], context.get("action_names"),
-                                                         context.get("action_bounds"))
+        objective = AttackSpec(eps=float(eps), target=target).objective(
+            victim.kind, context["n_actions"], context.get("action_names"), context.get("action_bounds"))
         check(pretrain, victim.kind, objective)
     file = Path(policy_ref(model))
     ppo = dict(PPO_DEFAULTS)

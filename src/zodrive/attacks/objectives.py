@@ -275,9 +275,11 @@ def make_objective(
             given, (target, _, fallback) = target, target.partition(ELSE)
             if not fallback.lower().startswith(AVOID) or ELSE in fallback or target.lower().startswith(AVOID):
                 raise ZodriveError(f"target {given!r}: a discrete victim's target is an action, not:ACTION, or "
-                                   "ACTION,not:ACTION (the action, else at least not the other; e.g. FASTER,not:SLOWER)")
+                                   "ACTION,not:ACTION (the action, else at least not the other; e.g. "
+                                   "FASTER,not:SLOWER)")
             if loss != "margin":
-                raise ZodriveError(f"target {given} (an action, else not another) has only the margin loss, not {loss!r}")
+                raise ZodriveError(f"target {given} (an action, else not another) has only the margin loss, "
+                                   f"not {loss!r}")
             avoid = _action_index(fallback[len(AVOID):], names, n_actions, given)
         elif isinstance(target, str) and target.lower().startswith(AVOID):
             if loss != "margin":
