@@ -33,6 +33,13 @@ rs eval-rs-else --target FASTER,not:SLOWER
 # the product's form of W = 1 gives the same adversary
 zodrive attack-train models/dqn-robust --eps 0.05 --steps 0 --pretrain-rounds 4 --pretrain-episodes 10 --reward horizon \
   --target FASTER,not:SLOWER --out $R/cli-w1 --no-progress > $D/cli-w1.txt 2>&1
+# the fitted start with the fallback and the surrogate variants of pilots/decision-focused (training seed 0)
+for v in "dec:--pretrain-loss decisions" "vert:--pretrain-probe vertices" "vd:--pretrain-probe vertices --pretrain-loss decisions"; do
+  n=${v%%:*}; o=${v#*:}
+  [ -f $R/fb-$n/model.zip ] || zodrive attack-train models/dqn-robust --eps 0.05 --steps 0 --pretrain-rounds 4 \
+    --pretrain-episodes 10 --reward horizon --target FASTER,not:SLOWER $o --out $R/fb-$n --no-progress > $D/fb-$n.txt 2>&1
+  ev $R/fb-$n
+done
 python - > $D/paired.txt <<'PY'
 import hashlib, json, zipfile
 from pathlib import Path
@@ -46,7 +53,8 @@ def returns(cell):
 F = "eval-amortized-dqn-robust-eps0.05"
 for a, b in [("eval-w1", F), ("eval-w1-seed1", F + "-seed1"), ("eval-w1-seed2", F + "-seed2"), ("eval-w3", F),
              ("eval-w3", "eval-w1"), ("eval-rs-else", "eval-rs"), *[(x, y) for y in ("eval-rs", "eval-rs-else") for x in
-             (F, F + "-seed1", F + "-seed2", "eval-w1", "eval-w1-seed1", "eval-w1-seed2")]]:
+             (F, F + "-seed1", F + "-seed2", "eval-w1", "eval-w1-seed1", "eval-w1-seed2")],
+             *[(f"eval-fb-{v}", "eval-w1") for v in ("dec", "vert", "vd")]]:
     x, y = returns(a), returns(b)
     seeds = sorted(set(x) & set(y))
     d, lo, hi = paired_difference_ci([x[s] for s in seeds], [y[s] for s in seeds])
