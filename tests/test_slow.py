@@ -55,6 +55,27 @@ def test_the_committed_fitted_adversary_gives_its_committed_episodes(tmp_path: P
         assert row["pct_of_max"] == committed[row["seed"]]["pct_of_max"] and row["queries"] == 0, row["seed"]
 
 
+@pytest.mark.parametrize("cell, attack", [
+    ("dqn-robust-random-search-fallback-eps0.05-100", ["--attack", "random-search", "--patience", "10"]),
+    ("dqn-robust-amortized-fallback-eps0.05-100",
+     ["--attack", "learned:results/learned-adversary/amortized-fallback-dqn-robust-eps0.05"]),
+])
+def test_the_fallback_target_s_cells_give_their_committed_episodes(tmp_path: Path, monkeypatch, cell: str,
+                                                                   attack: list[str]) -> None:
+    """`--target FASTER,not:SLOWER` (random search) and the fitted start fitted with it, on models/dqn-robust at
+    eps 0.05, replay the first episodes of their committed cells (results/learned-adversary), number for number."""
+    monkeypatch.chdir(ROOT)
+    cells = ROOT / "results" / "learned-adversary" / "cells"
+    committed = {r["seed"]: r for r in map(json.loads, (cells / cell / "episodes.jsonl").read_text().splitlines())}
+    out = tmp_path / "cell"
+    target = ["--target", "FASTER,not:SLOWER"] if "random-search" in cell else []
+    assert main(["evaluate", "models/dqn-robust", *attack, *target, "--eps", "0.05", "--episodes", "3",
+                 "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    for row in map(json.loads, (out / "episodes.jsonl").read_text().splitlines()):
+        mine = committed[row["seed"]]
+        assert row["pct_of_max"] == mine["pct_of_max"] and row["queries"] == mine["queries"], row["seed"]
+
+
 def test_vertex_hold_gives_its_committed_episodes(tmp_path: Path) -> None:
     """`--attack vertex-hold` on models/dqn-close at eps 0.02 replays the first episodes of its committed
     cell (results/vertex-hold), number for number, at one query per step."""
