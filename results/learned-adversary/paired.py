@@ -49,6 +49,7 @@ PAIRS = [  # (learned cell, per-step cell)
     # random search on the DQN driver at eps 0.02, 100 episodes, with and without the fallback, against PGD with it
     *[(C / f"dqn-driver-random-search{f}-eps0.02-100", C / "dqn-driver-pgd-fallback-eps0.02-100") for f in ("", "-fallback")],
     (C / "dqn-driver-random-search-fallback-eps0.02-100", C / "dqn-driver-random-search-eps0.02-100"),
+    (C / "dqn-close-random-search-fallback-eps0.02-100", K / "random-search-eps0.02"),  # the fallback on dqn-close
     # PPO from the fitted start for 1 M steps (run-ppo.sh ... std0.2-w10k-1m ... --steps 1000000)
     *[(C / "ppo-dqn-robust-eps0.05-std0.2-w10k-1m-100", other) for other in (
         C / "dqn-robust-amortized-eps0.05-100", R / "dqn-robust-random-search-eps0.05",

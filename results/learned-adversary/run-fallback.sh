@@ -1,10 +1,11 @@
 #!/bin/sh
 # Per-step attacks with the fallback target FASTER,not:SLOWER (FASTER, else at least not SLOWER), 100 episodes on
 # seeds 100000-100099 (README.md, section "A fallback target"). The fitted start with that target:
-# run-fallback-fitted.sh. Usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]
+# run-fallback-fitted.sh. Usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close
 #   rs:  random search on models/dqn-robust at eps 0.05, attack seeds 0, 1, 2
 #   rs-driver: random search on the DQN driver at eps 0.02 (~450 queries per step for ~400 steps an episode),
 #        without the fallback, or with it given `fallback`
+#   rs-close: random search with the fallback on models/dqn-close at eps 0.02 (no patience, as its committed cell)
 #   pgd: white-box PGD where PGD was the strongest per-step attack (the DQN driver at eps 0.02 and 0.05,
 #        dqn-robust at eps 0.02)
 set -e
@@ -29,6 +30,10 @@ elif [ "$1" = rs-driver ]; then
   else cell=dqn-driver-random-search-eps0.02-100; t=""; fi
   $Z evaluate models/dqn-driver --attack random-search --eps 0.02 --patience 10 $t --episodes 100 --seed 100000 \
     --workers 1 --no-progress --out $A/cells/$cell > $A/cells/$cell.txt 2>&1
+elif [ "$1" = rs-close ]; then
+  cell=dqn-close-random-search-fallback-eps0.02-100
+  $Z evaluate models/dqn-close --attack random-search --eps 0.02 --target $T --episodes 100 \
+    --seed 100000 --workers 1 --no-progress --out $A/cells/$cell > $A/cells/$cell.txt 2>&1
 else
-  echo "usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]" >&2; exit 2
+  echo "usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close" >&2; exit 2
 fi
