@@ -343,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--pretrain-margin", type=_nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default 1)")
-    atk.add_argument("--target", help="with --pretrain-rounds: the per-step target the start is fitted to, as "
+    atk.add_argument("--target", default="auto", help="with --pretrain-rounds: the per-step target the start is fitted to, as "
                                        "evaluate's --target (default auto: FASTER / '1,0.5'); e.g. FASTER,not:SLOWER")
     atk.add_argument("--explore-std", type=_positive_float,
                      help="PPO's exploration: a Gaussian of this std per action dimension (in units of eps), "
@@ -709,7 +709,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
                         victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
-                        target=args.target or "auto", explore_std=args.explore_std,
+                        target=args.target, explore_std=args.explore_std,
                         critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
     for r in (train["pretrain"] or {}).get("rounds", []):

@@ -29,6 +29,11 @@ def _others_max(q: torch.Tensor, index: torch.Tensor | int) -> torch.Tensor:
     return torch.where(excluded, float("-inf"), q).amax(dim=-1)
 
 
+def _avoid_margin(q: torch.Tensor, avoid: int, kappa: float) -> torch.Tensor:
+    """max(q[avoid] - max_{j != avoid} q_j + kappa, 0): zero once another action wins by kappa."""
+    return torch.clamp(q[..., avoid] - _others_max(q, avoid) + kappa, min=0.0)
+
+
 @dataclass(frozen=True)
 class Objective:
     """Base: `loss(out, clean) -> (N, M)`, `success(out, clean) -> (N, M)` booleans."""
@@ -78,10 +83,9 @@ class DiscreteTargeted(Objective):
         if self.kind == "paper":
             y = clean.argmax(dim=-1)[:, None, None].expand(*out.shape[:-1], 1)
             return self.weight * (q_t - out.gather(-1, y).squeeze(-1)).abs()
-        others = _others_max(out, self.target)
-        loss = torch.clamp(others - q_t + self.kappa, min=0.0)
+        loss = torch.clamp(_others_max(out, self.target) - q_t + self.kappa, min=0.0)
         if self.avoid is not None:
-            loss = loss + torch.clamp(out[..., self.avoid] - _others_max(out, self.avoid) + self.kappa, min=0.0)
+            loss = loss + _avoid_margin(out, self.avoid, self.kappa)
         return self.weight * loss
 
     def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
@@ -120,7 +124,7 @@ class DiscreteAvoid(Objective):
     kappa: float = 0.01
 
     def loss(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
-        return self.weight * torch.clamp(out[..., self.avoid] - _others_max(out, self.avoid) + self.kappa, min=0.0)
+        return self.weight * _avoid_margin(out, self.avoid, self.kappa)
 
     def success(self, out: torch.Tensor, clean: torch.Tensor) -> torch.Tensor:
         return out.argmax(dim=-1) != self.avoid
@@ -270,21 +274,18 @@ def make_objective(
             return DiscreteWorst(weight=weight, kappa=kappa)
         if loss not in DQN_LOSSES:
             raise ZodriveError(f"unknown DQN loss {loss!r} (known: {', '.join(DQN_LOSSES)})")
-        avoid = given = None
+        given, avoid = target, None
+        if isinstance(target, str) and AVOID in target.lower() and loss != "margin":
+            raise ZodriveError(f"target {target} (an action to avoid) has only the margin loss, not {loss!r}")
         if isinstance(target, str) and ELSE in target:
-            given, (target, _, fallback) = target, target.partition(ELSE)
+            target, _, fallback = target.partition(ELSE)
             if not fallback.lower().startswith(AVOID) or ELSE in fallback or target.lower().startswith(AVOID):
                 raise ZodriveError(f"target {given!r}: a discrete victim's target is an action, not:ACTION, or "
                                    "ACTION,not:ACTION (the action, else at least not the other; e.g. "
                                    "FASTER,not:SLOWER)")
-            if loss != "margin":
-                raise ZodriveError(f"target {given} (an action, else not another) has only the margin loss, "
-                                   f"not {loss!r}")
             avoid = _action_index(fallback[len(AVOID):], names, n_actions, given)
         elif isinstance(target, str) and target.lower().startswith(AVOID):
-            if loss != "margin":
-                raise ZodriveError(f"target {target} (any action but one) has only the margin loss, not {loss!r}")
-            return DiscreteAvoid(weight=weight, avoid=_action_index(target[len(AVOID):], names, n_actions, target),
+            return DiscreteAvoid(weight=weight, avoid=_action_index(target[len(AVOID):], names, n_actions, given),
                                  kappa=kappa)
         index = _action_index(target, names, n_actions)  # type: ignore[arg-type]
         if avoid == index:
