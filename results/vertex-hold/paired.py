@@ -40,6 +40,11 @@ PAIRS = [  # (vertex-hold cell, other cell)
     *[(Path(f"../picker/cells/dqn-driver-eps0.02-seed{s}"), other) for s in (0, 1, 2)
       if (H / f"../picker/cells/dqn-driver-eps0.02-seed{s}/episodes.jsonl").is_file()
       for other in (R / "dqn-driver-pgd-eps0.02", H / "dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100")],
+    # pickers fitted with --loss rank (picker/run.sh dqn-close-rank ... --loss rank): against random search, and
+    # against the picker of the same fit seed fitted with the default loss (bce)
+    *[(Path(f"../picker/cells/dqn-close-rank-eps0.02-seed{s}"), other) for s in (0, 1, 2)
+      if (H / f"../picker/cells/dqn-close-rank-eps0.02-seed{s}/episodes.jsonl").is_file()
+      for other in (K / "random-search-eps0.02", H / f"../picker/cells/dqn-close-eps0.02-seed{s}")],
     # against PGD with the fallback target FASTER,not:SLOWER (results/learned-adversary/run-fallback.sh)
     ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.02", C / "dqn-robust-pgd-fallback-eps0.02-100"),

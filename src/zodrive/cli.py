@@ -367,7 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     pick = sub.add_parser("picker-train", help="fit a picker for vertex hold from counted victim queries: which "
                                                 "random vertex to feed; use it with --attack vertex-hold:DIR")
-    from zodrive.agents.picker import PickerFit  # torch-free
+    from zodrive.agents.picker import LOSSES, PickerFit  # torch-free
 
     pick.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
     pick.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
@@ -384,6 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
                              ("switch", _probability_below_one, "a held vertex the picker rates below this is replaced "
                                                                 "(0: never)")):
         pick.add_argument(f"--{flag}", type=kind, help=f"{what} [{getattr(PickerFit, flag)}]")
+    pick.add_argument("--loss", choices=LOSSES, help="bce: each vertex's label alone; rank: also the order of the "
+                                                     f"vertices within each state [{PickerFit.loss}]")
     _scenario_flags(pick, trust=False)
     pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
@@ -729,8 +731,8 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
 
     from zodrive.agents.picker import PickerFit, picker_train
 
-    given = {k: getattr(args, k) for k in ("rounds", "episodes", "probes", "epochs", "width", "candidates", "switch")
-             if getattr(args, k) is not None}
+    given = {k: getattr(args, k) for k in ("rounds", "episodes", "probes", "epochs", "width", "candidates", "switch",
+                                                "loss") if getattr(args, k) is not None}
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
                         seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
     scenario = "".join([f" --preset {args.preset}" if args.preset else "",

@@ -17,7 +17,8 @@ from zodrive.envs import attack_context, load_preset, make_env
 FASTER = 3
 Chooser = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
 """(clean observation (1, *obs), per-episode memory) -> the observation fed to the victim; the memory
-holds "missed" (the victim did not take the target at the last step) and whatever the chooser keeps."""
+holds "missed" (the victim did not take the target at the last step), "action" (the action it took)
+and whatever the chooser keeps."""
 
 
 def setup(model: str, eps: float) -> tuple[dict[str, Any], Victim, Any, ThreatModel]:
@@ -47,7 +48,7 @@ def drive(env: Any, victim: Victim, seed0: int, episodes: int, choose: Chooser, 
             t = target(x)
             memory["target"] = t
             act = int(victim.query(choose(x, memory))[0].argmax())
-            memory["missed"] = act != t
+            memory["missed"], memory["action"] = act != t, act
             wanted[t] = wanted.get(t, 0) + 1
             taken[t] = taken.get(t, 0) + int(act == t)
             actions[act] += 1

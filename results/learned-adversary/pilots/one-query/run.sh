@@ -30,3 +30,11 @@ evaluate rs-robust-0.05-not-SLOWER random-search not:SLOWER --patience 10
 # Do the fitted start's three training seeds reach FASTER on different states? One query per step: the next
 # adversary takes over after a miss (2026-11-26)
 run ensemble-dqn-robust ensemble.py models/dqn-robust 0.05 $A $A-seed1 $A-seed2
+# Is braking what keeps the fitted start (with the fallback) weaker than random search on dqn-robust at eps 0.05?
+# Vertex hold for "not braking" after the adversary misses (or after the victim brakes), one query per step
+# (2026-11-26, second session)
+F=results/learned-adversary/amortized-fallback-dqn-robust-eps0.05
+run switch-miss-dqn-robust switch.py models/dqn-robust 0.05 $F --m 1 3 10 --trigger miss
+run switch-brake-dqn-robust switch.py models/dqn-robust 0.05 $F --m 1 3 --trigger brake
+# Where a picker misses on dqn-close at eps 0.02, does its pool of 64 random vertices hold one that works?
+run pool-dqn-close pool.py models/dqn-close 0.02 results/vertex-hold/picker/dqn-close-eps0.02-seed0
