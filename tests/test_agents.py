@@ -58,7 +58,7 @@ def test_the_imitation_margin_pulls_the_greedy_action_to_the_guides() -> None:
     model.configure_guide(guide, start=0.0, steps=1, imitation=1.0, margin=0.8)
     obs = th.as_tensor(np.random.default_rng(0).uniform(-1, 1, (64, 5, 5)), dtype=th.float32)
     first = model.extra_loss(obs)
-    assert first is not None and float(first) >= 0
+    assert first is not None and first.item() >= 0
     opt = th.optim.Adam(model.q_net.parameters(), lr=1e-2)
     for _ in range(300):
         loss = model.extra_loss(obs)
@@ -66,7 +66,7 @@ def test_the_imitation_margin_pulls_the_greedy_action_to_the_guides() -> None:
         loss.backward()
         opt.step()
     taken = model.q_net(obs).argmax(dim=1).numpy()
-    assert np.mean(taken == guide(obs.numpy())) > 0.9 and float(model.extra_loss(obs)) < float(first)
+    assert np.mean(taken == guide(obs.numpy())) > 0.9 and model.extra_loss(obs).item() < first.item()
 
 
 def test_demonstrations_fill_the_buffer_and_pretraining_learns_them() -> None:
@@ -125,3 +125,20 @@ def test_recipe_guide_names_the_rules_it_follows() -> None:
     np.testing.assert_array_equal(model.guide(states), close.actions(states))
     with pytest.raises(ZodriveError, match="recipe guide must be"):
         _configure_guide(model, {"algo": "dqn", "total_timesteps": 100, "guide": {"name": "closer-rules"}}, preset)
+
+
+def test_a_resumed_run_keeps_the_recipes_n_step_returns_or_says_so() -> None:
+    """SB3 warns on a load that `n_steps` is ignored; `check_n_step_buffer` reads the buffer instead, and
+    refuses a checkpoint whose buffer does not take the recipe's n-step returns (PPO's n_steps is a rollout)."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from zodrive.agents.training import check_n_step_buffer
+    from zodrive.errors import ZodriveError
+
+    recipe = {"hyperparameters": {"n_steps": 30}}
+    env = gym.make("CartPole-v1")
+    check_n_step_buffer(DQN("MlpPolicy", env, n_steps=30, buffer_size=100, device="cpu"), recipe)
+    with pytest.raises(ZodriveError, match="resumes with 1-step returns, the recipe says n_steps: 30"):
+        check_n_step_buffer(DQN("MlpPolicy", env, buffer_size=100, device="cpu"), recipe)
+    check_n_step_buffer(PPO("MlpPolicy", env, n_steps=64, batch_size=64, device="cpu"), {"hyperparameters": {"n_steps": 64}})

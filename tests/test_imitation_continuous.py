@@ -236,6 +236,9 @@ def test_the_labelling_teacher_replans_from_a_lane_it_was_driven_into() -> None:
         driver = IdmMobilDriver(env, "continuous", replan=replan)
         driver()  # the first call of an episode: the target is the lane it starts in
         ego = env.unwrapped.vehicle
+        # the premise (this test failed once, not reproduced since: if MOBIL chose the lane the ego is then
+        # put into, steering to it is 0): the first call kept the lane it starts in
+        assert driver._target_lane == ego.lane_index, (driver._target_lane, ego.lane_index, ego.position)
         network = ego.road.network
         _from, _to, index = ego.lane_index
         lane = (_from, _to, index + shift if index + shift < len(network.graph[_from][_to]) else index - shift)

@@ -7,6 +7,7 @@ import json
 import logging
 import shutil
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -317,6 +318,19 @@ def train(
         raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
 
 
+def check_n_step_buffer(model: Any, recipe: dict[str, Any]) -> None:
+    """A resumed off-policy run keeps the recipe's n-step returns, or a one-line error. On a load SB3 (2.6+)
+    warns that `n_steps` "is ignored because a custom replay_buffer_class was passed": the class is the
+    `NStepReplayBuffer` it chose itself when the run started, and the saved buffer arguments still carry
+    `n_steps`, so the returns stay n-step. This checks that instead of trusting the warning."""
+    if not hasattr(model, "replay_buffer_kwargs"):  # on-policy (PPO): n_steps is the rollout's length
+        return
+    want = int((recipe.get("hyperparameters") or {}).get("n_steps", 1))
+    got = int(getattr(model.replay_buffer, "n_steps", 1))
+    if got != want:
+        raise ZodriveError(f"the checkpoint resumes with {got}-step returns, the recipe says n_steps: {want}")
+
+
 def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
            previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool) -> Path:
     algo = recipe["algo"]
@@ -347,7 +361,10 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         done = 0
     else:
         path, done = checkpoint
-        model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        with warnings.catch_warnings():  # SB3 says n_steps is ignored, wrongly on a load: `check_n_step_buffer`
+            warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
+            model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        check_n_step_buffer(model, recipe)
         buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
         if buffer.is_file():
             model.load_replay_buffer(buffer)
