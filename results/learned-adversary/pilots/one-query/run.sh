@@ -38,3 +38,9 @@ run switch-miss-dqn-robust switch.py models/dqn-robust 0.05 $F --m 1 3 10 --trig
 run switch-brake-dqn-robust switch.py models/dqn-robust 0.05 $F --m 1 3 --trigger brake
 # Where a picker misses on dqn-close at eps 0.02, does its pool of 64 random vertices hold one that works?
 run pool-dqn-close pool.py models/dqn-close 0.02 results/vertex-hold/picker/dqn-close-eps0.02-seed0
+# Six pickers (three BCE and three rank fits) with their ratings averaged, on tuning seeds and then on the
+# evaluation seeds, paired against random search
+K=results/vertex-hold/picker
+{ run pickers-tuning pickers.py models/dqn-close 0.02 $K/dqn-close-eps0.02-seed{0,1,2} $K/dqn-close-rank-eps0.02-seed{0,1,2} --alone
+  run pickers-eval pickers.py models/dqn-close 0.02 $K/dqn-close-eps0.02-seed{0,1,2} $K/dqn-close-rank-eps0.02-seed{0,1,2} \
+    --episodes 100 --seed0 100000 --paired results/close-rules/attacked/random-search-eps0.02; }
