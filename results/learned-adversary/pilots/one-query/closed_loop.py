@@ -8,22 +8,18 @@ coordinates flipped (a new draw each such step); else its own perturbation. --m 
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import drive, setup, show
+from common import arguments, drive, setup, show
 from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordinates
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments()
     p.add_argument("adversary")
     p.add_argument("--m", type=int, nargs="+", default=[1, 3])
-    p.add_argument("--episodes", type=int, default=30)
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)
     adversary = LearnedAdversary(threat, adversary=a.adversary)

@@ -4,6 +4,7 @@ the target action at the last step (the one answer a one-query attacker gets).""
 
 from __future__ import annotations
 
+import argparse
 from typing import Any, Callable
 
 import numpy as np
@@ -19,6 +20,15 @@ Chooser = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
 """(clean observation (1, *obs), per-episode memory) -> the observation fed to the victim; the memory
 holds "missed" (the victim did not take the target at the last step), "action" (the action it took)
 and whatever the chooser keeps."""
+
+
+def arguments(episodes: int = 30) -> argparse.ArgumentParser:
+    """The arguments every probe here takes: the victim MODEL, its L-inf EPS and --episodes; a probe adds its own."""
+    p = argparse.ArgumentParser()
+    p.add_argument("model")
+    p.add_argument("eps", type=float)
+    p.add_argument("--episodes", type=int, default=episodes)
+    return p
 
 
 def setup(model: str, eps: float) -> tuple[dict[str, Any], Victim, Any, ThreatModel]:

@@ -9,19 +9,15 @@ would come sooner than by speeding into the car ahead. Tuning seeds 900000.., no
 
 from __future__ import annotations
 
-import argparse
 
 import numpy as np
 
-from common import FASTER, drive, setup, show, vertex_hold
+from common import FASTER, arguments, drive, setup, show, vertex_hold
 from zodrive.agents.rules import LANE_LEFT, LANE_RIGHT, LANE_WIDTH, ObservationRules
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
-    p.add_argument("--episodes", type=int, default=30)
+    p = arguments()
     p.add_argument("--beside", type=float, default=5.0)
     a = p.parse_args()
     preset, victim, env, threat = setup(a.model, a.eps)

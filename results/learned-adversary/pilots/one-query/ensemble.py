@@ -9,21 +9,17 @@ and any of them, would have given FASTER. Tuning seeds 900000.., nothing written
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import FASTER, drive, setup, show
+from common import FASTER, arguments, drive, setup, show
 from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordinates
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments()
     p.add_argument("adversaries", nargs="+")
-    p.add_argument("--episodes", type=int, default=30)
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)
     advs = [LearnedAdversary(threat, adversary=d) for d in a.adversaries]

@@ -9,21 +9,17 @@ vertices. Seeds --seed0.., nothing written.
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import drive, setup, show
+from common import arguments, drive, setup, show
 from zodrive.attacks.picker import Picker
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments()
     p.add_argument("pickers", nargs="+")
-    p.add_argument("--episodes", type=int, default=30)
     p.add_argument("--seed0", type=int, default=900000)
     p.add_argument("--alone", action="store_true", help="also each picker alone")
     p.add_argument("--paired", help="an evaluation folder on the same seeds: the paired difference against it")

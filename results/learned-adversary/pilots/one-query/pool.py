@@ -10,22 +10,18 @@ Tuning seeds 900000.., nothing written.
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import FASTER, drive, setup, show
+from common import FASTER, arguments, drive, setup, show
 from zodrive.attacks.picker import Picker
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments(10)
     p.add_argument("picker")
     p.add_argument("--k", type=int, default=64)
-    p.add_argument("--episodes", type=int, default=10)
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)
     picker, _ = Picker.load(a.picker)

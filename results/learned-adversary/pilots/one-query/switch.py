@@ -12,25 +12,21 @@ adversary again. Tuning seeds 900000.., nothing written.
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import FASTER, drive, setup, show
+from common import FASTER, arguments, drive, setup, show
 from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordinates
 
 SLOWER = 4
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments()
     p.add_argument("adversary")
     p.add_argument("--m", type=int, nargs="+", default=[1, 3, 10])
     p.add_argument("--trigger", choices=("miss", "brake"), default="miss")
-    p.add_argument("--episodes", type=int, default=30)
     p.add_argument("--seed0", type=int, default=900000)
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)

@@ -12,22 +12,18 @@ the share of states each vertex makes the victim take FASTER (mean, best, 90th p
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import numpy as np
 
-from common import FASTER, drive, setup, show, vertex_hold
+from common import FASTER, arguments, drive, setup, show, vertex_hold
 from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordinates
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("model")
-    p.add_argument("eps", type=float)
+    p = arguments()
     p.add_argument("--under", help="a fitted adversary's folder: collect the states it leads to")
     p.add_argument("--train", type=int, default=20)
-    p.add_argument("--episodes", type=int, default=30)
     p.add_argument("--pool", type=int, default=4096)
     p.add_argument("--k", type=int, default=16)
     a = p.parse_args()
