@@ -44,3 +44,5 @@ K=results/vertex-hold/picker
 { run pickers-tuning pickers.py models/dqn-close 0.02 $K/dqn-close-eps0.02-seed{0,1,2} $K/dqn-close-rank-eps0.02-seed{0,1,2} --alone
   run pickers-eval pickers.py models/dqn-close 0.02 $K/dqn-close-eps0.02-seed{0,1,2} $K/dqn-close-rank-eps0.02-seed{0,1,2} \
     --episodes 100 --seed0 100000 --paired results/close-rules/attacked/random-search-eps0.02; }
+# On random search's own states (with the fallback), where does the fitted start (with the fallback) reach FASTER?
+run critical-dqn-robust critical.py models/dqn-robust 0.05 $F --episodes 30
