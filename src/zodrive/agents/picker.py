@@ -89,15 +89,14 @@ def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Ten
     bce = torch.nn.functional.binary_cross_entropy_with_logits
     opt = torch.optim.Adam(net.parameters(), LEARNING_RATE)
     net.train()
-    if loss == "bce":
+    if loss == "bce":  # batches of rows
         fit_x, fit_y = x[~held], y[~held]
-        batches = lambda: torch.randperm(len(fit_x)).split(BATCH)  # noqa: E731
-    else:
-        states = len(x) // per_state
-        sx, sy, sh = (t.view(states, per_state, *t.shape[1:]) for t in (x, y, held))
-        batches = lambda: torch.randperm(states).split(max(1, BATCH // per_state))  # noqa: E731
+        count, size = len(fit_x), BATCH
+    else:  # batches of whole states, about as many rows
+        count, size = len(x) // per_state, max(1, BATCH // per_state)
+        sx, sy, sh = (t.view(count, per_state, *t.shape[1:]) for t in (x, y, held))
     for _ in range(epochs):
-        for batch in batches():
+        for batch in torch.randperm(count).split(size):
             if loss == "bce":
                 out = bce(net(fit_x[batch]).squeeze(1), fit_y[batch])
             else:
