@@ -249,19 +249,19 @@ def test_the_rank_loss_puts_a_working_vertex_first_where_bce_alone_does_not() ->
     from zodrive.agents.picker import _fit
 
     states, per_state = 300, 32
+    rng = np.random.default_rng(0)
+    signs = rng.choice([-0.1, 0.1], (states, per_state, 25))
+    x = torch.from_numpy((rng.normal(0, 0.3, (states, 1, 25)) + signs).reshape(-1, 25).astype(np.float32))
+    works = torch.from_numpy((signs[:, :, 6] > 0) & (signs[:, :, 7] > 0))
+    held = torch.zeros(states, per_state, dtype=torch.bool)
+    held[250:] = True  # the last 50 states are held out whole
+    assert works[250:].any(1).all()
     first = {}
     for loss in ("bce", "rank"):
-        rng = np.random.default_rng(0)
         torch.manual_seed(0)
-        signs = rng.choice([-0.1, 0.1], (states, per_state, 25))
-        x = torch.from_numpy((rng.normal(0, 0.3, (states, 1, 25)) + signs).reshape(-1, 25).astype(np.float32))
-        works = torch.from_numpy((signs[:, :, 6] > 0) & (signs[:, :, 7] > 0))
-        held = torch.zeros(states, per_state, dtype=torch.bool)
-        held[250:] = True  # the last 50 states are held out whole
         net = network(25, 32)
         _fit(net, x, works.reshape(-1).float(), held.reshape(-1), 30, per_state=per_state, loss=loss)
         with torch.no_grad():
             best = net(x).view(states, per_state)[250:].argmax(1)
-        assert works[250:].any(1).all()
         first[loss] = float(works[250:][torch.arange(50), best].float().mean())
     assert first["rank"] >= 0.9 and first["bce"] <= 0.75, first

@@ -727,12 +727,11 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
 
 
 def cmd_picker_train(args: argparse.Namespace) -> int:
-    from dataclasses import replace
+    from dataclasses import fields, replace
 
     from zodrive.agents.picker import PickerFit, picker_train
 
-    given = {k: getattr(args, k) for k in ("rounds", "episodes", "probes", "epochs", "width", "candidates", "switch",
-                                                "loss") if getattr(args, k) is not None}
+    given = {f.name: getattr(args, f.name) for f in fields(PickerFit) if getattr(args, f.name) is not None}
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
                         seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
     scenario = "".join([f" --preset {args.preset}" if args.preset else "",

@@ -234,7 +234,7 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..), preset {meta['preset'].get('name')}",
         f"- fit: seed {train['seed']}, {fit['rounds']} rounds of {fit['episodes']} training episodes, {fit['probes']} random "
         f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round, loss "
-        f"{fit.get('loss', 'bce')}; "
+        f"{fit['loss']}; "
         f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
         *[f"  - {round_line(r)}" for r in train["rounds"]], "",
         f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}"
