@@ -1,5 +1,6 @@
-"""Vertex hold (`attacks.hold`): one counted query per step, never the clean observation; a
-perturbation kept while the victim takes the target, a fresh vertex after a step it did not."""
+"""Vertex hold and vertex check (`attacks.hold`): one counted query per step, never the clean
+observation; a perturbation kept while the victim takes the target, a fresh vertex after a step it
+did not (vertex hold) or instead of one the check says fails (vertex check)."""
 
 from __future__ import annotations
 
@@ -28,8 +29,11 @@ def gate_victim(seen: list[np.ndarray]) -> Victim:
     return Victim(query=query, kind="discrete", obs_shape=(5, 5))
 
 
-def build(victim: Victim, **kw):
-    return AttackSpec(attack="vertex-hold", eps=EPS, **kw).build(victim, **context("discrete"))
+BOTH = pytest.mark.parametrize("name", ["vertex-hold", "vertex-check"])
+
+
+def build(victim: Victim, name: str = "vertex-hold", **kw):
+    return AttackSpec(attack=name, eps=EPS, **kw).build(victim, **context("discrete"))
 
 
 def test_it_holds_what_works_and_redraws_what_does_not() -> None:
@@ -52,9 +56,10 @@ def test_it_holds_what_works_and_redraws_what_does_not() -> None:
     assert all(not np.array_equal(fed[i], fed[i + 1]) for i in range(first))  # redrawn after a miss
 
 
-def test_one_counted_query_per_row_per_step_on_a_vertex_and_never_the_clean_observation() -> None:
+@BOTH
+def test_one_counted_query_per_row_per_step_on_a_vertex_and_never_the_clean_observation(name: str) -> None:
     seen: list[np.ndarray] = []
-    attack, objective, oracle = build(gate_victim(seen))
+    attack, objective, oracle = build(gate_victim(seen), name)
     x0 = observations(6, seed=4)
     attack.reseed(list(range(6)))
     for _ in range(5):
@@ -65,19 +70,22 @@ def test_one_counted_query_per_row_per_step_on_a_vertex_and_never_the_clean_obse
         inside = np.abs(x0[:, :, 1:]) < 1 - EPS  # not clipped by the box: exactly on a vertex
         np.testing.assert_allclose(np.abs(delta[:, :, 1:])[inside], EPS, rtol=1e-5)
         assert np.isnan(result.clean_outputs).all() and not result.already.any()
-        np.testing.assert_array_equal(result.success, result.adv_outputs.argmax(1) == 3)
+        asked = ~np.isnan(result.adv_outputs).any(axis=1)  # vertex check: a vertex fed unasked has no outputs
+        assert asked.all() or name == "vertex-check"
+        np.testing.assert_array_equal(result.success, asked & (np.nan_to_num(result.adv_outputs).argmax(1) == 3))
     sent = np.concatenate(seen)
     assert oracle.total_queries == len(sent) - oracle.calibration_queries == 30
     asked = np.concatenate(seen[-5:])  # the attack's own calls, after the oracle's calibration
     assert [len(batch) for batch in seen[-5:]] == [6] * 5 and not any(np.array_equal(s, x) for s in asked for x in x0)
 
 
-def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them() -> None:
+@BOTH
+def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them(name: str) -> None:
     x0 = observations(4, seed=5)
     victim = linear_victim(seed=2)
 
     def run(rows: list[int]) -> np.ndarray:
-        attack, objective, oracle = build(victim)
+        attack, objective, oracle = build(victim, name)
         attack.reseed([11 + r for r in rows])
         return np.stack([attack.perturb(x0[rows], oracle, objective).x_adv for _ in range(6)])
 
@@ -87,9 +95,10 @@ def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them() ->
     np.testing.assert_array_equal(together, run([0, 1, 2, 3]))
 
 
-def test_a_spent_episode_budget_feeds_the_clean_observation() -> None:
+@BOTH
+def test_a_spent_episode_budget_feeds_the_clean_observation(name: str) -> None:
     seen: list[np.ndarray] = []
-    attack, objective, oracle = build(gate_victim(seen), episode_query_budget=3)
+    attack, objective, oracle = build(gate_victim(seen), name, episode_query_budget=3)
     x0 = observations(1, seed=6)
     attack.reseed(1)
     results = [attack.perturb(x0, oracle, objective) for _ in range(5)]
@@ -107,12 +116,13 @@ def test_a_spent_episode_budget_feeds_the_clean_observation() -> None:
     ({"kappa": 5.0}, "kappa has no effect"),
     ({"target": "FASTER,not:SLOWER"}, "the fallback of target FASTER,not:SLOWER would be ignored"),
 ])
-def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str) -> None:
+@BOTH
+def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str, name: str) -> None:
     with pytest.raises(ZodriveError, match=message):
-        build(linear_victim(), **options)
+        build(linear_victim(), name, **options)
     if "norm" not in options and "steps" not in options and "warm_start" not in options:
         with pytest.raises(ZodriveError, match=message):  # and before any episode runs (`zodrive compare`)
-            AttackSpec(attack="vertex-hold", eps=EPS, **options).check()
+            AttackSpec(attack=name, eps=EPS, **options).check()
 
 
 def test_the_vertex_is_held_whole_where_the_box_clipped_it() -> None:
@@ -153,5 +163,57 @@ def test_a_default_compare_grid_leaves_out_what_cannot_take_its_options() -> Non
     assert default_attacks([]) == (list(ATTACKS), {})
     names, left_out = default_attacks(["target=none"])
     assert "vertex-hold" not in names and "random-search" in names and "fixed target" in left_out["vertex-hold"]
+    assert "vertex-check" not in names and "fixed target" in left_out["vertex-check"]
     names, left_out = default_attacks(["steps=50"])
-    assert set(left_out) == {"vertex-hold"} and "steps has no effect" in left_out["vertex-hold"]
+    assert set(left_out) == {"vertex-hold", "vertex-check"} and "steps has no effect" in left_out["vertex-check"]
+
+
+def flipping_gate_victim() -> Victim:
+    """Takes FASTER (3) exactly when vehicle 1's x has the sign of vehicle 2's x, else IDLE (1). With
+    vehicle 1's x at 0 and vehicle 2's at +-0.5 (beyond eps), half the vertices work, and which half
+    flips with vehicle 2's sign."""
+
+    def query(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float32)
+        out = np.zeros((len(x), 5), dtype=np.float32)
+        out[:, 1] = 0.5
+        out[:, 3] = np.where(x[:, 1, 1] * x[:, 2, 1] > 0, 1.0, 0.0)
+        return out
+
+    return Victim(query=query, kind="discrete", obs_shape=(5, 5))
+
+
+def test_vertex_check_never_feeds_a_vertex_its_check_says_fails_and_misses_fewer_steps() -> None:
+    """The clean observation flips which half of the vertices works every third step. Vertex hold
+    feeds its held vertex and misses every flip; vertex check asks first, feeds a fresh vertex where
+    the held one fails, and misses only where that fresh vertex fails too (half the time here)."""
+    victim = flipping_gate_victim()
+    x0 = observations(1, seed=7)
+    x0[0, 1, 1] = 0.0
+    states = []
+    for t in range(60):
+        x = x0.copy()
+        x[0, 2, 1] = 0.5 if (t // 3) % 2 == 0 else -0.5
+        states.append(x)
+    missed = {"vertex-hold": 0, "vertex-check": 0}
+    for name in missed:
+        for seed in range(5):
+            attack, objective, oracle = build(victim, name)
+            attack.reseed(seed)
+            fed_before = None
+            for x in states:
+                result = attack.perturb(x, oracle, objective)
+                took = victim.query(result.x_adv).argmax(1)[0] == 3  # what the victim did (the evaluator's view)
+                missed[name] += not took
+                assert int(result.queries[0]) == 1
+                if name == "vertex-check":
+                    asked = not np.isnan(result.adv_outputs).any()
+                    assert bool(result.success[0]) == asked  # fed the asked vertex exactly when the check said yes
+                    if asked:
+                        assert took
+                    elif fed_before is not None:  # the held vertex failed its check: a fresh one is fed
+                        assert not np.array_equal(result.x_adv - x, fed_before)
+                fed_before = result.x_adv - x
+    # over 5 seeds: hold misses every flip (19 each) and half the steps after a miss; check about half that
+    assert missed["vertex-hold"] >= 5 * 19
+    assert missed["vertex-check"] <= 0.6 * missed["vertex-hold"]

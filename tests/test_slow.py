@@ -89,14 +89,16 @@ def test_vertex_hold_gives_its_committed_episodes(tmp_path: Path) -> None:
         assert row["pct_of_max"] == mine["pct_of_max"] and row["queries"] == mine["queries"] == row["length"], row
 
 
-def test_a_committed_picker_gives_its_committed_episodes(tmp_path: Path) -> None:
-    """`--attack vertex-hold:DIR` with the committed picker of fit seed 0 (results/vertex-hold/picker) replays
-    the first episodes of its committed cell, number for number, at one query per step."""
+@pytest.mark.parametrize(("attack", "prefix"), [("vertex-hold", ""), ("vertex-check", "check-")])
+def test_a_committed_picker_gives_its_committed_episodes(tmp_path: Path, attack: str, prefix: str) -> None:
+    """`--attack vertex-hold:DIR` (and `vertex-check:DIR`) with the committed picker of fit seed 0
+    (results/vertex-hold/picker) replays the first episodes of its committed cell, number for number, at one
+    query per step."""
     picker = ROOT / "results" / "vertex-hold" / "picker" / "dqn-close-eps0.02-seed0"
-    cell = ROOT / "results" / "vertex-hold" / "picker" / "cells" / "dqn-close-eps0.02-seed0"
+    cell = ROOT / "results" / "vertex-hold" / "picker" / "cells" / f"{prefix}dqn-close-eps0.02-seed0"
     committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
     out = tmp_path / "cell"
-    assert main(["evaluate", str(ROOT / "models" / "dqn-close"), "--attack", f"vertex-hold:{picker}", "--eps", "0.02",
+    assert main(["evaluate", str(ROOT / "models" / "dqn-close"), "--attack", f"{attack}:{picker}", "--eps", "0.02",
                  "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
     rows = list(map(json.loads, (out / "episodes.jsonl").read_text().splitlines()))
     assert len(rows) == 3

@@ -366,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--no-progress", action="store_true")
 
     pick = sub.add_parser("picker-train", help="fit a picker for vertex hold from counted victim queries: which "
-                                                "random vertex to feed; use it with --attack vertex-hold:DIR")
+                                                "random vertex to feed; use it with --attack vertex-hold:DIR or vertex-check:DIR")
     from zodrive.agents.picker import LOSSES, PickerFit  # torch-free
 
     pick.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
@@ -475,7 +475,7 @@ def _backend_flags(parser: argparse.ArgumentParser) -> None:
 def _attack_flags(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("attack (black-box unless the name says otherwise)")
     group.add_argument("--attack", help="attack config name/YAML, registry name, learned:DIR (an adversary "
-                                        "trained by attack-train) or vertex-hold:DIR (a picker fitted by picker-train)")
+                                        "trained by attack-train), vertex-hold:DIR or vertex-check:DIR (a picker fitted by picker-train)")
     group.add_argument("--eps", type=float)
     group.add_argument("--norm", choices=["linf", "l2"])
     group.add_argument("--mode", choices=["budgeted", "paper"])

@@ -100,6 +100,22 @@ class VertexHold(Attack):
                 ) -> AttackResult:
         """The step above for clean observations `x0` (N, *obs); a row whose episode budget
         cannot pay the one query is fed its clean observation and holds nothing."""
+        step = self._begin(x0, oracle, objective)
+        if step is None:
+            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
+        x0, delta, live = step
+        fed = self._project(x0, delta)
+        out, took = self._ask(fed, live, oracle, objective)
+        # the vertex itself is held, not its projection: a coordinate the box clipped at this step
+        # is whole again at the next one if the observation has moved away from the edge
+        self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
+        return self._result(x0, fed, live, took, out, oracle)
+
+    def _begin(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Start a step: (clean observations as float32, each row's flat vertex to try (held, or fresh
+        where none is held or the picker's `switch` drops it), the rows that can pay a query), or None
+        when no row can (nothing is held then)."""
         self.check_objective(objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         dim = int(np.prod(shape))
@@ -107,11 +123,10 @@ class VertexHold(Attack):
         flat0 = x0.reshape(n, dim)
         oracle.begin_step(rows=n)
         self._streams(n)
-        everyone = np.arange(n)
-        live = oracle.remaining(everyone) >= 1
+        live = oracle.remaining(np.arange(n)) >= 1
         if not live.any():
             self._carry = np.full((n, dim), np.nan, dtype=np.float32)
-            return self._untouched(x0, oracle)
+            return None
         held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
             np.full((n, dim), np.nan, dtype=np.float32)
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
@@ -127,21 +142,32 @@ class VertexHold(Attack):
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
-        # projected once, every vertex final (the L-inf projection is elementwise: row by row is the same)
-        fed = self.threat.project((flat0 + delta).reshape(x0.shape), x0).astype(np.float32)
+        return x0, delta, live
+
+    def _project(self, x0: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """The observations fed for flat vertices `delta`, projected once into the threat model (the
+        L-inf projection is elementwise: row by row is the same)."""
+        return self.threat.project((x0.reshape(len(x0), -1) + delta).reshape(x0.shape), x0).astype(np.float32)
+
+    def _ask(self, fed: np.ndarray, live: np.ndarray, oracle: QueryOracle, objective: Objective
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """One counted query per live row on `fed`: the outputs (NaN for a row not asked) and
+        whether the victim took the target."""
         asked = np.flatnonzero(live)
         answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
-        out = np.full((n, answered.shape[1]), np.nan, dtype=np.float32)
+        out = np.full((len(fed), answered.shape[1]), np.nan, dtype=np.float32)
         out[asked] = answered
-        took = np.zeros(n, dtype=bool)
+        took = np.zeros(len(fed), dtype=bool)
         out_t = torch.from_numpy(answered)
         took[asked] = objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
-        x_adv = np.where(live.reshape(n, *([1] * len(shape))), fed, x0)
-        # the vertex itself is held, not its projection: a coordinate the box clipped at this step
-        # is whole again at the next one if the observation has moved away from the edge
-        self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
+        return out, took
+
+    def _result(self, x0: np.ndarray, fed: np.ndarray, live: np.ndarray, success: np.ndarray, out: np.ndarray,
+                oracle: QueryOracle) -> AttackResult:
+        n = len(x0)
+        x_adv = np.where(live.reshape(n, *([1] * (x0.ndim - 1))), fed, x0)
         linf, l2 = distortion(x_adv, x0)
-        return AttackResult(x_adv=x_adv, success=took, already=np.zeros(n, dtype=bool),  # clean never asked
+        return AttackResult(x_adv=x_adv, success=success, already=np.zeros(n, dtype=bool),  # clean never asked
                             iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
@@ -163,3 +189,35 @@ class VertexHold(Attack):
             scores = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base))
             best[i], rated[i] = drawn[i, int(scores.argmax())], float(scores.max())
         return best, rated
+
+
+class VertexCheck(VertexHold):
+    """Vertex hold that asks before it feeds: the one query of a step checks the vertex about to be
+    fed (the one fed at the last step, or a fresh one); if the victim would not take the target on
+    it, a fresh vertex is fed instead, unasked, and is the one checked at the next step.
+
+    Vertex hold learns that a held vertex stopped working only from the victim's move on it; here
+    the query comes first, so that move is never made on a vertex known to fail. A step is missed
+    only when the check fails and the fresh vertex fails too. The fresh vertex is unasked, so the
+    victim's outputs on it are unknown (NaN) and its step counts as no success: `success` is the
+    share of steps on which the check confirmed the target (a lower bound on the share taken; the
+    action counts give the rest).
+
+    Queries per environment step: 1 (with a picker too)."""
+
+    name = "vertex-check"
+    no_search = "vertex check queries one point per step and only asks whether the victim would take the target"
+
+    def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
+                ) -> AttackResult:
+        step = self._begin(x0, oracle, objective)
+        if step is None:
+            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
+        x0, delta, live = step
+        out, took = self._ask(self._project(x0, delta), live, oracle, objective)
+        failed = np.flatnonzero(live & ~took)
+        if failed.size:
+            delta[failed] = self._fresh(x0.reshape(len(x0), -1)[failed], failed, tuple(x0.shape[1:]))[0]
+            out[failed] = np.nan  # fed unasked
+        self._carry = np.where(live[:, None], delta, np.nan).astype(np.float32)
+        return self._result(x0, self._project(x0, delta), live, took, out, oracle)

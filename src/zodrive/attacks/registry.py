@@ -6,7 +6,7 @@ from typing import Any
 
 from zodrive.attacks.base import Attack
 from zodrive.attacks.coordinate import CoordinateFD
-from zodrive.attacks.hold import VertexHold
+from zodrive.attacks.hold import VertexCheck, VertexHold
 from zodrive.attacks.nes import NES
 from zodrive.attacks.noise import UniformNoise
 from zodrive.attacks.pgd import FGSM, PGD
@@ -19,15 +19,17 @@ from zodrive.errors import ZodriveError
 
 ATTACKS: dict[str, type[Attack]] = {
     cls.name: cls
-    for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD, VertexHold)
+    for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD, VertexHold,
+                VertexCheck)
 }
 
 
-KNOWN = (*ATTACKS, "learned:DIR", "vertex-hold:DIR")
-"""Every attack name: the attacks above (nine searches and vertex hold), the learned adversary
+PICKER_ATTACKS = ("vertex-hold", "vertex-check")  # the attacks that read a picker (`NAME:DIR`)
+KNOWN = (*ATTACKS, "learned:DIR", *(f"{name}:DIR" for name in PICKER_ATTACKS))
+"""Every attack name: the attacks above (nine searches, vertex hold and vertex check), the learned adversary
 (`learned`, read from a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has
 no place in the registry of attacks that run from nothing but their options, and vertex hold with a
-picker (`vertex-hold:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
+picker (`vertex-hold:DIR`, `vertex-check:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
@@ -36,8 +38,9 @@ def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
 
     if name == NAME:
         return LearnedAdversary(threat, **hyper)
-    if name != "vertex-hold" and hyper.pop("adversary", None) is not None:  # vertex-hold:DIR reads a picker
-        raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR and vertex-hold:DIR, not {name}")
+    if name not in PICKER_ATTACKS and hyper.pop("adversary", None) is not None:  # vertex-hold:DIR reads a picker
+        raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR, vertex-hold:DIR and "
+                           f"vertex-check:DIR, not {name}")
     try:
         cls = ATTACKS[name]
     except KeyError:

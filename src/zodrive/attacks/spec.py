@@ -11,7 +11,7 @@ from zodrive.attacks.victim import Victim, decision_only
 from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack, needs_fixed_target
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.registry import ATTACKS, KNOWN, make_attack
+from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
@@ -19,8 +19,8 @@ from zodrive.errors import ZodriveError
 log = logging.getLogger(__name__)
 
 LEARNED = "learned"
-FOLDER_ATTACKS = (LEARNED, "vertex-hold")
-"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, vertex hold's picker."""
+FOLDER_ATTACKS = (LEARNED, *PICKER_ATTACKS)
+"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, a picker."""
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 DEFAULT_FROZEN = ("presence",)
 
@@ -187,8 +187,8 @@ class AttackSpec:
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
-    `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`) and `vertex-hold:DIR`
-    vertex hold with the picker fitted into DIR (`zodrive picker-train`)."""
+    `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`), `vertex-hold:DIR` and
+    `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`)."""
     from zodrive.config import available
 
     head, colon, folder = name.partition(":")

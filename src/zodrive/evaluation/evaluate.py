@@ -24,7 +24,7 @@ from zodrive.agents.baselines import is_baseline
 from zodrive.agents.factory import is_factory, split_factory
 from zodrive.agents.policies import check_policy, make_policy_env
 from zodrive.attacks.base import ENGINE_VERSION
-from zodrive.attacks.spec import AttackSpec
+from zodrive.attacks.spec import PICKER_ATTACKS, AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
@@ -67,7 +67,7 @@ class EvalJob:
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
         if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
-            if attack.get("attack") == "vertex-hold":
+            if attack.get("attack") in PICKER_ATTACKS:
                 from zodrive.attacks.picker import digest
 
                 key["adversary"] = digest(attack["adversary"])
@@ -230,7 +230,7 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int,
 
 
 def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any], defense: str | None) -> None:
-    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s picker) fitted against
+    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s or `vertex-check:DIR`'s picker) fitted against
     another model file, preset or defense: one line saying which."""
     if attack is not None and attack.get("attack") == "learned":
         from zodrive.attacks.learned import check_adversary
@@ -238,7 +238,7 @@ def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict
         if attack.get("adversary") is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
         check_adversary(attack["adversary"], model_file=model, preset=preset, defense=defense)
-    if attack is not None and attack.get("attack") == "vertex-hold" and attack.get("adversary") is not None:
+    if attack is not None and attack.get("attack") in PICKER_ATTACKS and attack.get("adversary") is not None:
         from zodrive.attacks.picker import check_picker
 
         check_picker(attack["adversary"], model_file=model, preset=preset, defense=defense)

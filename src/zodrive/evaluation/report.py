@@ -50,9 +50,10 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 def _picker(summary: dict[str, Any]) -> str:
-    """`, picker DIR` for vertex hold with a picker (`vertex-hold:DIR`), else nothing."""
+    """`, picker DIR` for an attack with a picker (`vertex-hold:DIR`, `vertex-check:DIR`), else nothing
+    (the learned adversary's folder is shown as its adversary)."""
     folder = (summary.get("attack_config") or {}).get("adversary")
-    return f", picker {folder}" if summary.get("attack") == "vertex-hold" and folder else ""
+    return f", picker {folder}" if summary.get("attack") != "learned" and folder else ""
 
 
 def _options(config: dict) -> str:

@@ -1,0 +1,95 @@
+"""A probe (issue 23, item 1; not a product command): vertex check (`--attack vertex-check:DIR`) feeds a fresh
+vertex, unasked, where its check says the held one fails; what fresh vertex works most often there? The victim
+drives under the product's vertex check (its own counted query and random streams). At every step where the
+held vertex fails at the new state, the victim is also asked, for analysis only (uncounted, not an attack), on:
+  picker-64    the picker's best of 64 random vertices (what vertex check feeds),
+  picker-1024  the picker's best of 1024,
+  recent       the last vertex confirmed before the held one (a memory of this episode's winners),
+  recent-best  the picker's best of the last 8 distinct confirmed vertices,
+  near-h       the picker's best of 64 copies of the held vertex with 10 % of its signs flipped,
+  gradient     the vertex the picker's gradient points to at the failed point,
+  any-1024     whether any of those 1024 random vertices works (what a search could find).
+Tuning seeds 900000.., nothing written.
+
+    python results/learned-adversary/pilots/one-query/fallback.py MODEL EPS PICKER_DIR [--episodes 30]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from common import FASTER, arguments, setup
+from zodrive.attacks.spec import load_attack
+from zodrive.envs import attack_context
+
+
+def main() -> None:
+    p = arguments(30)
+    p.add_argument("picker")
+    a = p.parse_args()
+    preset, victim, env, threat = setup(a.model, a.eps)
+    ctx = attack_context(preset)
+    spec = load_attack(f"vertex-check:{a.picker}", [f"eps={a.eps}"])
+    attack, objective, oracle = spec.build(victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    picker, shape = attack.picker, env.observation_space.shape
+    mask = threat.mask(shape).reshape(-1)
+    dim, eps = mask.size, np.float32(a.eps)
+    rng = np.random.default_rng(0)
+    names = ("picker-64", "picker-1024", "recent", "recent-best", "near-h", "gradient", "any-1024")
+    hits = {n: 0 for n in names}
+    failed, steps, returns = 0, 0, []
+
+    def fed(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
+        return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
+
+    def works(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        return victim.query(fed(x, deltas)).argmax(axis=1) == FASTER
+
+    def best(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        return deltas[int(picker.scores(fed(x, deltas)).argmax())]
+
+    for e in range(a.episodes):
+        obs, _ = env.reset(seed=900000 + e)
+        attack.reseed(900000 + e)
+        oracle.begin_episode()
+        attack._carry, winners, total, done = None, [], 0.0, False
+        while not done:
+            x = np.asarray(obs, np.float32)[None]
+            held = attack._carry
+            if held is not None and not np.isnan(held).any() and not works(x, held)[0]:
+                failed += 1
+                h = held[0]
+                pool = eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(1024, dim)) * mask
+                ok = works(x, pool)
+                hits["picker-64"] += bool(works(x, best(x, pool[:64])[None])[0])
+                hits["picker-1024"] += bool(ok[int(picker.scores(fed(x, pool)).argmax())])
+                older = [w for w in winners if not np.array_equal(w, h)]
+                hits["recent"] += bool(older) and bool(works(x, older[-1][None])[0])
+                hits["recent-best"] += bool(older) and bool(works(x, best(x, np.stack(older[-8:]))[None])[0])
+                flips = rng.random((64, dim)) < 0.1
+                hits["near-h"] += bool(works(x, best(x, np.where(flips, -h, h) * mask)[None])[0])
+                point = torch.from_numpy(fed(x, h[None]).reshape(1, -1)).requires_grad_(True)
+                picker.net(point).sum().backward()
+                hits["gradient"] += bool(works(x, (eps * np.sign(point.grad.numpy()[0]) * mask)[None])[0])
+                hits["any-1024"] += bool(ok.any())
+            result = attack.perturb(x, oracle, objective)
+            if result.success[0]:
+                delta = (attack._carry[0]).copy()
+                if not winners or not np.array_equal(winners[-1], delta):
+                    winners.append(delta)
+            act = int(victim.query(result.x_adv)[0].argmax())
+            steps += 1
+            obs, reward, terminated, truncated, _ = env.step(act)
+            total += reward
+            done = terminated or truncated
+        returns.append(total)
+    print(f"  vertex check: return {np.mean(returns):.2f} over {a.episodes} episodes, {steps} steps; the held vertex "
+          f"failed its check on {failed} ({failed / steps * 100:.1f} %)")
+    for n in names:
+        print(f"  {n}: works on {hits[n] / max(failed, 1) * 100:.1f} % of those steps")
+
+
+if __name__ == "__main__":
+    main()

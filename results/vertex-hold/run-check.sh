@@ -1,0 +1,26 @@
+#!/bin/bash
+# Vertex check (`--attack vertex-check`, 1 query per step: the check comes before the feed) on the cells where
+# vertex hold matters, 100 episodes on seeds 100000-100099, into results/vertex-hold/cells/check-*; and with
+# the DQN driver's pickers (picker/check.sh). The dqn-close pickers: bash results/vertex-hold/picker/check.sh
+# models/dqn-close 0.02 dqn-close-eps0.02-seed{0,1,2} dqn-close-rank-eps0.02-seed{0,1,2}.
+# Usage: bash results/vertex-hold/run-check.sh; then python results/vertex-hold/paired.py > results/vertex-hold/paired.txt
+set -u
+cd "$(dirname "$0")/../.."
+. .venv/bin/activate
+C=results/vertex-hold/cells
+cell() {  # NAME MODEL ARGS...: one evaluation, its command and summary in check-NAME.txt
+  name=check-$1; model=$2; shift 2
+  echo "\$ zodrive evaluate $model --attack vertex-check $* --episodes 100 --seed 100000 --out $C/$name" > $C/$name.txt
+  zodrive evaluate $model --attack vertex-check "$@" --episodes 100 --seed 100000 --workers 1 --out $C/$name \
+    --no-progress >> $C/$name.txt 2>&1
+}
+blind() {
+  cell dqn-close-eps0.02 models/dqn-close --eps 0.02
+  cell dqn-close-eps0.05 models/dqn-close --eps 0.05
+  cell dqn-driver-eps0.2 models/dqn-driver --eps 0.2
+}
+picked() {
+  bash results/vertex-hold/picker/check.sh models/dqn-driver 0.02 dqn-driver-eps0.02-seed0 dqn-driver-eps0.02-seed1 \
+    dqn-driver-eps0.02-seed2
+}
+blind & picked; wait
