@@ -42,6 +42,7 @@ ATTACK = {
     "--timing": ["0.5", "2"], "--max-change": ["0.01", "-1"], "--access": ["score", "decision", "x"],
     "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"], "--episode-query-budget": ["10", "0"],
     "--on-failure": ["best", "clean", "x"], "--warm-start": [None], "--trust-model": [None],
+    "--check-below": ["0.9", "2", "x"],
     "--defense": ["kinematic", "nope"],
 }
 COMMANDS = {

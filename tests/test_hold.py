@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from toys import context, linear_victim, observations
 from zodrive.attacks import AttackSpec
+from zodrive.attacks.picker import Picker
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
@@ -154,6 +156,18 @@ def test_the_summary_says_no_base_rate_is_known() -> None:
     assert "the target taken on 75.0% of steps" in text and "no base rate" in text and "1.0 queries/step" in text
 
 
+def test_vertex_check_s_summary_says_what_its_success_counts() -> None:
+    from zodrive.evaluation.report import format_summary
+
+    summary = {"episodes": 2, "seed": 1, "mean_return": 1.0, "ci95": [0.5, 1.5], "max_return": 2.0,
+               "collision_rate": 0.5, "mean_length": 10.0, "attack": "vertex-check", "eps": 0.02, "norm": "linf",
+               "mode": "budgeted", "target": "auto", "attack_success_rate": 0.6, "target_base_rate": None,
+               "queries_per_step": 0.805, "max_linf": 0.02, "attack_config": {"check_below": 0.998}}
+    text = format_summary(summary)
+    assert "a check confirmed the target on 60.0% of steps" in text and "fed unasked is not counted" in text
+    assert "0.81 queries/step" in text and "check_below=0.998" in text
+
+
 def test_a_default_compare_grid_leaves_out_what_cannot_take_its_options() -> None:
     """`zodrive compare` without --attacks runs every attack that takes --attack-set: vertex-hold
     is left out (and named) with an untargeted objective or a search option, kept otherwise."""
@@ -217,3 +231,101 @@ def test_vertex_check_never_feeds_a_vertex_its_check_says_fails_and_misses_fewer
     # over 5 seeds: hold misses every flip (19 each) and half the steps after a miss; check about half that
     assert missed["vertex-hold"] >= 5 * 19
     assert missed["vertex-check"] <= 0.6 * missed["vertex-hold"]
+
+
+class _Product(torch.nn.Module):
+    """The logit `gain` * x[1, 1] * x[2, 1] of a flattened (5, 5) observation."""
+
+    def __init__(self, gain: float) -> None:
+        super().__init__()
+        self.gain = gain
+
+    def forward(self, flat: torch.Tensor) -> torch.Tensor:
+        return self.gain * flat[:, 6:7] * flat[:, 11:12]
+
+
+def gate_picker(gain: float, candidates: int = 8) -> Picker:
+    """A picker for `flipping_gate_victim`: rates a fed observation by the sign the gate reads (a large
+    `gain`: right on every vertex; a negative one: always wrong)."""
+    identity = torch.nn.Linear(25, 25, bias=False)
+    with torch.no_grad():
+        identity.weight.copy_(torch.eye(25))
+    return Picker(torch.nn.Sequential(identity, _Product(gain)), candidates=candidates, switch=0.0)
+
+
+def checked(victim: Victim, picker: Picker, check_below: float):
+    """Vertex check with an in-memory picker (a folder's picker is an MLP; these toys are exact) and `check_below`."""
+    attack, objective, oracle = build(victim, "vertex-check")
+    attack.use_picker(picker, {"target": 3, "tol": None})
+    attack.check_below = check_below
+    return attack, objective, oracle
+
+
+def flipping_states(steps: int, every: int = 3) -> list[np.ndarray]:
+    x0 = observations(1, seed=7)
+    x0[0, 1, 1] = 0.0
+    states = []
+    for t in range(steps):
+        x = x0.copy()
+        x[0, 2, 1] = 0.5 if (t // every) % 2 == 0 else -0.5
+        states.append(x)
+    return states
+
+
+def test_check_below_skips_the_checks_a_picker_is_sure_of_and_spends_them_where_a_check_fails() -> None:
+    """With a picker that is right, a held vertex rated high is fed unasked (no query that step), and
+    where the gate flips the saved query checks a fresh vertex: no step is missed after the first, and
+    no prefix of the episode spends more queries than its steps."""
+    victim = flipping_gate_victim()
+    attack, objective, oracle = checked(victim, gate_picker(200.0), check_below=0.9)
+    spent, misses, free = 0, 0, 0
+    attack.reseed(4)
+    for t, x in enumerate(flipping_states(60)):
+        result = attack.perturb(x, oracle, objective)
+        spent += int(result.queries[0])
+        assert spent <= t + 1
+        free += int(result.queries[0]) == 0
+        misses += t > 0 and victim.query(result.x_adv).argmax(1)[0] != 3
+    assert misses == 0 and free >= 30 and spent < 60
+
+
+def test_check_below_never_spends_more_than_one_query_per_step_on_average_even_with_a_wrong_picker() -> None:
+    """A picker that reads only vehicle 2 (sure of every vertex while its x is positive, of none while it is
+    negative): whatever it says, every prefix of every episode (rows in lockstep, one restarted) spends at
+    most one query per step so far, and the queries saved are spent where checks fail."""
+    victim = flipping_gate_victim()
+    half = torch.nn.Linear(25, 1, bias=False)
+    with torch.no_grad():
+        half.weight.zero_()
+        half.weight[0, 11] = 50.0
+    attack, objective, oracle = checked(victim, Picker(torch.nn.Sequential(half), candidates=8, switch=0.0), 0.5)
+    states = flipping_states(40, every=2)
+    attack.reseed([1, 2, 3])
+    spent, steps, most = np.zeros(3, dtype=int), np.zeros(3, dtype=int), 0
+    for t, x in enumerate(states):
+        if t == 20:  # row 1 starts a new episode
+            attack.restart_row(1, 9)
+            oracle.begin_episode(1)
+            spent[1] = steps[1] = 0
+        result = attack.perturb(np.repeat(x, 3, axis=0), oracle, objective)
+        spent += result.queries
+        steps += 1
+        most = max(most, int(result.queries.max()))
+        assert (spent <= steps).all(), (t, spent, steps)
+    assert most > 1  # the bank was spent: some step checked more than one vertex
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"check_below": 0.9}, "use vertex-check:DIR"),  # no picker to rate with
+    ({"check_below": 1.5}, r"must be in \[0, 1\]"),
+])
+def test_check_below_needs_a_picker_and_a_rating(options: dict, message: str) -> None:
+    with pytest.raises(ZodriveError, match=message):
+        build(flipping_gate_victim(), "vertex-check", **options)
+
+
+def test_check_below_is_refused_by_every_other_attack() -> None:
+    with pytest.raises(ZodriveError, match="applies to vertex-check:DIR, not vertex-hold"):
+        build(flipping_gate_victim(), "vertex-hold", check_below=0.9)
+    with pytest.raises(ZodriveError, match="applies to vertex-check:DIR, not random-search"):
+        AttackSpec(attack="random-search", eps=EPS, check_below=0.9).check()

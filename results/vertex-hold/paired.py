@@ -45,6 +45,24 @@ PAIRS = [  # (vertex-hold cell, other cell)
     *[(Path(f"../picker/cells/dqn-close-rank-eps0.02-seed{s}"), other) for s in (0, 1, 2)
       if (H / f"../picker/cells/dqn-close-rank-eps0.02-seed{s}/episodes.jsonl").is_file()
       for other in (K / "random-search-eps0.02", H / f"../picker/cells/dqn-close-eps0.02-seed{s}")],
+    # vertex check (run-check.sh, picker/check.sh; cells check-*): against the strongest per-step attack and
+    # against vertex hold, blind or with the same picker
+    *[(Path(f"check-{cell}"), other) for cell, others in (
+        ("dqn-close-eps0.02", (K / "random-search-eps0.02", H / "dqn-close-eps0.02")),
+        ("dqn-close-eps0.05", (K / "random-search-eps0.05", H / "dqn-close-eps0.05")),
+        ("dqn-driver-eps0.2", (C / "dqn-driver-random-search-eps0.2-100", H / "dqn-driver-eps0.2")))
+      if (H / f"check-{cell}/episodes.jsonl").is_file() for other in others],
+    *[(Path(f"../picker/cells/check-{name}-seed{s}"), other) for name, strongest in (
+        ("dqn-close-eps0.02", (K / "random-search-eps0.02",)), ("dqn-close-rank-eps0.02", (K / "random-search-eps0.02",)),
+        ("dqn-driver-eps0.02", (R / "dqn-driver-pgd-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"))) for s in (0, 1, 2)
+      if (H / f"../picker/cells/check-{name}-seed{s}/episodes.jsonl").is_file()
+      for other in (*strongest, H / f"../picker/cells/{name}-seed{s}")],
+    # vertex check with --check-below 0.998 (at most 1 query per step on average): against random search and
+    # against vertex check with the same picker at 1 query per step
+    *[(Path(f"../picker/cells/check-below0.998-{name}-seed{s}"), other)
+      for name in ("dqn-close-eps0.02", "dqn-close-rank-eps0.02") for s in (0, 1, 2)
+      if (H / f"../picker/cells/check-below0.998-{name}-seed{s}/episodes.jsonl").is_file()
+      for other in (K / "random-search-eps0.02", H / f"../picker/cells/check-{name}-seed{s}")],
     # against PGD with the fallback target FASTER,not:SLOWER (results/learned-adversary/run-fallback.sh)
     ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.02", C / "dqn-robust-pgd-fallback-eps0.02-100"),

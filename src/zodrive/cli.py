@@ -508,6 +508,9 @@ def _attack_flags(parser: argparse.ArgumentParser) -> None:
                        help="defense-aware attacker: the perturbation changes by at most this (L-inf) between steps")
     group.add_argument("--access", choices=["score", "decision"],
                        help="what the attacker's queries return: scores (Q-values/action) or only the decision")
+    group.add_argument("--check-below", type=float,
+                       help="vertex-check:DIR: a held vertex the picker rates at least this (0-1) is fed without a check; "
+                            "the saved queries pay for checks of fresh vertices (at most 1 query per step on average)")
     group.add_argument("--attack-seed", type=_seed)
 
 
@@ -518,7 +521,7 @@ ATTACK_FLAGS = {"--eps": "eps", "--norm": "norm", "--mode": "mode", "--steps": "
                 "--patience": "patience", "--no-patience": "no_patience", "--warm-start/--no-warm-start": "warm_start",
                 "--on-failure": "on_failure", "--restarts": "restarts",
                 "--timing": "timing", "--episode-query-budget": "episode_query_budget", "--access": "access",
-                "--max-change": "max_change",
+                "--max-change": "max_change", "--check-below": "check_below",
                 "--attack-seed": "attack_seed"}
 
 

@@ -56,9 +56,10 @@ class AttackOptions(_Strict):
     query_budget: Optional[StrictInt] = Field(None, ge=1)
     seed: StrictInt = Field(0, ge=0)
     adversary: Optional[str] = None
+    check_below: Optional[float] = Field(None, ge=0, le=1)
 
     @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "timing", "max_change",
-                     mode="before")
+                     "check_below", mode="before")
     @classmethod
     def _finite_number(cls, value: Any) -> Any:
         if isinstance(value, bool) or (value is not None and not isinstance(value, (int, float))):

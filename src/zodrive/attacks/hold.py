@@ -57,6 +57,7 @@ class VertexHold(Attack):
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
         self.picker: Picker | None = None
+        self._width = 0  # the victim's output width, once known (the outputs of a step that asked nothing)
         self.picker_goal: Any = None
         self.picker_frozen: list[str] | None = None
         self._checked: Objective | None = None  # the objective the picker was last checked against
@@ -103,7 +104,7 @@ class VertexHold(Attack):
         step = self._begin(x0, oracle, objective)
         if step is None:
             return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live = step
+        x0, delta, live, _ = step
         fed = self._project(x0, delta)
         out, took = self._ask(fed, live, oracle, objective)
         # the vertex itself is held, not its projection: a coordinate the box clipped at this step
@@ -112,10 +113,10 @@ class VertexHold(Attack):
         return self._result(x0, fed, live, took, out, oracle)
 
     def _begin(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Start a step: (clean observations as float32, each row's flat vertex to try (held, or fresh
-        where none is held or the picker's `switch` drops it), the rows that can pay a query), or None
-        when no row can (nothing is held then)."""
+        where none is held or the picker's `switch` drops it), the rows that can pay a query, the rows
+        whose vertex is the held one), or None when no row can (nothing is held then)."""
         self.check_objective(objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         dim = int(np.prod(shape))
@@ -142,7 +143,8 @@ class VertexHold(Attack):
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
-        return x0, delta, live
+            stale[fresh[~take]] = False
+        return x0, delta, live, ~stale
 
     def _project(self, x0: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """The observations fed for flat vertices `delta`, projected once into the threat model (the
@@ -154,13 +156,21 @@ class VertexHold(Attack):
         """One counted query per live row on `fed`: the outputs (NaN for a row not asked) and
         whether the victim took the target."""
         asked = np.flatnonzero(live)
-        answered = np.asarray(oracle(fed[asked], asked), dtype=np.float32)
-        out = np.full((len(fed), answered.shape[1]), np.nan, dtype=np.float32)
-        out[asked] = answered
+        out = np.full((len(fed), self._width), np.nan, dtype=np.float32)
         took = np.zeros(len(fed), dtype=bool)
-        out_t = torch.from_numpy(answered)
-        took[asked] = objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
+        if asked.size:
+            answered, took[asked] = self._query(fed[asked], asked, oracle, objective)
+            out = np.full((len(fed), answered.shape[1]), np.nan, dtype=np.float32)
+            out[asked] = answered
         return out, took
+
+    def _query(self, fed: np.ndarray, rows: np.ndarray, oracle: QueryOracle, objective: Objective
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The victim's outputs on `fed`, one counted query charged to each of `rows`, and whether it took the target."""
+        answered = np.asarray(oracle(fed, rows), dtype=np.float32)
+        self._width = answered.shape[1]
+        out_t = torch.from_numpy(answered)
+        return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
 
     def _result(self, x0: np.ndarray, fed: np.ndarray, live: np.ndarray, success: np.ndarray, out: np.ndarray,
                 oracle: QueryOracle) -> AttackResult:
@@ -175,20 +185,27 @@ class VertexHold(Attack):
         """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`) and its rating:
         a random one (rated +inf), or with a picker the best-rated of `candidates` random ones at the
         row's observation (one picker call per row)."""
+        if self.picker is None:
+            signs = np.array([-self.threat.eps, self.threat.eps], dtype=np.float32)
+            mask = self.threat.mask(shape).reshape(-1)
+            return self.draw(rows, lambda g: g.choice(signs, size=flat0.shape[1])) * mask, np.full(len(rows), np.inf)
+        drawn, scores = self._rated(flat0, rows, shape)
+        best = scores.argmax(axis=1)
+        return drawn[np.arange(len(rows)), best], scores.max(axis=1).astype(np.float64)
+
+    def _rated(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """`candidates` random vertices (rows, k, dim) for each of `rows` and the picker's ratings (rows, k)
+        of them at the row's observation (one picker call per row)."""
         eps = np.float32(self.threat.eps)
         mask = self.threat.mask(shape).reshape(-1)
-        dim = flat0.shape[1]
         signs = np.array([-eps, eps], dtype=np.float32)
-        if self.picker is None:
-            return self.draw(rows, lambda g: g.choice(signs, size=dim)) * mask, np.full(len(rows), np.inf)
         k = self.picker.candidates
-        drawn = self.draw(rows, lambda g: g.choice(signs, size=(k, dim))) * mask  # (rows, k, dim)
-        best, rated = np.empty((len(rows), dim), dtype=np.float32), np.empty(len(rows))
+        drawn = self.draw(rows, lambda g: g.choice(signs, size=(k, flat0.shape[1]))) * mask  # (rows, k, dim)
+        scores = np.empty((len(rows), k), dtype=np.float32)
         for i in range(len(rows)):
             base = np.repeat(flat0[i:i + 1], k, axis=0).reshape(-1, *shape)
-            scores = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base))
-            best[i], rated[i] = drawn[i, int(scores.argmax())], float(scores.max())
-        return best, rated
+            scores[i] = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base))
+        return drawn, scores
 
 
 class VertexCheck(VertexHold):
@@ -198,26 +215,87 @@ class VertexCheck(VertexHold):
 
     Vertex hold learns that a held vertex stopped working only from the victim's move on it; here
     the query comes first, so that move is never made on a vertex known to fail. A step is missed
-    only when the check fails and the fresh vertex fails too. The fresh vertex is unasked, so the
-    victim's outputs on it are unknown (NaN) and its step counts as no success: `success` is the
-    share of steps on which the check confirmed the target (a lower bound on the share taken; the
-    action counts give the rest).
+    only when the check fails and the fresh vertex fails too. A vertex fed unasked has unknown
+    outputs (NaN) and its step counts as no success: `success` is the share of steps on which a
+    check confirmed the target (a lower bound on the share taken; the action counts give the rest).
 
-    Queries per environment step: 1 (with a picker too)."""
+    `check_below` (with a picker): a held vertex the picker rates at least this at the new state is
+    fed without a check, and each query so saved pays for one check of a fresh vertex where a check
+    fails (the picker's best first, up to `candidates`). A row never spends more queries than steps
+    so far in its episode, so the average stays at most one per step; one step may spend more.
+
+    Queries per environment step: 1; with `check_below`, at most 1 + candidates in one step and at
+    most 1 per step on average over every start of an episode."""
 
     name = "vertex-check"
     no_search = "vertex check queries one point per step and only asks whether the victim would take the target"
+
+    def __init__(self, threat: ThreatModel, *, adversary: str | None = None, check_below: float | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(threat, adversary=adversary, **kwargs)
+        if check_below is not None:
+            if isinstance(check_below, bool) or not isinstance(check_below, (int, float)) or not 0 <= check_below <= 1:
+                raise ZodriveError(f"check_below (a picker's rating) must be in [0, 1], not {check_below!r}")
+            if self.picker is None:
+                raise ZodriveError("check_below reads a picker's rating: use vertex-check:DIR (a picker from "
+                                   "`zodrive picker-train`)")
+        self.check_below = None if check_below is None else float(check_below)
+        self._bank: np.ndarray | None = None  # per row: queries earned (one per step) and not yet spent
+
+    def queries_per_run(self, steps: int | None = None) -> int:
+        return 1 if self.check_below is None else 1 + self.picker.candidates
+
+    def queries_per_step(self) -> int:
+        return self.queries_per_run()
+
+    def begin_episode(self) -> None:
+        super().begin_episode()
+        self._bank = None
+
+    def restart_row(self, row: int, seed: int) -> None:
+        super().restart_row(row, seed)
+        if self._bank is not None:
+            self._bank[row] = 0
+
+    def keep_rows(self, rows: np.ndarray) -> None:
+        super().keep_rows(rows)
+        self._bank = None if self._bank is None else self._bank[rows]
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
         step = self._begin(x0, oracle, objective)
         if step is None:
             return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live = step
-        out, took = self._ask(self._project(x0, delta), live, oracle, objective)
-        failed = np.flatnonzero(live & ~took)
-        if failed.size:
-            delta[failed] = self._fresh(x0.reshape(len(x0), -1)[failed], failed, tuple(x0.shape[1:]))[0]
-            out[failed] = np.nan  # fed unasked
+        x0, delta, live, kept = step
+        n, shape = len(x0), tuple(x0.shape[1:])
+        flat0 = x0.reshape(n, -1)
+        if self._bank is None or len(self._bank) != n:
+            self._bank = np.zeros(n, dtype=np.int64)
+        self._bank[live] += 1
+        ask = live.copy()
+        if self.check_below is not None:
+            for r in np.flatnonzero(kept & live):  # one call per row: lockstep = one-row runs
+                ask[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0] < self.check_below
+        out, took = self._ask(self._project(x0, delta), ask, oracle, objective)
+        self._bank[ask] -= 1
+        failed = np.flatnonzero(ask & ~took)
+        if failed.size and self.check_below is None:
+            delta[failed] = self._fresh(flat0[failed], failed, shape)[0]
+        elif failed.size:
+            drawn, scores = self._rated(flat0[failed], failed, shape)
+            for i, r in enumerate(failed):
+                for j in np.argsort(-scores[i], kind="stable"):  # the best-rated first
+                    delta[r] = drawn[i, j]
+                    if self._bank[r] < 1 or oracle.remaining(np.array([r]))[0] < 1:
+                        break  # fed unasked
+                    answer, ok = self._query(self._project(x0[r:r + 1], delta[r:r + 1]), np.array([r]), oracle,
+                                             objective)
+                    self._bank[r] -= 1
+                    if out.shape[1] != answer.shape[1]:  # nothing was asked before in this step
+                        out = np.full((n, answer.shape[1]), np.nan, dtype=np.float32)
+                    if ok[0]:
+                        out[r], took[r] = answer[0], True
+                        break
+        out[failed[~took[failed]]] = np.nan  # fed unasked
         self._carry = np.where(live[:, None], delta, np.nan).astype(np.float32)
         return self._result(x0, self._project(x0, delta), live, took, out, oracle)

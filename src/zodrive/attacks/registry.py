@@ -36,6 +36,8 @@ def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
     """Build an attack by name with validated hyperparameters (`learned` needs `adversary`)."""
     from zodrive.attacks.learned import NAME, LearnedAdversary
 
+    if name != "vertex-check" and hyper.pop("check_below", None) is not None:
+        raise ZodriveError(f"check_below (a picker's rating) applies to vertex-check:DIR, not {name}")
     if name == NAME:
         return LearnedAdversary(threat, **hyper)
     if name not in PICKER_ATTACKS and hyper.pop("adversary", None) is not None:  # vertex-hold:DIR reads a picker

@@ -56,6 +56,7 @@ class AttackSpec:
     query_budget: int | None = None       # max queries per environment step (None: no cap)
     seed: int = 0                         # the attack's random stream
     adversary: str | None = None          # learned:DIR / vertex-hold:DIR: the trained adversary / picker folder
+    check_below: float | None = None      # vertex-check:DIR: a held vertex rated >= this is fed unasked (saved queries pay checks)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
@@ -118,7 +119,8 @@ class AttackSpec:
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
                            restarts=self.restarts, timing=self.timing, max_change=self.max_change,
-                           seed=self.seed, **({} if self.adversary is None else {"adversary": self.adversary}))
+                           seed=self.seed, **({} if self.adversary is None else {"adversary": self.adversary}),
+                           **({} if self.check_below is None else {"check_below": self.check_below}))
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""

@@ -1,0 +1,70 @@
+"""A probe (issue 23, item 1; not a product command): could vertex check skip the checks its picker is sure of,
+and spend the saved queries where a check fails? The victim drives under the product's vertex check with the
+picker (`--attack vertex-check:DIR`, one query per step). For analysis only (uncounted, not an attack), at
+every step with a held vertex the victim is also asked on it: the probe prints how often held vertices fail
+by the picker's rating of them, and, where one fails, how often one of the picker's best k of 64 fresh
+vertices works. Tuning seeds 900000.., nothing written.
+
+    python results/learned-adversary/pilots/one-query/budget.py MODEL EPS PICKER_DIR [--episodes 20]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common import FASTER, arguments, setup
+from zodrive.attacks.spec import load_attack
+from zodrive.envs import attack_context
+
+
+def main() -> None:
+    p = arguments(20)
+    p.add_argument("picker")
+    a = p.parse_args()
+    preset, victim, env, threat = setup(a.model, a.eps)
+    ctx = attack_context(preset)
+    spec = load_attack(f"vertex-check:{a.picker}", [f"eps={a.eps}"])
+    attack, objective, oracle = spec.build(victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    picker, shape = attack.picker, env.observation_space.shape
+    mask = threat.mask(shape).reshape(-1)
+    dim, eps, rng = mask.size, np.float32(a.eps), np.random.default_rng(0)
+    held_rows, topk, ks = [], [], (1, 2, 3, 4, 8)
+
+    def fed(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
+        return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
+
+    for e in range(a.episodes):
+        obs, _ = env.reset(seed=900000 + e)
+        attack.reseed(900000 + e)
+        oracle.begin_episode()
+        attack.begin_episode()
+        done = False
+        while not done:
+            x = np.asarray(obs, np.float32)[None]
+            held = attack._carry
+            if held is not None and not np.isnan(held).any():
+                point = fed(x, held)
+                works = victim.query(point).argmax(axis=1)[0] == FASTER
+                held_rows.append((float(picker.scores(point)[0]), bool(works)))
+                if not works:
+                    pool = fed(x, eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(64, dim)) * mask)
+                    best = np.argsort(-picker.scores(pool), kind="stable")[:max(ks)]
+                    hit = victim.query(pool[best]).argmax(axis=1) == FASTER
+                    topk.append([bool(hit[:k].any()) for k in ks])
+            result = attack.perturb(x, oracle, objective)
+            obs, _, terminated, truncated, _ = env.step(int(victim.query(result.x_adv)[0].argmax()))
+            done = terminated or truncated
+    rated, worked = np.array(held_rows).T
+    print(f"  {len(rated)} steps with a held vertex; it failed on {(1 - worked.mean()) * 100:.2f} %")
+    for q in (0.5, 0.8, 0.9):
+        top = rated >= np.quantile(rated, q)
+        print(f"  the top {100 * (1 - q):.0f} % by the picker's rating (>= {np.quantile(rated, q):.3f}) failed on "
+              f"{(1 - worked[top].mean()) * 100:.2f} %, the rest on {(1 - worked[~top].mean()) * 100:.2f} %")
+    hits = np.array(topk).mean(axis=0) * 100
+    print(f"  where it failed ({len(topk)} steps), one of the picker's best k of 64 fresh vertices worked: "
+          + ", ".join(f"k={k} {h:.1f} %" for k, h in zip(ks, hits)))
+
+
+if __name__ == "__main__":
+    main()
