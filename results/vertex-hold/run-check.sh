@@ -9,16 +9,12 @@ set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate
 C=results/vertex-hold/cells
-cell() {  # NAME MODEL ARGS...: one evaluation, its command and summary in check-NAME.txt
-  name=check-$1; model=$2; shift 2
-  echo "\$ zodrive evaluate $model --attack vertex-check $* --episodes 100 --seed 100000 --out $C/$name" > $C/$name.txt
-  zodrive evaluate $model --attack vertex-check "$@" --episodes 100 --seed 100000 --workers 1 --out $C/$name \
-    --no-progress >> $C/$name.txt 2>&1
-}
+. results/vertex-hold/cell.sh
+check() { name=$1; shift; cell vertex-check check-$name "$@"; }  # NAME MODEL ARGS...
 blind() {
-  cell dqn-close-eps0.02 models/dqn-close --eps 0.02
-  cell dqn-close-eps0.05 models/dqn-close --eps 0.05
-  cell dqn-driver-eps0.2 models/dqn-driver --eps 0.2
+  check dqn-close-eps0.02 models/dqn-close --eps 0.02
+  check dqn-close-eps0.05 models/dqn-close --eps 0.05
+  check dqn-driver-eps0.2 models/dqn-driver --eps 0.2
 }
 picked() {
   bash results/vertex-hold/picker/check.sh models/dqn-driver 0.02 check "" dqn-driver-eps0.02-seed0 dqn-driver-eps0.02-seed1 \

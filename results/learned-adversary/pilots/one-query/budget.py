@@ -12,27 +12,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import FASTER, arguments, setup
-from zodrive.attacks.spec import load_attack
-from zodrive.envs import attack_context
+from common import FASTER, arguments, on_vertices, vertex_check
 
 
 def main() -> None:
     p = arguments(20)
     p.add_argument("picker")
     a = p.parse_args()
-    preset, victim, env, threat = setup(a.model, a.eps)
-    ctx = attack_context(preset)
-    spec = load_attack(f"vertex-check:{a.picker}", [f"eps={a.eps}"])
-    attack, objective, oracle = spec.build(victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     picker, shape = attack.picker, env.observation_space.shape
     mask = threat.mask(shape).reshape(-1)
     dim, eps, rng = mask.size, np.float32(a.eps), np.random.default_rng(0)
+    fed = on_vertices(threat, shape)
     held_rows, topk, ks = [], [], (1, 2, 3, 4, 8)
-
-    def fed(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-        base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
-        return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
 
     for e in range(a.episodes):
         obs, _ = env.reset(seed=900000 + e)

@@ -41,6 +41,29 @@ def setup(model: str, eps: float) -> tuple[dict[str, Any], Victim, Any, ThreatMo
     return preset, victim, make_env(preset), attack.threat
 
 
+def vertex_check(model: str, eps: float, picker: str) -> tuple[Victim, Any, ThreatModel, Any, Any, Any]:
+    """The victim, one environment, the threat model, and the product's `--attack vertex-check:PICKER` at `eps`
+    built for them: (victim, env, threat, attack, objective, oracle)."""
+    from zodrive.envs import attack_context as context
+
+    preset, victim, env, threat = setup(model, eps)
+    ctx = context(preset)
+    attack, objective, oracle = load_attack(f"vertex-check:{picker}", [f"eps={eps}"]).build(
+        victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    return victim, env, threat, attack, objective, oracle
+
+
+def on_vertices(threat: ThreatModel, shape: tuple[int, ...]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """fed(x, deltas): the observations (k, *obs) fed at clean observation x (1, *obs) for flat vertices
+    `deltas` (k, dim), projected into the threat model."""
+    dim = int(np.prod(shape))
+
+    def fed(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
+        return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
+    return fed
+
+
 def drive(env: Any, victim: Victim, seed0: int, episodes: int, choose: Chooser, *,
           target: Callable[[np.ndarray], int] = lambda x: FASTER,
           states: list[np.ndarray] | None = None) -> dict[str, Any]:

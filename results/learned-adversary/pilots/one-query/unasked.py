@@ -19,19 +19,14 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from common import FASTER, arguments, setup
-from zodrive.attacks.spec import load_attack
-from zodrive.envs import attack_context
+from common import FASTER, arguments, on_vertices, vertex_check
 
 
 def main() -> None:
     p = arguments(30)
     p.add_argument("picker")
     a = p.parse_args()
-    preset, victim, env, threat = setup(a.model, a.eps)
-    ctx = attack_context(preset)
-    spec = load_attack(f"vertex-check:{a.picker}", [f"eps={a.eps}"])
-    attack, objective, oracle = spec.build(victim, ctx["features"], ctx["bounds"], ctx["n_actions"], ctx["action_names"])
+    victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     picker, shape = attack.picker, env.observation_space.shape
     mask = threat.mask(shape).reshape(-1)
     dim, eps = mask.size, np.float32(a.eps)
@@ -39,10 +34,7 @@ def main() -> None:
     names = ("picker-64", "picker-1024", "recent", "recent-best", "near-h", "gradient", "any-1024")
     hits = {n: 0 for n in names}
     failed, steps, returns = 0, 0, []
-
-    def fed(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-        base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
-        return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
+    fed = on_vertices(threat, shape)
 
     def works(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
         return victim.query(fed(x, deltas)).argmax(axis=1) == FASTER
