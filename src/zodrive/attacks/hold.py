@@ -23,7 +23,10 @@ the one a picker fitted offline from counted queries (`zodrive picker-train`,
 `zodrive.attacks.picker`) rates most likely to make the victim take the target; a held vertex the
 picker rates below its `switch` at the new state is replaced the same way. The picker runs locally.
 
-Queries per environment step: 1 (with a picker too).
+`vertex-check` (`VertexCheck`, below) spends the query before feeding instead: the vertex about to be fed
+is checked, and one that would fail is swapped for a fresh vertex, fed unasked.
+
+Queries per environment step: 1 (with a picker too; `vertex-check --check-below` averages at most 1).
 """
 
 from __future__ import annotations
@@ -225,7 +228,7 @@ class VertexCheck(VertexHold):
     so far in its episode, so the average stays at most one per step; one step may spend more.
 
     Queries per environment step: 1; with `check_below`, at most 1 + candidates in one step and at
-    most 1 per step on average over every start of an episode."""
+    most 1 per step on average over every prefix of an episode."""
 
     name = "vertex-check"
     no_search = "vertex check queries one point per step and only asks whether the victim would take the target"
