@@ -329,3 +329,27 @@ def test_check_below_is_refused_by_every_other_attack() -> None:
         build(flipping_gate_victim(), "vertex-hold", check_below=0.9)
     with pytest.raises(ZodriveError, match="applies to vertex-check:DIR, not random-search"):
         AttackSpec(attack="random-search", eps=EPS, check_below=0.9).check()
+
+
+def test_check_below_in_lockstep_gives_what_one_row_runs_give() -> None:
+    """Each row's bank, random stream and extra checks are its own: three rows attacked together get, step
+    for step, what three one-row runs get."""
+    victim = flipping_gate_victim()
+    half = torch.nn.Linear(25, 1, bias=False)
+    with torch.no_grad():
+        half.weight.zero_()
+        half.weight[0, 11] = 50.0
+    states = flipping_states(24, every=2)
+
+    def run(rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        attack, objective, oracle = checked(victim, Picker(torch.nn.Sequential(half), candidates=8, switch=0.0), 0.5)
+        attack.reseed([7 + r for r in rows])
+        results = [attack.perturb(np.repeat(x, len(rows), axis=0), oracle, objective) for x in states]
+        return np.stack([r.x_adv for r in results]), np.stack([r.queries for r in results])
+
+    fed, queries = run([0, 1, 2])
+    for r in range(3):
+        alone_fed, alone_queries = run([r])
+        np.testing.assert_array_equal(fed[:, r], alone_fed[:, 0])
+        np.testing.assert_array_equal(queries[:, r], alone_queries[:, 0])
+    assert queries.max() > 1 and queries.min() == 0  # both sides of the rule ran
