@@ -232,12 +232,15 @@ def test_the_labelling_teacher_replans_from_a_lane_it_was_driven_into() -> None:
 
     def steering(replan: bool, shift: int) -> float:
         env = make_env(load_preset("continuous"))
-        env.reset(seed=3)
+        # seed 4: MOBIL refuses both lane changes outright (unsafe for the new follower). At seed 3, used before,
+        # the better one fell short of MOBIL's threshold by only 0.05 m/s^2; the test failed twice in about 40
+        # full-suite runs there, for a cause not found (the steering values below are +-1 and 0, far from theirs)
+        env.reset(seed=4)
         driver = IdmMobilDriver(env, "continuous", replan=replan)
         driver()  # the first call of an episode: the target is the lane it starts in
         ego = env.unwrapped.vehicle
-        # the premise (this test failed once, not reproduced since: if MOBIL chose the lane the ego is then
-        # put into, steering to it is 0): the first call kept the lane it starts in
+        # the premise (if MOBIL chose the lane the ego is then put into, steering to it is 0): the first call
+        # kept the lane it starts in
         assert driver._target_lane == ego.lane_index, (driver._target_lane, ego.lane_index, ego.position)
         network = ego.road.network
         _from, _to, index = ego.lane_index
