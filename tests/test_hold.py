@@ -253,6 +253,15 @@ def gate_picker(gain: float, candidates: int = 8) -> Picker:
     return Picker(torch.nn.Sequential(identity, _Product(gain)), candidates=candidates, switch=0.0)
 
 
+def half_picker() -> Picker:
+    """A picker that reads only vehicle 2's x: sure of every vertex while it is positive, of none while it is not."""
+    half = torch.nn.Linear(25, 1, bias=False)
+    with torch.no_grad():
+        half.weight.zero_()
+        half.weight[0, 11] = 50.0
+    return Picker(torch.nn.Sequential(half), candidates=8, switch=0.0)
+
+
 def checked(victim: Victim, picker: Picker, check_below: float):
     """Vertex check with an in-memory picker (a folder's picker is an MLP; these toys are exact) and `check_below`."""
     attack, objective, oracle = build(victim, "vertex-check")
@@ -294,11 +303,7 @@ def test_check_below_never_spends_more_than_one_query_per_step_on_average_even_w
     negative): whatever it says, every prefix of every episode (rows in lockstep, one restarted) spends at
     most one query per step so far, and the queries saved are spent where checks fail."""
     victim = flipping_gate_victim()
-    half = torch.nn.Linear(25, 1, bias=False)
-    with torch.no_grad():
-        half.weight.zero_()
-        half.weight[0, 11] = 50.0
-    attack, objective, oracle = checked(victim, Picker(torch.nn.Sequential(half), candidates=8, switch=0.0), 0.5)
+    attack, objective, oracle = checked(victim, half_picker(), 0.5)
     states = flipping_states(40, every=2)
     attack.reseed([1, 2, 3])
     spent, steps, most = np.zeros(3, dtype=int), np.zeros(3, dtype=int), 0
@@ -335,14 +340,10 @@ def test_check_below_in_lockstep_gives_what_one_row_runs_give() -> None:
     """Each row's bank, random stream and extra checks are its own: three rows attacked together get, step
     for step, what three one-row runs get."""
     victim = flipping_gate_victim()
-    half = torch.nn.Linear(25, 1, bias=False)
-    with torch.no_grad():
-        half.weight.zero_()
-        half.weight[0, 11] = 50.0
     states = flipping_states(24, every=2)
 
     def run(rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        attack, objective, oracle = checked(victim, Picker(torch.nn.Sequential(half), candidates=8, switch=0.0), 0.5)
+        attack, objective, oracle = checked(victim, half_picker(), 0.5)
         attack.reseed([7 + r for r in rows])
         results = [attack.perturb(np.repeat(x, len(rows), axis=0), oracle, objective) for x in states]
         return np.stack([r.x_adv for r in results]), np.stack([r.queries for r in results])

@@ -60,7 +60,6 @@ class VertexHold(Attack):
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
         self.picker: Picker | None = None
-        self._width = 0  # the victim's output width, once known (the outputs of a step that asked nothing)
         self.picker_goal: Any = None
         self.picker_frozen: list[str] | None = None
         self._checked: Objective | None = None  # the objective the picker was last checked against
@@ -75,7 +74,7 @@ class VertexHold(Attack):
         return 1
 
     def queries_per_step(self) -> int:
-        return 1
+        return self.queries_per_run()
 
     def first_iteration_cost(self) -> int:
         return 1
@@ -118,8 +117,9 @@ class VertexHold(Attack):
     def _begin(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Start a step: (clean observations as float32, each row's flat vertex to try (held, or fresh
-        where none is held or the picker's `switch` drops it), the rows that can pay a query, the rows
-        whose vertex is the held one), or None when no row can (nothing is held then)."""
+        where none is held or the picker's `switch` drops it), the rows that can pay a query, the picker's
+        rating of each row's vertex where it is the held one and `_rates_held`, else -inf), or None when no
+        row can (nothing is held then)."""
         self.check_objective(objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         dim = int(np.prod(shape))
@@ -136,18 +136,21 @@ class VertexHold(Attack):
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
         stale = np.isnan(held).any(axis=1)
         rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
-        if self.picker is not None and self.picker.switch > 0:
+        if self._rates_held():
             for r in np.flatnonzero(~stale & live):  # one call per row: lockstep = one-row runs
-                rating[r] = self.picker.scores(self.threat.project((flat0[r] + delta[r]).reshape(1, *shape),
-                                                                   x0[r:r + 1]))[0]
+                rating[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0]
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
         fresh = np.flatnonzero(stale & live)
         if fresh.size:
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
-            stale[fresh[~take]] = False
-        return x0, delta, live, ~stale
+            rating[fresh[take]] = -np.inf
+        return x0, delta, live, rating
+
+    def _rates_held(self) -> bool:
+        """Whether a step needs the picker's rating of the held vertex (for `switch`)."""
+        return self.picker is not None and self.picker.switch > 0
 
     def _project(self, x0: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """The observations fed for flat vertices `delta`, projected once into the threat model (the
@@ -159,19 +162,18 @@ class VertexHold(Attack):
         """One counted query per live row on `fed`: the outputs (NaN for a row not asked) and
         whether the victim took the target."""
         asked = np.flatnonzero(live)
-        out = np.full((len(fed), self._width), np.nan, dtype=np.float32)
         took = np.zeros(len(fed), dtype=bool)
-        if asked.size:
-            answered, took[asked] = self._query(fed[asked], asked, oracle, objective)
-            out = np.full((len(fed), answered.shape[1]), np.nan, dtype=np.float32)
-            out[asked] = answered
+        if not asked.size:  # vertex check skipped every check: no outputs, as on a step with nothing asked
+            return np.full((len(fed), 0), np.nan, dtype=np.float32), took
+        answered, took[asked] = self._query(fed[asked], asked, oracle, objective)
+        out = np.full((len(fed), answered.shape[1]), np.nan, dtype=np.float32)
+        out[asked] = answered
         return out, took
 
     def _query(self, fed: np.ndarray, rows: np.ndarray, oracle: QueryOracle, objective: Objective
                ) -> tuple[np.ndarray, np.ndarray]:
         """The victim's outputs on `fed`, one counted query charged to each of `rows`, and whether it took the target."""
         answered = np.asarray(oracle(fed, rows), dtype=np.float32)
-        self._width = answered.shape[1]
         out_t = torch.from_numpy(answered)
         return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
 
@@ -248,8 +250,8 @@ class VertexCheck(VertexHold):
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1 if self.check_below is None else 1 + self.picker.candidates
 
-    def queries_per_step(self) -> int:
-        return self.queries_per_run()
+    def _rates_held(self) -> bool:
+        return super()._rates_held() or self.check_below is not None
 
     def begin_episode(self) -> None:
         super().begin_episode()
@@ -269,16 +271,13 @@ class VertexCheck(VertexHold):
         step = self._begin(x0, oracle, objective)
         if step is None:
             return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live, kept = step
+        x0, delta, live, rating = step
         n, shape = len(x0), tuple(x0.shape[1:])
         flat0 = x0.reshape(n, -1)
         if self._bank is None or len(self._bank) != n:
             self._bank = np.zeros(n, dtype=np.int64)
         self._bank[live] += 1
-        ask = live.copy()
-        if self.check_below is not None:
-            for r in np.flatnonzero(kept & live):  # one call per row: lockstep = one-row runs
-                ask[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0] < self.check_below
+        ask = live if self.check_below is None else live & (rating < self.check_below)  # -inf: a fresh vertex
         out, took = self._ask(self._project(x0, delta), ask, oracle, objective)
         self._bank[ask] -= 1
         failed = np.flatnonzero(ask & ~took)
@@ -294,8 +293,6 @@ class VertexCheck(VertexHold):
                     answer, ok = self._query(self._project(x0[r:r + 1], delta[r:r + 1]), np.array([r]), oracle,
                                              objective)
                     self._bank[r] -= 1
-                    if out.shape[1] != answer.shape[1]:  # nothing was asked before in this step
-                        out = np.full((n, answer.shape[1]), np.nan, dtype=np.float32)
                     if ok[0]:
                         out[r], took[r] = answer[0], True
                         break

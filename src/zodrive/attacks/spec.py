@@ -119,8 +119,8 @@ class AttackSpec:
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
                            restarts=self.restarts, timing=self.timing, max_change=self.max_change,
-                           seed=self.seed, **({} if self.adversary is None else {"adversary": self.adversary}),
-                           **({} if self.check_below is None else {"check_below": self.check_below}))
+                           seed=self.seed, **{k: v for k, v in (("adversary", self.adversary),
+                                                                 ("check_below", self.check_below)) if v is not None})
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""

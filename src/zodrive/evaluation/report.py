@@ -36,15 +36,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         if summary["attack_success_rate"] is None:  # a learned adversary: no per-step goal
             lines.append(f"attack success: n/a (the adversary lowers the return over the episode, no per-step "
                          f"target); {summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}")
-        elif summary["attack"] == "vertex-check":  # asked before feeding; a vertex fed unasked has no known outcome
-            lines.append(f"attack success: a check confirmed the target on {summary['attack_success_rate']:.1%} of "
-                         f"steps (a vertex fed unasked is not counted: see action_share; the clean observation is not "
-                         f"queried: no base rate); {summary['queries_per_step']:.2f} queries/step; max Linf "
-                         f"{summary['max_linf']:.4f}")
         elif summary.get("target_base_rate", 0.0) is None:  # the clean observation was never queried
-            lines.append(f"attack success: the target taken on {summary['attack_success_rate']:.1%} of steps (the "
-                         f"clean observation is not queried: no base rate); {summary['queries_per_step']:.1f} "
-                         f"queries/step; max Linf {summary['max_linf']:.4f}")
+            rate, checked = f"{summary['attack_success_rate']:.1%}", summary["attack"] == "vertex-check"
+            what = (f"a check confirmed the target on {rate} of steps (a vertex fed unasked is not counted: see "
+                    "action_share; " if checked else f"the target taken on {rate} of steps (")
+            lines.append(f"attack success: {what}the clean observation is not queried: no base rate); "
+                         f"{summary['queries_per_step']:.{2 if checked else 1}f} queries/step; max Linf "
+                         f"{summary['max_linf']:.4f}")
         else:
             lines.append(
                 f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import FASTER, arguments, on_vertices, vertex_check
+from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
 
 
 def main() -> None:
-    p = arguments(20)
-    p.add_argument("picker")
+    p = arguments(20, "picker")
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     picker, shape = attack.picker, env.observation_space.shape
@@ -26,27 +25,19 @@ def main() -> None:
     fed = on_vertices(threat, shape)
     held_rows, topk, ks = [], [], (1, 2, 3, 4, 8)
 
-    for e in range(a.episodes):
-        obs, _ = env.reset(seed=900000 + e)
-        attack.reseed(900000 + e)
-        oracle.begin_episode()
-        attack.begin_episode()
-        done = False
-        while not done:
-            x = np.asarray(obs, np.float32)[None]
-            held = attack._carry
-            if held is not None and not np.isnan(held).any():
-                point = fed(x, held)
-                works = victim.query(point).argmax(axis=1)[0] == FASTER
-                held_rows.append((float(picker.scores(point)[0]), bool(works)))
-                if not works:
-                    pool = fed(x, eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(64, dim)) * mask)
-                    best = np.argsort(-picker.scores(pool), kind="stable")[:max(ks)]
-                    hit = victim.query(pool[best]).argmax(axis=1) == FASTER
-                    topk.append([bool(hit[:k].any()) for k in ks])
-            result = attack.perturb(x, oracle, objective)
-            obs, _, terminated, truncated, _ = env.step(int(victim.query(result.x_adv)[0].argmax()))
-            done = terminated or truncated
+    def at_state(x: np.ndarray, held: np.ndarray | None) -> None:
+        if held is None or np.isnan(held).any():
+            return
+        point = fed(x, held)
+        works = victim.query(point).argmax(axis=1)[0] == FASTER
+        held_rows.append((float(picker.scores(point)[0]), bool(works)))
+        if not works:
+            pool = fed(x, eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(64, dim)) * mask)
+            best = np.argsort(-picker.scores(pool), kind="stable")[:max(ks)]
+            hit = victim.query(pool[best]).argmax(axis=1) == FASTER
+            topk.append([bool(hit[:k].any()) for k in ks])
+
+    drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, at_state)
     rated, worked = np.array(held_rows).T
     print(f"  {len(rated)} steps with a held vertex; it failed on {(1 - worked.mean()) * 100:.2f} %")
     for q in (0.5, 0.8, 0.9):

@@ -17,8 +17,7 @@ from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordin
 
 
 def main() -> None:
-    p = arguments()
-    p.add_argument("adversary")
+    p = arguments(folder="adversary")
     p.add_argument("--m", type=int, nargs="+", default=[1, 3])
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)

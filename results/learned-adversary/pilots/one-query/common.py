@@ -22,11 +22,14 @@ holds "missed" (the victim did not take the target at the last step), "action" (
 and whatever the chooser keeps."""
 
 
-def arguments(episodes: int = 30) -> argparse.ArgumentParser:
-    """The arguments every probe here takes: the victim MODEL, its L-inf EPS and --episodes; a probe adds its own."""
+def arguments(episodes: int = 30, folder: str | None = None) -> argparse.ArgumentParser:
+    """The arguments every probe here takes: the victim MODEL, its L-inf EPS, the trained `folder` it reads
+    if any (e.g. "picker", "adversary") and --episodes; a probe adds its own."""
     p = argparse.ArgumentParser()
     p.add_argument("model")
     p.add_argument("eps", type=float)
+    if folder is not None:
+        p.add_argument(folder)
     p.add_argument("--episodes", type=int, default=episodes)
     return p
 
@@ -62,6 +65,32 @@ def on_vertices(threat: ThreatModel, shape: tuple[int, ...]) -> Callable[[np.nda
         base = np.repeat(x.reshape(1, dim), len(deltas), axis=0)
         return threat.project((base + deltas).reshape(-1, *shape), base.reshape(-1, *shape))
     return fed
+
+
+def drive_attack(env: Any, victim: Victim, attack: Any, objective: Any, oracle: Any, seed0: int, episodes: int,
+                 at_state: Callable[[np.ndarray, np.ndarray | None], None],
+                 after: Callable[[Any], None] = lambda result: None) -> list[float]:
+    """`episodes` episodes from seed `seed0` with a product attack feeding the victim (its own counted queries
+    and random streams). `at_state(x, held)` sees each clean observation (1, *obs) and the vertex the attack
+    holds (None at an episode's start) before the attack acts, `after(result)` each step's AttackResult.
+    Returns the episodes' returns."""
+    returns = []
+    for e in range(episodes):
+        obs, _ = env.reset(seed=seed0 + e)
+        attack.reseed(seed0 + e)
+        oracle.begin_episode()
+        attack.begin_episode()
+        total, done = 0.0, False
+        while not done:
+            x = np.asarray(obs, np.float32)[None]
+            at_state(x, attack._carry)
+            result = attack.perturb(x, oracle, objective)
+            after(result)
+            obs, reward, terminated, truncated, _ = env.step(int(victim.query(result.x_adv)[0].argmax()))
+            total += reward
+            done = terminated or truncated
+        returns.append(total)
+    return returns
 
 
 def drive(env: Any, victim: Victim, seed0: int, episodes: int, choose: Chooser, *,

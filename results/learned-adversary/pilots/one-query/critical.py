@@ -20,8 +20,7 @@ SLOWER = 4
 
 
 def main() -> None:
-    p = arguments(20)
-    p.add_argument("adversary")
+    p = arguments(20, "adversary")
     p.add_argument("--seed0", type=int, default=900000)
     a = p.parse_args()
     preset, victim, env, threat = setup(a.model, a.eps)

@@ -15,24 +15,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from common import FASTER, arguments, on_vertices, vertex_check
+from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
 from zodrive.attacks.picker import network
-
-
-def drive(env, victim, attack, objective, oracle, seed: int, episodes: int, at_state) -> None:
-    """`episodes` episodes from `seed` under the attack; `at_state(x, held)` is called at every state first."""
-    for e in range(episodes):
-        obs, _ = env.reset(seed=seed + e)
-        attack.reseed(seed + e)
-        oracle.begin_episode()
-        attack.begin_episode()
-        done = False
-        while not done:
-            x = np.asarray(obs, np.float32)[None]
-            at_state(x, attack._carry)
-            result = attack.perturb(x, oracle, objective)
-            obs, _, terminated, truncated, _ = env.step(int(victim.query(result.x_adv)[0].argmax()))
-            done = terminated or truncated
 
 
 def fit(x: torch.Tensor, y: torch.Tensor, loss: str, epochs: int, seed: int) -> torch.nn.Module:
@@ -51,8 +35,7 @@ def fit(x: torch.Tensor, y: torch.Tensor, loss: str, epochs: int, seed: int) -> 
 
 
 def main() -> None:
-    p = arguments(30)
-    p.add_argument("picker")
+    p = arguments(30, "picker")
     p.add_argument("--episodes-fit", type=int, default=15)
     p.add_argument("--probes", type=int, default=256)
     p.add_argument("--epochs", type=int, default=10)
@@ -72,7 +55,7 @@ def main() -> None:
         xs.append(points.reshape(len(points), -1))
         margins.append(q[:, FASTER] - others)
 
-    drive(env, victim, attack, objective, oracle, 900100, a.episodes_fit, collect)
+    drive_attack(env, victim, attack, objective, oracle, 900100, a.episodes_fit, collect)
     x = torch.from_numpy(np.concatenate(xs))
     m = np.concatenate(margins)
     scale = float(np.std(m))
@@ -98,7 +81,7 @@ def main() -> None:
             for name, net in nets.items():
                 hits[name] += bool(works[int(net(flat).squeeze(1).argmax())])
 
-    drive(env, victim, attack, objective, oracle, 900000, a.episodes, judge)
+    drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, judge)
     print(f"  tuning seeds 900000-{900000 + a.episodes - 1}: the held vertex failed its check on {failed} steps; "
           "there the best-rated of 64 random vertices worked:")
     for name, n in hits.items():

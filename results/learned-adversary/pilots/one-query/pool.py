@@ -19,8 +19,7 @@ from zodrive.attacks.picker import Picker
 
 
 def main() -> None:
-    p = arguments(10)
-    p.add_argument("picker")
+    p = arguments(10, "picker")
     p.add_argument("--k", type=int, default=64)
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)

@@ -21,8 +21,7 @@ SLOWER = 4
 
 
 def main() -> None:
-    p = arguments()
-    p.add_argument("adversary")
+    p = arguments(folder="adversary")
     p.add_argument("--trigger", choices=("miss", "brake"), default="brake")
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)

@@ -21,8 +21,7 @@ from zodrive.attacks.picker import Picker
 
 
 def main() -> None:
-    p = arguments(30)
-    p.add_argument("picker")
+    p = arguments(30, "picker")
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)
     picker, _ = Picker.load(a.picker)

@@ -23,8 +23,7 @@ SLOWER = 4
 
 
 def main() -> None:
-    p = arguments()
-    p.add_argument("adversary")
+    p = arguments(folder="adversary")
     p.add_argument("--m", type=int, nargs="+", default=[1, 3, 10])
     p.add_argument("--trigger", choices=("miss", "brake"), default="miss")
     p.add_argument("--seed0", type=int, default=900000)

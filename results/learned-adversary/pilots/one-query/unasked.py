@@ -19,12 +19,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from common import FASTER, arguments, on_vertices, vertex_check
+from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
 
 
 def main() -> None:
-    p = arguments(30)
-    p.add_argument("picker")
+    p = arguments(30, "picker")
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     picker, shape = attack.picker, env.observation_space.shape
@@ -33,7 +32,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     names = ("picker-64", "picker-1024", "recent", "recent-best", "near-h", "gradient", "any-1024")
     hits = {n: 0 for n in names}
-    failed, steps, returns = 0, 0, []
+    failed, steps, winners = 0, 0, []
     fed = on_vertices(threat, shape)
 
     def works(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
@@ -42,41 +41,34 @@ def main() -> None:
     def best(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
         return deltas[int(picker.scores(fed(x, deltas)).argmax())]
 
-    for e in range(a.episodes):
-        obs, _ = env.reset(seed=900000 + e)
-        attack.reseed(900000 + e)
-        oracle.begin_episode()
-        attack._carry, winners, total, done = None, [], 0.0, False
-        while not done:
-            x = np.asarray(obs, np.float32)[None]
-            held = attack._carry
-            if held is not None and not np.isnan(held).any() and not works(x, held)[0]:
-                failed += 1
-                h = held[0]
-                pool = eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(1024, dim)) * mask
-                ok = works(x, pool)
-                hits["picker-64"] += bool(works(x, best(x, pool[:64])[None])[0])
-                hits["picker-1024"] += bool(ok[int(picker.scores(fed(x, pool)).argmax())])
-                older = [w for w in winners if not np.array_equal(w, h)]
-                hits["recent"] += bool(older) and bool(works(x, older[-1][None])[0])
-                hits["recent-best"] += bool(older) and bool(works(x, best(x, np.stack(older[-8:]))[None])[0])
-                flips = rng.random((64, dim)) < 0.1
-                hits["near-h"] += bool(works(x, best(x, np.where(flips, -h, h) * mask)[None])[0])
-                point = torch.from_numpy(fed(x, h[None]).reshape(1, -1)).requires_grad_(True)
-                picker.net(point).sum().backward()
-                hits["gradient"] += bool(works(x, (eps * np.sign(point.grad.numpy()[0]) * mask)[None])[0])
-                hits["any-1024"] += bool(ok.any())
-            result = attack.perturb(x, oracle, objective)
-            if result.success[0]:
-                delta = (attack._carry[0]).copy()
-                if not winners or not np.array_equal(winners[-1], delta):
-                    winners.append(delta)
-            act = int(victim.query(result.x_adv)[0].argmax())
-            steps += 1
-            obs, reward, terminated, truncated, _ = env.step(act)
-            total += reward
-            done = terminated or truncated
-        returns.append(total)
+    def at_state(x: np.ndarray, held: np.ndarray | None) -> None:
+        nonlocal failed, steps
+        steps += 1
+        if held is None:  # an episode begins
+            winners.clear()
+        if held is None or np.isnan(held).any() or works(x, held)[0]:
+            return
+        failed += 1
+        h = held[0]
+        pool = eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(1024, dim)) * mask
+        ok = works(x, pool)
+        hits["picker-64"] += bool(works(x, best(x, pool[:64])[None])[0])
+        hits["picker-1024"] += bool(ok[int(picker.scores(fed(x, pool)).argmax())])
+        older = [w for w in winners if not np.array_equal(w, h)]
+        hits["recent"] += bool(older) and bool(works(x, older[-1][None])[0])
+        hits["recent-best"] += bool(older) and bool(works(x, best(x, np.stack(older[-8:]))[None])[0])
+        flips = rng.random((64, dim)) < 0.1
+        hits["near-h"] += bool(works(x, best(x, np.where(flips, -h, h) * mask)[None])[0])
+        point = torch.from_numpy(fed(x, h[None]).reshape(1, -1)).requires_grad_(True)
+        picker.net(point).sum().backward()
+        hits["gradient"] += bool(works(x, (eps * np.sign(point.grad.numpy()[0]) * mask)[None])[0])
+        hits["any-1024"] += bool(ok.any())
+
+    def after(result) -> None:  # a vertex the check confirmed joins the episode's winners
+        if result.success[0] and (not winners or not np.array_equal(winners[-1], attack._carry[0])):
+            winners.append(attack._carry[0].copy())
+
+    returns = drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, at_state, after)
     print(f"  vertex check: return {np.mean(returns):.2f} over {a.episodes} episodes, {steps} steps; the held vertex "
           f"failed its check on {failed} ({failed / steps * 100:.1f} %)")
     for n in names:
