@@ -54,6 +54,20 @@ PAIRS = [  # (learned cell, per-step cell)
     *[(C / "ppo-dqn-robust-eps0.05-std0.2-w10k-1m-100", other) for other in (
         C / "dqn-robust-amortized-eps0.05-100", R / "dqn-robust-random-search-eps0.05",
         C / "dqn-robust-random-search-fallback-eps0.05-100")],
+    # white-box PGD (patience 10) on dqn-robust at eps 0.05, the literature's per-step baseline, against the fitted
+    # start's training seeds without and with the fallback
+    *[(C / f"dqn-robust-amortized{f}-eps0.05{t}-100", C / "dqn-robust-pgd-eps0.05-100")
+      for f in ("", "-fallback") for t in SEEDS],
+    # PPO from the fitted start against white-box PGD on the continuous victims (PGD's cells have 30 episodes:
+    # the first 30 seeds are paired)
+    *[(C / f"ppo-ddpg-driver-eps0.2{t}-100", Path("results/attacks-drivers/cells/ddpg-driver-pgd-eps0.2")) for t in SEEDS],
+    *[(C / f"ppo-ddpg-driver-eps0.05{t}-100", C / "ddpg-driver-pgd-eps0.05") for t in SEEDS],
+    (C / "ppo-ddpg-robust-eps0.05-100", C / "ddpg-robust-pgd-eps0.05"),
+    (C / "ppo-td3-finetuned-eps0.2-100", Path("results/attacks-td3-finetuned/cells/td3-finetuned-pgd-eps0.2")),
+    # for the summary table: the fitted start's training seeds 1 and 2 on the DQN driver at eps 0.05 against PGD, and
+    # with the fallback on dqn-robust at eps 0.02 against plain PGD
+    *[(C / f"dqn-driver-amortized-eps0.05{t}-100", C / "dqn-driver-pgd-eps0.05-100") for t in SEEDS[1:]],
+    *[(C / f"dqn-robust-amortized-fallback-eps0.02{t}-100", R / "dqn-robust-pgd-eps0.02") for t in SEEDS],
 ]
 
 

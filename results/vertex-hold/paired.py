@@ -67,6 +67,13 @@ PAIRS = [  # (vertex-hold cell, other cell)
     ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.02", C / "dqn-robust-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.05", C / "dqn-robust-random-search-fallback-eps0.05-100"),
+    # vertex check on dqn-close at eps 0.02 against white-box PGD (patience 10), the literature's per-step baseline
+    *[(Path(f"../picker/cells/check-{name}-seed{s}"), K / "pgd-eps0.02")
+      for name in ("dqn-close-eps0.02", "dqn-close-rank-eps0.02") for s in (0, 1, 2)],
+    # against white-box PGD where random search was the strongest per-step attack (the summary table of
+    # results/learned-adversary/README.md)
+    ("dqn-driver-eps0.2", C / "dqn-driver-pgd-eps0.2-100"),
+    *[(f"dqn-close-eps0.05{t}", K / "pgd-eps0.05") for t in ("", "-seed1", "-seed2")],
     # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
     ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
     ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),
