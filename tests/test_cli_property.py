@@ -74,9 +74,7 @@ COMMANDS = {
     "env": ({}, False),
     "picker-train": ({"--eps": EPS, "--out": ["{tmp}/pk", "/proc/pk"], "--seed": ["0", "4", "5", "x"],
                       "--target": ATTACK["--target"], "--rounds": NUMBERS, "--switch": ["0.3", "1", "x"],
-                      "--candidates": NUMBERS, "--loss": ["bce", "rank", "x"], "--preset": COMMON["--preset"], "--force": [None],
-                      "--refine": [str(ROOT / "results" / "vertex-hold" / "picker" / "dqn-close-eps0.02-seed0"), "{tmp}/nope"],
-                      "--episodes": NUMBERS, "--probes": NUMBERS, "--epochs": NUMBERS}, True),
+                      "--candidates": NUMBERS, "--loss": ["bce", "rank", "x"], "--preset": COMMON["--preset"], "--force": [None]}, True),
     "certify": ({"--eps": EPS, "--episodes": ["1", "0", "x"], "--preset": COMMON["--preset"], "--tol": EPS,
                  "--out": ["{tmp}/ce", "/proc/ce"], "--force": [None]}, True),
 }
@@ -119,7 +117,7 @@ def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) 
     from zodrive.cli import main
 
     for module, name in ((training, "train"), (adversary, "attack_train"), (adversarial, "adversarial_train"), (robust, "robust_train"),
-                         (picker, "picker_train"), (picker, "picker_refine"),
+                         (picker, "picker_train"),
                          (compare, "compare"), (reproduce, "reproduce"), (select, "select_checkpoint")):
         monkeypatch.setattr(module, name, _stub)
     with tempfile.TemporaryDirectory() as tmp:

@@ -15,7 +15,7 @@ import torch
 
 from toys import context, linear_victim, observations
 from zodrive.attacks import AttackSpec
-from zodrive.attacks.picker import FALLBACK_FILE, FORMAT, META_FILE, WEIGHTS_FILE, network
+from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, network
 from zodrive.attacks.spec import load_attack
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
@@ -24,21 +24,22 @@ EPS = 0.1
 GATE = 1 * 5 + 1  # flattened index of vehicle 1's x
 
 
-def gate_victim(always: bool = False, below: bool = False) -> Victim:
-    """Takes FASTER (3) where vehicle 1's x is above 0 (below 0 with `below`; or always), else IDLE (1)."""
+def gate_victim(always: bool = False) -> Victim:
+    """Takes FASTER (3) where vehicle 1's x is above 0 (or always), else IDLE (1)."""
 
     def query(x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float32)
         out = np.zeros((len(x), 5), dtype=np.float32)
         out[:, 1] = 0.5
-        out[:, 3] = 1.0 if always else np.where((x[:, 1, 1] < 0) if below else (x[:, 1, 1] > 0), 1.0, 0.0)
+        out[:, 3] = 1.0 if always else np.where(x[:, 1, 1] > 0, 1.0, 0.0)
         return out
 
     return Victim(query=query, kind="discrete", obs_shape=(5, 5))
 
 
-def gate_net(slope: float) -> torch.nn.Module:
-    """A picker network that rates an observation by vehicle 1's x: logit = slope * x."""
+def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps: float = EPS, target: int | str = 3,
+                weights: bytes | None = None, **fields) -> Path:
+    """A picker folder whose network rates an observation by vehicle 1's x: logit = 50 x."""
     net = network(25, 2)
     with torch.no_grad():
         for layer in net:
@@ -47,26 +48,15 @@ def gate_net(slope: float) -> torch.nn.Module:
                 layer.bias.zero_()
         net[0].weight[0, GATE], net[0].weight[1, GATE] = 1.0, -1.0  # relu(x), relu(-x)
         net[2].weight[0, 0], net[2].weight[1, 1] = 1.0, 1.0
-        net[4].weight[0, 0], net[4].weight[0, 1] = slope, -slope
-    return net
-
-
-def gate_picker(folder: Path, *, candidates: int = 16, switch: float = 0.0, eps: float = EPS, target: int | str = 3,
-                weights: bytes | None = None, fallback: float | bytes | None = None, **fields) -> Path:
-    """A picker folder whose network rates an observation by vehicle 1's x: logit = 50 x; `fallback`, the
-    slope of a refined picker's fallback network (or its file's bytes)."""
+        net[4].weight[0, 0], net[4].weight[0, 1] = 50.0, -50.0
     folder.mkdir(parents=True, exist_ok=True)
     if weights is None:
-        torch.save(gate_net(50.0).state_dict(), folder / WEIGHTS_FILE)
+        torch.save(net.state_dict(), folder / WEIGHTS_FILE)
     else:
         (folder / WEIGHTS_FILE).write_bytes(weights)
-    if isinstance(fallback, bytes):
-        (folder / FALLBACK_FILE).write_bytes(fallback)
-    elif fallback is not None:
-        torch.save(gate_net(fallback).state_dict(), folder / FALLBACK_FILE)
     meta = {"format": FORMAT, "victim": "toy", "victim_sha256": "0" * 64, "preset": {"name": "toy"}, "eps": eps,
             "norm": "linf", "frozen": ["presence"], "target": target, "tol": None, "obs_shape": [5, 5], "width": 2,
-            "candidates": candidates, "switch": switch, **({} if fallback is None else {"fallback": True}), **fields}
+            "candidates": candidates, "switch": switch, **fields}
     (folder / META_FILE).write_text(json.dumps(meta))
     return folder
 
@@ -179,47 +169,10 @@ class _Payload:
 
 def test_a_crafted_weights_file_is_refused_without_running_it(tmp_path: Path) -> None:
     marker = tmp_path / "pwned"
-    for folder in (gate_picker(tmp_path / "crafted", weights=pickle.dumps(_Payload(str(marker)))),
-                   gate_picker(tmp_path / "crafted-fallback", fallback=pickle.dumps(_Payload(str(marker))))):
-        with pytest.raises(ZodriveError, match="is not a picker's weights"):
-            AttackSpec(attack="vertex-check", eps=EPS, adversary=str(folder)).build(gate_victim(), **context("discrete"))
+    folder = gate_picker(tmp_path / "crafted", weights=pickle.dumps(_Payload(str(marker))))
+    with pytest.raises(ZodriveError, match="is not a picker's weights"):
+        build(gate_victim(), folder)
     assert not marker.exists()
-
-
-def test_a_refined_picker_ranks_the_vertex_fed_after_a_failed_check_with_its_fallback(tmp_path: Path) -> None:
-    """The victim takes FASTER only where vehicle 1's x is below 0, and the picker rates vertices by x above 0:
-    vertex check with it alone never gets FASTER (each check fails, and its next pick fails too). A fallback that
-    rates by x below 0 picks, after the first failed check, a vertex the next check confirms and holds; the
-    first pick, with nothing failed yet, is still the picker's. One counted query per step either way."""
-    x0 = observations(1, seed=3)
-    x0[0, 1, 1] = 0.0  # on the gate: half the vertices open it
-    confirmed = {}
-    for name, fallback in (("plain", None), ("refined", -50.0)):
-        folder = gate_picker(tmp_path / name, fallback=fallback)
-        attack, objective, oracle = AttackSpec(attack="vertex-check", eps=EPS, adversary=str(folder)).build(
-            gate_victim(below=True), **context("discrete"))
-        attack.reseed(0)
-        steps = [attack.perturb(x0, oracle, objective) for _ in range(6)]
-        assert all(int(r.queries[0]) == 1 for r in steps) and oracle.total_queries == 6
-        confirmed[name] = ([bool(r.success[0]) for r in steps], [float(np.sign(r.x_adv[0, 1, 1])) for r in steps])
-    # the first check fails on the picker's own pick (x up) in both; what is fed then is the fallback's (x down)
-    assert confirmed == {"plain": ([False] * 6, [1.0] * 6), "refined": ([False] + [True] * 5, [-1.0] * 6)}
-
-
-def test_vertex_hold_refuses_a_refined_picker_and_the_key_covers_the_fallback(tmp_path: Path) -> None:
-    from zodrive.attacks.picker import digest
-
-    refined = gate_picker(tmp_path / "refined", fallback=-50.0)
-    with pytest.raises(ZodriveError, match="was refined for vertex check .* use vertex-check:"):
-        build(gate_victim(), refined)
-    assert digest(refined) != digest(gate_picker(tmp_path / "other", fallback=-20.0))  # the same description
-    (refined / FALLBACK_FILE).unlink()
-    with pytest.raises(ZodriveError, match="is not a picker \\(no fallback.pt"):
-        AttackSpec(attack="vertex-check", eps=EPS, adversary=str(refined)).build(gate_victim(), **context("discrete"))
-    bad = gate_picker(tmp_path / "bad", fallback=-50.0)
-    (bad / META_FILE).write_text((bad / META_FILE).read_text().replace('"fallback": true', '"fallback": "yes"'))
-    with pytest.raises(ZodriveError, match="wrong type or out of range"):
-        AttackSpec(attack="vertex-check", eps=EPS, adversary=str(bad)).build(gate_victim(), **context("discrete"))
 
 
 def test_picker_train_writes_a_folder_vertex_hold_reads_and_never_overwrites_it(tmp_path: Path, capsys) -> None:
@@ -261,49 +214,6 @@ def test_picker_train_writes_a_folder_vertex_hold_reads_and_never_overwrites_it(
     capsys.readouterr()
     assert main([*fit[:5], str(tmp_path / "listwise"), *fit[6:], "--loss", "listwise"]) == 2
     assert "invalid choice: 'listwise'" in capsys.readouterr().err and not (tmp_path / "listwise").exists()
-
-
-def test_picker_train_refine_writes_a_fallback_vertex_check_reads_and_vertex_hold_refuses(tmp_path: Path, capsys) -> None:
-    """A tiny fit, then a refining round (5-step episodes): every victim query is counted (one check per step, the
-    probes at each state where a check failed), the picker's own weights are kept and the fallback is new, and
-    what the refined picker fixed cannot be set again."""
-    from zodrive.cli import main
-
-    root = Path(__file__).resolve().parents[1]
-    model, base, refined = str(root / "models" / "dqn-close"), tmp_path / "base", tmp_path / "refined"
-    short = ["--env-set", "max_episode_steps=5"]
-    assert main(["picker-train", model, "--eps", "0.02", "--out", str(base), "--rounds", "2", "--episodes", "1",
-                 "--probes", "4", "--epochs", "1", "--width", "8", *short]) == 0
-    fitted = json.loads((base / "train.json").read_text())
-    del fitted["target"], fitted["fit"]["loss"]  # as a picker fitted before --target and --loss existed records it
-    (base / "train.json").write_text(json.dumps(fitted))
-    refine = ["picker-train", model, "--eps", "0.02", "--out", str(refined), "--refine", str(base), "--episodes", "6",
-              "--probes", "8", *short]
-    assert main(refine) == 0
-    printed = capsys.readouterr().out
-    assert "refining round: 6 episodes, 30 steps under vertex check" in printed
-    assert f"--attack vertex-check:{refined} --eps 0.02 --env-set max_episode_steps=5" in printed
-    r = json.loads((refined / "train.json").read_text())["refine"]
-    assert r["states"] > 0 and r["victim_queries"] == r["steps"] + r["states"] * 8
-    assert json.loads((refined / META_FILE).read_text())["fallback"] is True
-    assert (refined / WEIGHTS_FILE).read_bytes() == (base / WEIGHTS_FILE).read_bytes()
-    assert (refined / FALLBACK_FILE).read_bytes() != (base / WEIGHTS_FILE).read_bytes()
-    assert "refined for vertex check from" in (refined / "CARD.md").read_text()
-    assert main(["evaluate", model, "--attack", f"vertex-check:{refined}", "--eps", "0.02", "--episodes", "1",
-                 "--out", str(tmp_path / "eval"), "--no-progress", *short]) == 0
-    capsys.readouterr()
-    for argv, message in (
-            (["evaluate", model, "--attack", f"vertex-hold:{refined}", "--eps", "0.02", "--episodes", "1", *short],
-             "was refined for vertex check"),
-            (refine, "already holds a run"),
-            ([*refine[:5], str(tmp_path / "x"), *refine[6:], "--seed", "1", "--width", "4"],
-             "--seed, --width cannot be set with --refine"),
-            ([*refine[:5], str(tmp_path / "x"), "--refine", str(refined), *short], "is already refined"),
-            ([*refine[:3], "0.05", *refine[4:5], str(tmp_path / "x"), *refine[6:]], "fitted for eps 0.02, not 0.05")):
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert message in err and len(err.strip().splitlines()) == 1, (argv, err)
-    assert not (tmp_path / "x").exists()
 
 
 def test_a_fit_with_an_unknown_loss_is_a_one_line_error() -> None:

@@ -74,10 +74,6 @@ PAIRS = [  # (vertex-hold cell, other cell)
     # results/learned-adversary/README.md)
     ("dqn-driver-eps0.2", C / "dqn-driver-pgd-eps0.2-100"),
     *[(f"dqn-close-eps0.05{t}", K / "pgd-eps0.05") for t in ("", "-seed1", "-seed2")],
-    # vertex check with the pickers refined for it (refine.sh): against random search and against the same
-    # picker unrefined
-    *[(Path(f"../picker/cells/check-dqn-close-eps0.02-seed{s}-refined"), other) for s in (0, 1, 2)
-      for other in (K / "random-search-eps0.02", H / f"../picker/cells/check-dqn-close-eps0.02-seed{s}")],
     # behind the shield: against its strongest attack so far and the constant brake (its first 100 seeds)
     ("dqn-driver+shield@0.02-eps0.02", S / "dqn-driver+shield@0.02-pgd-eps0.02"),
     ("dqn-driver+shield@0.02-eps0.02", S / "baseline-slower-300"),

@@ -367,19 +367,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     pick = sub.add_parser("picker-train", help="fit a picker for vertex hold from counted victim queries: which "
                                                 "random vertex to feed; use it with --attack vertex-hold:DIR or vertex-check:DIR")
-    from zodrive.agents.picker import LOSSES, PickerFit, PickerRefine  # torch-free
+    from zodrive.agents.picker import LOSSES, PickerFit  # torch-free
 
     pick.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
     pick.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
     pick.add_argument("--out", type=Path, required=True, help="the picker's folder")
-    pick.add_argument("--seed", type=_seed, help="fit seed: training episodes 10000*seed + 1000*round + i [0]")
-    pick.add_argument("--target", help="what the picker rates vertices for, as evaluate's --target: "
-                                       "auto (FASTER / '1,0.5'), an action name or index, or not:ACTION [auto]")
-    pick.add_argument("--refine", type=Path, metavar="DIR",
-                      help="refine the picker in DIR for vertex check instead of fitting one: drive --episodes "
-                           f"[{PickerRefine.episodes}] under vertex-check:DIR, query --probes [{PickerRefine.probes}] "
-                           "vertices where a check failed, fit a copy of its network on them (--epochs "
-                           f"[{PickerRefine.epochs}]); vertex check ranks the vertex it feeds after a failed check with it")
+    pick.add_argument("--seed", type=_seed, default=0, help="fit seed: training episodes 10000*seed + 1000*round + i")
+    pick.add_argument("--target", default="auto", help="what the picker rates vertices for, as evaluate's --target: "
+                                                       "auto (FASTER / '1,0.5'), an action name or index, or not:ACTION")
     for flag, kind, what in (("rounds", _positive_int, "rounds of driving under vertex hold, querying, refitting"),
                              ("episodes", _positive_int, "training episodes driven per round"),
                              ("probes", _positive_int, "random vertices queried at every state met"),
@@ -739,44 +734,15 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
 
     from zodrive.agents.picker import PickerFit, picker_train
 
-    if args.refine is not None:
-        return _picker_refine(args)
     given = {f.name: getattr(args, f.name) for f in fields(PickerFit) if getattr(args, f.name) is not None}
-    args.target = "auto" if args.target is None else args.target
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
-                        seed=0 if args.seed is None else args.seed, target=args.target, force=args.force,
-                        report=lambda line: print(line, flush=True))
+                        seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
+    scenario = "".join([f" --preset {args.preset}" if args.preset else "",
+                        *(f" --env-set {item}" for item in args.env_set),
+                        f" --env-id {args.env_id}" if args.env_id else "",
+                        f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
     target = "" if args.target == "auto" else f" --target {args.target}"
-    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{target}{_scenario_of(args)})")
-    return 0
-
-
-def _scenario_of(args: argparse.Namespace) -> str:
-    """The scenario flags of a fit, as an evaluation of what it wrote must repeat them."""
-    return "".join([f" --preset {args.preset}" if args.preset else "", *(f" --env-set {item}" for item in args.env_set),
-                    f" --env-id {args.env_id}" if args.env_id else "",
-                    f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
-
-
-def _picker_refine(args: argparse.Namespace) -> int:
-    """`picker-train --refine DIR`: the refining round only; what the picker in DIR fixed is an error here."""
-    from dataclasses import fields, replace
-
-    from zodrive.agents.picker import PickerRefine, picker_refine
-    from zodrive.attacks.picker import read_meta
-
-    fixed = [f"--{name}" for name in ("seed", "target", "rounds", "width", "candidates", "switch", "loss")
-             if getattr(args, name) is not None]
-    if fixed:
-        raise ZodriveError(f"{', '.join(fixed)} cannot be set with --refine: the picker in {args.refine} fixed "
-                           f"{'it' if len(fixed) == 1 else 'them'} (refining keeps its fit seed, target and network)")
-    meta = read_meta(args.refine)
-    if float(meta["eps"]) != args.eps:
-        raise ZodriveError(f"picker {args.refine} was fitted for eps {meta['eps']:g}, not {args.eps:g}")
-    given = {f.name: getattr(args, f.name) for f in fields(PickerRefine) if getattr(args, f.name) is not None}
-    path = picker_refine(str(args.model), _preset_of(args), args.refine, args.out, replace(PickerRefine(), **given),
-                         force=args.force, report=lambda line: print(line, flush=True))
-    print(f"saved {path} (use: --attack vertex-check:{path} --eps {args.eps:g}{_scenario_of(args)})")
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{target}{scenario})")
     return 0
 
 

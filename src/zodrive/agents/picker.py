@@ -14,7 +14,6 @@ evaluation seeds.
 
 from __future__ import annotations
 
-import copy
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -215,171 +214,6 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     return out
 
 
-@dataclass(frozen=True)
-class PickerRefine:
-    """How a picker is refined for vertex check (`zodrive picker-train --refine DIR`; flags of the same names).
-    The defaults are the probe's (results/learned-adversary/pilots/one-query/hard.py, tuning seeds)."""
-
-    episodes: int = 480     # training episodes driven under vertex check with the picker
-    probes: int = 512       # random vertices queried at every state where a check failed
-    epochs: int = 1         # passes over those labelled vertices
-
-    def check(self) -> None:
-        for name, most in (("episodes", 1000), ("probes", 1_000_000), ("epochs", 1000)):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= most):
-                raise ZodriveError(f"picker {name} must be an integer from 1 to {most}, not {value!r}")
-
-
-REFINE_RATE = 3e-4  # smaller than a fit's: the fallback starts from the fitted picker and moves from it
-
-
-def picker_refine(model: str, preset: dict[str, Any], base: Path, out: Path, refine: PickerRefine = PickerRefine(), *,
-                  force: bool = False, report: Callable[[str], None] | None = None) -> Path:
-    """Refine the picker in `base` for vertex check and write it to `out` (returned): drive `episodes` training
-    episodes under `vertex-check:base`; at each state where its check failed, query `probes` random vertices;
-    fit a copy of the picker's network on those labels alone. That copy, `fallback.pt`, ranks the vertex
-    vertex check feeds unasked after a failed check. Why: there the plain picker's best of 64 works on about
-    three steps in five, where the states it was fitted on rarely include such a step
-    (results/vertex-hold/picker). The episodes continue the base fit's seeds: 10000 * seed + 1000 * rounds + i."""
-    import shutil
-
-    import torch
-
-    from zodrive.attacks.picker import FALLBACK_FILE, META_FILE, WEIGHTS_FILE, read_meta
-    from zodrive.agents.policies import is_sb3_zip, load_policy, policy_ref
-    from zodrive.agents.training import check_run_folder
-    from zodrive.attacks.learned import check_fitted_against
-    from zodrive.attacks.spec import AttackSpec
-    from zodrive.envs import attack_context, make_env
-    from zodrive.evaluation.rollout import to_action
-    from zodrive.runinfo import write_atomic, write_json, write_run_info
-
-    refine.check()
-    if not is_sb3_zip(model):
-        raise ZodriveError("picker-train attacks a model file (SB3 zip or model folder): a picker is tied to the "
-                           "file it was fitted against by its SHA-256")
-    meta = read_meta(base)
-    if meta.get("fallback"):
-        raise ZodriveError(f"picker {base} is already refined: refine the picker it was refined from")
-    check_fitted_against(meta, f"picker {base} was fitted", "fit", model_file=policy_ref(model), preset=preset)
-    try:
-        fitted = json.loads((Path(base) / "train.json").read_text())
-        seed, rounds = int(fitted["seed"]), int(fitted["fit"]["rounds"])
-    except (OSError, ValueError, KeyError, TypeError):
-        raise ZodriveError(f"{base} has no readable train.json (its fit seed and rounds): refine a picker "
-                           "written by `zodrive picker-train`") from None
-    if not (0 <= seed <= 4 and 1 <= rounds <= 9 and refine.episodes <= 1000):
-        raise ZodriveError(f"picker {base} (seed {seed}, {rounds} rounds) leaves no block of training seeds for "
-                           "a refining round: its seeds are 10000 * seed + 1000 * round + i, below 50000")
-    check_run_folder(out, resume=False, force=force, resumable=False)
-    victim = load_policy(model, preset, None)  # the safe loader
-    context = attack_context(preset)
-    eps = float(meta["eps"])
-    goal = meta["target"]  # as the picker records it: an action index, "not:INDEX" or a continuous action
-    target = ",".join(f"{v:g}" for v in goal) if isinstance(goal, list) else goal
-    spec = AttackSpec(attack="vertex-check", eps=eps, seed=seed, target=target, adversary=str(base))
-    attack, objective, oracle = spec.build(victim, context["features"], context["bounds"], context["n_actions"],
-                                           context.get("action_names"), context.get("action_bounds"))
-    threat = attack.threat
-    env = make_env(preset)
-    shape = tuple(env.observation_space.shape)
-    mask = threat.mask(shape)
-    rng = np.random.default_rng([seed, rounds])
-    signs = np.array([-eps, eps], dtype=np.float32)
-    xs: list[np.ndarray] = []
-    ys: list[np.ndarray] = []
-    steps, confirmed, returns = 0, 0, []
-    start = time.perf_counter()
-    for e in range(refine.episodes):
-        episode_seed = 10_000 * seed + 1000 * rounds + e
-        obs, _ = env.reset(seed=episode_seed)
-        attack.reseed(episode_seed)
-        oracle.begin_episode()
-        attack.begin_episode()
-        done, total = False, 0.0
-        while not done:
-            x = np.asarray(obs, dtype=np.float32)[None]
-            result = attack.perturb(x, oracle, objective)
-            confirmed += int(result.success[0])
-            if np.isnan(result.adv_outputs[0]).any():  # the check failed: a vertex was fed unasked
-                probes = threat.project(x + rng.choice(signs, size=(refine.probes, *shape)) * mask,
-                                        np.repeat(x, refine.probes, axis=0)).astype(np.float32)
-                answers = torch.from_numpy(np.asarray(oracle(probes, np.zeros(refine.probes, dtype=np.int64)),
-                                                      dtype=np.float32))
-                xs.append(probes.reshape(refine.probes, -1))
-                ys.append(objective.success(answers[None], answers[:1])[0].numpy())
-            action = victim.query(result.x_adv) if np.isnan(result.adv_outputs).any() else result.adv_outputs
-            obs, reward, terminated, truncated, _ = env.step(to_action(victim, action, env.action_space))
-            total += float(reward)
-            steps += 1
-            done = terminated or truncated
-        returns.append(total)
-    env.close()
-    if not xs:
-        raise ZodriveError(f"no check failed in {refine.episodes} episodes: nothing to refine on")
-    x_all = torch.from_numpy(np.stack(xs))
-    y_all = torch.from_numpy(np.stack(ys).astype(np.float32))
-    held = torch.from_numpy(rng.random(len(x_all)) < HELD_OUT)  # whole states held out
-    base_net = attack.picker.net
-    before = _best_works(base_net, x_all[held], y_all[held])
-    net = copy.deepcopy(base_net)
-    _fit_fallback(net, x_all[~held].flatten(0, 1), y_all[~held].flatten(), refine.epochs)
-    after = _best_works(net, x_all[held], y_all[held])
-    line = (f"refining round: {refine.episodes} episodes, {steps} steps under vertex check, victim return "
-            f"{np.mean(returns):.2f}, a check confirmed the target on {confirmed / max(steps, 1):.1%} of steps; "
-            f"{len(x_all)} states where a check failed, {refine.probes} vertices each ({float(y_all.mean()):.1%} "
-            f"take the target); on the {int(held.sum())} held out the best-rated vertex works "
-            f"{before:.1%} -> {after:.1%}; {oracle.total_queries} queries")
-    if report is not None:
-        report(line)
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in (WEIGHTS_FILE, FALLBACK_FILE, META_FILE, "train.json", "CARD.md"):
-        (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
-    write_run_info(out, {"victim": str(model), "preset": preset, "refined_from": str(base), "refine": asdict(refine)},
-                   seed)
-    shutil.copyfile(Path(base) / WEIGHTS_FILE, out / f".{WEIGHTS_FILE}.tmp")
-    (out / f".{WEIGHTS_FILE}.tmp").replace(out / WEIGHTS_FILE)
-    torch.save(net.state_dict(), out / f".{FALLBACK_FILE}.tmp")
-    (out / f".{FALLBACK_FILE}.tmp").replace(out / FALLBACK_FILE)
-    meta = {**meta, "fallback": True, "refined_from": str(base)}
-    train = {**fitted, "kind": "picker for vertex hold, refined for vertex check", "refined_from": str(base),
-             "refine": {**asdict(refine), "line": line, "steps": steps, "states": len(x_all),
-                        "held_out_best_works": [before, after],
-                        "victim_queries": int(oracle.total_queries),
-                        "wall_time_s": round(time.perf_counter() - start, 1)}}
-    write_json(out / "train.json", train)
-    write_atomic(out / META_FILE, json.dumps(meta, indent=2) + "\n")
-    write_atomic(out / "CARD.md", _card(out, meta, train))
-    return out
-
-
-def _fit_fallback(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, epochs: int) -> None:
-    """Binary cross-entropy, `epochs` passes at REFINE_RATE (the refining round's fit)."""
-    import torch
-
-    opt = torch.optim.Adam(net.parameters(), REFINE_RATE)
-    net.train()
-    for _ in range(epochs):
-        for batch in torch.randperm(len(x)).split(BATCH):
-            loss = torch.nn.functional.binary_cross_entropy_with_logits(net(x[batch]).squeeze(1), y[batch])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    net.eval()
-
-
-def _best_works(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor) -> float:
-    """The share of states (rows of `x`: their labelled vertices) where the vertex `net` rates best works."""
-    import torch
-
-    if not len(x):
-        return float("nan")
-    with torch.no_grad():
-        best = net(x.flatten(0, 1)).view(x.shape[0], x.shape[1]).argmax(dim=1)
-    return float(y[torch.arange(len(y)), best].mean())
-
-
 def round_line(r: dict[str, Any]) -> str:
     """One round of a fit, as picker-train prints it and the card lists it."""
     return (f"round {r['round']}: {r['steps']} steps under vertex hold{' with the picker' if r['round'] else ''}, "
@@ -391,7 +225,7 @@ def round_line(r: dict[str, Any]) -> str:
 def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
     fit = train["fit"]
     return "\n".join([
-        f"# Picker for {'vertex check' if 'refine' in train else 'vertex hold'}: {meta['victim']} at L-inf eps {meta['eps']:g}", "",
+        f"# Picker for vertex hold: {meta['victim']} at L-inf eps {meta['eps']:g}", "",
         "A classifier of whether the victim takes the target "
         f"({meta['target']!r}) on an observation, fitted from counted victim queries "
         "(`zodrive.agents.picker`). `--attack vertex-hold:DIR` feeds the best-rated of "
@@ -400,14 +234,10 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..), preset {meta['preset'].get('name')}",
         f"- fit: seed {train['seed']}, {fit['rounds']} rounds of {fit['episodes']} training episodes, {fit['probes']} random "
         f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round, loss "
-        f"{fit.get('loss', 'bce')}; "  # a fit before --loss existed was bce
+        f"{fit['loss']}; "
         f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
-        *[f"  - {round_line(r)}" for r in train["rounds"]],
-        *([f"- refined for vertex check from `{train['refined_from']}` (`fallback.pt`, which ranks the vertex fed "
-           f"unasked after a failed check): {train['refine']['line']}, {train['refine']['wall_time_s']} s"]
-          if "refine" in train else []), "",
-        f"Use: `zodrive evaluate {meta['victim']} --attack {'vertex-check' if 'refine' in train else 'vertex-hold'}:{out} "
-        f"--eps {meta['eps']:g}"
-        f"{'' if train.get('target', 'auto') == 'auto' else ' --target ' + str(train['target'])}` on the preset "
+        *[f"  - {round_line(r)}" for r in train["rounds"]], "",
+        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}"
+        f"{'' if train['target'] == 'auto' else ' --target ' + str(train['target'])}` on the preset "
         "it was fitted on (config.yaml: a picker is refused elsewhere)", "",
     ])

@@ -52,7 +52,6 @@ class VertexHold(Attack):
     unread = ("loss", "weight", "kappa", "mu", "step_size")  # (`tol` it reads: a continuous target's tolerance)
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
-    reads_fallback = False  # whether a picker's fallback network (for failed checks) is used
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         """`adversary`: a picker's folder (`vertex-hold:DIR`), else vertices are drawn blind."""
@@ -66,10 +65,6 @@ class VertexHold(Attack):
         self._checked: Objective | None = None  # the objective the picker was last checked against
         if adversary is not None:
             picker, meta = Picker.load(adversary)
-            if picker.fallback is not None and not self.reads_fallback:
-                raise ZodriveError(f"picker {adversary} was refined for vertex check (it holds a fallback network "
-                                   f"for failed checks): use vertex-check:{adversary}, or vertex-hold with the "
-                                   "picker it was refined from")
             self.use_picker(picker, {"target": meta["target"], "tol": meta["tol"]})
             if float(meta["eps"]) != threat.eps:
                 raise ZodriveError(f"picker {adversary} was fitted for eps {meta['eps']:g}, not {threat.eps:g}")
@@ -191,23 +186,21 @@ class VertexHold(Attack):
                             iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
-    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...], *, failed: bool = False
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`) and its rating:
         a random one (rated +inf), or with a picker the best-rated of `candidates` random ones at the
-        row's observation (one picker call per row; `failed`: they replace a vertex whose check failed)."""
+        row's observation (one picker call per row)."""
         if self.picker is None:
             signs = np.array([-self.threat.eps, self.threat.eps], dtype=np.float32)
             mask = self.threat.mask(shape).reshape(-1)
             return self.draw(rows, lambda g: g.choice(signs, size=flat0.shape[1])) * mask, np.full(len(rows), np.inf)
-        drawn, scores = self._rated(flat0, rows, shape, failed=failed)
+        drawn, scores = self._rated(flat0, rows, shape)
         best = scores.argmax(axis=1)
         return drawn[np.arange(len(rows)), best], scores.max(axis=1).astype(np.float64)
 
-    def _rated(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...], *, failed: bool = False
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _rated(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """`candidates` random vertices (rows, k, dim) for each of `rows` and the picker's ratings (rows, k)
-        of them at the row's observation (one picker call per row; `failed`: by its fallback, if any)."""
+        of them at the row's observation (one picker call per row)."""
         eps = np.float32(self.threat.eps)
         mask = self.threat.mask(shape).reshape(-1)
         signs = np.array([-eps, eps], dtype=np.float32)
@@ -216,7 +209,7 @@ class VertexHold(Attack):
         scores = np.empty((len(rows), k), dtype=np.float32)
         for i in range(len(rows)):
             base = np.repeat(flat0[i:i + 1], k, axis=0).reshape(-1, *shape)
-            scores[i] = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base), failed=failed)
+            scores[i] = self.picker.scores(self.threat.project(base + drawn[i].reshape(-1, *shape), base))
         return drawn, scores
 
 
@@ -241,7 +234,6 @@ class VertexCheck(VertexHold):
 
     name = "vertex-check"
     no_search = "vertex check queries one point per step and only asks whether the victim would take the target"
-    reads_fallback = True
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, check_below: float | None = None,
                  **kwargs: Any) -> None:
@@ -290,9 +282,9 @@ class VertexCheck(VertexHold):
         self._bank[ask] -= 1
         failed = np.flatnonzero(ask & ~took)
         if failed.size and self.check_below is None:
-            delta[failed] = self._fresh(flat0[failed], failed, shape, failed=True)[0]
+            delta[failed] = self._fresh(flat0[failed], failed, shape)[0]
         elif failed.size:
-            drawn, scores = self._rated(flat0[failed], failed, shape, failed=True)
+            drawn, scores = self._rated(flat0[failed], failed, shape)
             for i, r in enumerate(failed):
                 for j in np.argsort(-scores[i], kind="stable"):  # the best-rated first
                     delta[r] = drawn[i, j]

@@ -10,10 +10,7 @@ and is never optimized against, unlike the fitted adversary's (`zodrive.agents.a
 optimization finds the surrogate's errors on models/dqn-close (results/learned-adversary).
 
 The folder holds `picker.json` (what it was fitted against, its settings) and `picker.pt` (the MLP's
-weights: a dict of tensors read with `torch.load(weights_only=True)`, so nothing is unpickled). A picker
-refined on hard states (`picker-train --refine`) also holds `fallback.pt`, a copy of the MLP fitted further
-on the states where a held vertex failed its check; vertex check ranks with it only the vertex it feeds
-unasked after a failed check, the step where the plain picker errs most (results/vertex-hold/picker).
+weights: a dict of tensors read with `torch.load(weights_only=True)`, so nothing is unpickled).
 """
 
 from __future__ import annotations
@@ -30,7 +27,6 @@ from zodrive.errors import ZodriveError
 
 META_FILE = "picker.json"
 WEIGHTS_FILE = "picker.pt"
-FALLBACK_FILE = "fallback.pt"
 FORMAT = 1
 KEYS = ("format", "victim", "victim_sha256", "preset", "eps", "norm", "frozen", "target", "tol", "obs_shape", "width",
         "candidates", "switch")
@@ -44,50 +40,36 @@ def network(inputs: int, width: int) -> torch.nn.Sequential:
 
 
 class Picker:
-    """Ranks fed observations by the fitted probability that the victim takes the target; `fallback`,
-    if any, is the network refined on hard states (`scores(..., failed=True)`)."""
+    """Ranks fed observations by the fitted probability that the victim takes the target."""
 
-    def __init__(self, net: torch.nn.Module, candidates: int, switch: float,
-                 fallback: torch.nn.Module | None = None) -> None:
+    def __init__(self, net: torch.nn.Module, candidates: int, switch: float) -> None:
         self.net, self.candidates, self.switch = net.eval(), int(candidates), float(switch)
-        self.fallback = None if fallback is None else fallback.eval()
 
-    def scores(self, fed: np.ndarray, *, failed: bool = False) -> np.ndarray:
+    def scores(self, fed: np.ndarray) -> np.ndarray:
         """(N, *obs) observations -> (N,) probabilities, in one network call: a row's score depends on
         the batch it is in (floating point), so callers that need lockstep = one-row runs call this
-        once per environment row (`VertexHold`). `failed`: rate the vertices that replace one whose
-        check just failed, with the fallback network where the picker has one."""
+        once per environment row (`VertexHold`)."""
         flat = torch.from_numpy(np.ascontiguousarray(fed, dtype=np.float32).reshape(len(fed), -1))
         if flat.shape[1] != self.net[0].in_features:
             raise ZodriveError(f"the picker reads observations of {self.net[0].in_features} values, not "
                                f"{flat.shape[1]}: fit one for this observation")
-        net = self.fallback if failed and self.fallback is not None else self.net
         with torch.no_grad():
-            return torch.sigmoid(net(flat)).squeeze(1).numpy()
+            return torch.sigmoid(self.net(flat)).squeeze(1).numpy()
 
     @classmethod
     def load(cls, folder: str | Path) -> tuple["Picker", dict[str, Any]]:
         """The picker in `folder` and its description, or a one-line error."""
         meta = read_meta(folder)
-        net = _weights(Path(folder) / WEIGHTS_FILE, meta)
-        fallback = _weights(Path(folder) / FALLBACK_FILE, meta) if meta.get("fallback") else None
-        return cls(net, meta["candidates"], meta["switch"], fallback), meta
-
-
-def _weights(path: Path, meta: dict[str, Any]) -> torch.nn.Module:
-    """The picker network `meta` describes with the weights in `path`, or a one-line error."""
-    if not path.is_file():
-        raise ZodriveError(f"{path.parent} is not a picker (no {path.name}; fit one with `zodrive picker-train`)")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # a truncated or foreign file; weights_only refuses anything but tensors
-        raise ZodriveError(f"{path} is not a picker's weights ({type(exc).__name__})") from None
-    net = network(int(np.prod(meta["obs_shape"])), int(meta["width"]))
-    try:
-        net.load_state_dict(state)
-    except (RuntimeError, TypeError, AttributeError):
-        raise ZodriveError(f"{path} does not fit the network {META_FILE} describes") from None
-    return net
+        try:
+            state = torch.load(Path(folder) / WEIGHTS_FILE, map_location="cpu", weights_only=True)
+        except Exception as exc:  # a truncated or foreign file; weights_only refuses anything but tensors
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} is not a picker's weights ({type(exc).__name__})") from None
+        net = network(int(np.prod(meta["obs_shape"])), int(meta["width"]))
+        try:
+            net.load_state_dict(state)
+        except (RuntimeError, TypeError, AttributeError):
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} does not fit the network {META_FILE} describes") from None
+        return cls(net, meta["candidates"], meta["switch"]), meta
 
 
 def read_meta(folder: str | Path) -> dict[str, Any]:
@@ -121,8 +103,7 @@ def _well_typed(meta: dict[str, Any]) -> bool:
             and isinstance(meta["obs_shape"], list) and all(_count(d, 10_000) for d in meta["obs_shape"])
             and _count(int(np.prod(meta["obs_shape"])) if meta["obs_shape"] else 0, 1_000_000)
             and _count(meta["width"], MAX_WIDTH) and _count(meta["candidates"], MAX_CANDIDATES)
-            and _number(meta["switch"]) and 0 <= meta["switch"] < 1
-            and isinstance(meta.get("fallback", False), bool))
+            and _number(meta["switch"]) and 0 <= meta["switch"] < 1)
 
 
 def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
@@ -140,9 +121,7 @@ def digest(folder: str | Path) -> str:
     refitted picker, or one with other `candidates` or `switch`, is another attack)."""
     from zodrive.agents.safe_load import sha256
 
-    fallback = Path(folder) / FALLBACK_FILE
-    return ("sha256:" + sha256(Path(folder) / WEIGHTS_FILE) + "+" + sha256(Path(folder) / META_FILE)
-            + ("+" + sha256(fallback) if fallback.is_file() else ""))
+    return "sha256:" + sha256(Path(folder) / WEIGHTS_FILE) + "+" + sha256(Path(folder) / META_FILE)
 
 
 def objective_target(objective: Any) -> dict[str, Any]:
