@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import arguments, drive_attack, vertex_check
+from common import arguments, drive_counting, percent, vertex_check
 
 
 def main() -> None:
@@ -22,13 +22,8 @@ def main() -> None:
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     attack.picker.switch = a.switch
-    actions = np.zeros(5, int)
-
-    def after(result) -> None:
-        actions[int(victim.query(result.x_adv)[0].argmax())] += 1
-
-    returns = drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, lambda x, held: None, after)
-    share = np.round(actions / actions.sum() * 100, 2).tolist()
+    returns, actions = drive_counting(env, victim, attack, objective, oracle, a.episodes)
+    share = percent(actions)
     print(f"  switch {a.switch}: return {np.mean(returns):.2f} over seeds 900000-{900000 + a.episodes - 1}, action share % "
           f"(LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER) {share}, {oracle.total_queries / actions.sum():.2f} queries/step")
 

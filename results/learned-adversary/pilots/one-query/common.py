@@ -93,6 +93,26 @@ def drive_attack(env: Any, victim: Victim, attack: Any, objective: Any, oracle: 
     return returns
 
 
+def drive_counting(env: Any, victim: Victim, attack: Any, objective: Any, oracle: Any, episodes: int,
+                   at_state: Callable[[np.ndarray, np.ndarray | None], None] = lambda x, held: None,
+                   after: Callable[[Any], None] = lambda result: None) -> tuple[list[float], np.ndarray]:
+    """`drive_attack` on tuning seeds 900000+, also counting the action the victim takes at each step (it acts on
+    the fed observation). Returns the episodes' returns and the counts (LANE_LEFT, IDLE, LANE_RIGHT, FASTER,
+    SLOWER)."""
+    actions = np.zeros(5, int)
+
+    def count(result: Any) -> None:
+        after(result)
+        actions[int(victim.query(result.x_adv)[0].argmax())] += 1
+
+    return drive_attack(env, victim, attack, objective, oracle, 900000, episodes, at_state, count), actions
+
+
+def percent(actions: np.ndarray) -> list[float]:
+    """Action counts as percentages of the steps, to two decimals."""
+    return np.round(actions / actions.sum() * 100, 2).tolist()
+
+
 def drive(env: Any, victim: Victim, seed0: int, episodes: int, choose: Chooser, *,
           target: Callable[[np.ndarray], int] = lambda x: FASTER,
           states: list[np.ndarray] | None = None) -> dict[str, Any]:

@@ -27,7 +27,7 @@ import copy
 import numpy as np
 import torch
 
-from common import FASTER, drive_attack, on_vertices, vertex_check
+from common import FASTER, drive_attack, drive_counting, on_vertices, percent, vertex_check
 
 
 def collect(a: argparse.Namespace) -> None:
@@ -143,13 +143,8 @@ def drive(a: argparse.Namespace) -> None:
         asked[0] = False
 
     attack._ask, attack._fresh = ask_then_mark, fresh_by_case
-    actions = np.zeros(5, int)
-
-    def after(result) -> None:
-        actions[int(victim.query(result.x_adv)[0].argmax())] += 1
-
-    returns = drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, begin, after)
-    share = np.round(actions / actions.sum() * 100, 2).tolist()
+    returns, actions = drive_counting(env, victim, attack, objective, oracle, a.episodes, begin)
+    share = percent(actions)
     print(f"  vertex check, the fine-tuned copy choosing the vertices fed unasked: return {np.mean(returns):.2f} over "
           f"seeds 900000-{900000 + a.episodes - 1}, action share % (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER) "
           f"{share}, {oracle.total_queries / actions.sum():.2f} queries/step")

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from common import FASTER, arguments, drive_attack, vertex_check
+from common import FASTER, arguments, drive_counting, percent, vertex_check
 from zodrive.attacks.objectives import DiscreteTargeted
 
 IDLE = 1
@@ -44,7 +44,6 @@ def main() -> None:
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     if a.rule != "strict":
         objective = FasterOrIdle(target=FASTER)
-    actions = np.zeros(5, int)
     belief = {"top": False}
 
     def before(x: np.ndarray, held: np.ndarray | None) -> None:
@@ -59,10 +58,9 @@ def main() -> None:
             belief["top"] = False
         elif out.argmax() == FASTER:
             belief["top"] = True
-        actions[int(victim.query(result.x_adv)[0].argmax())] += 1
 
-    returns = drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, before, after)
-    share = np.round(actions / actions.sum() * 100, 2).tolist()
+    returns, actions = drive_counting(env, victim, attack, objective, oracle, a.episodes, before, after)
+    share = percent(actions)
     print(f"  rule {a.rule}: return {np.mean(returns):.2f} over seeds 900000-{900000 + a.episodes - 1}, mean length "
           f"{actions.sum() / a.episodes:.1f}, action share % (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER) {share}, "
           f"{oracle.total_queries / actions.sum():.2f} queries/step")
