@@ -278,7 +278,8 @@ class VertexCheck(VertexHold):
             self._bank = np.zeros(n, dtype=np.int64)
         self._bank[live] += 1
         ask = live if self.check_below is None else live & (rating < self.check_below)  # -inf: a fresh vertex
-        out, took = self._ask(self._project(x0, delta), ask, oracle, objective)
+        fed = self._project(x0, delta)
+        out, took = self._ask(fed, ask, oracle, objective)
         self._bank[ask] -= 1
         failed = np.flatnonzero(ask & ~took)
         if failed.size and self.check_below is None:
@@ -297,5 +298,7 @@ class VertexCheck(VertexHold):
                         out[r], took[r] = answer[0], True
                         break
         out[failed[~took[failed]]] = np.nan  # fed unasked
+        if failed.size:  # only their vertices changed (the projection is row by row)
+            fed[failed] = self._project(x0[failed], delta[failed])
         self._carry = np.where(live[:, None], delta, np.nan).astype(np.float32)
-        return self._result(x0, self._project(x0, delta), live, took, out, oracle)
+        return self._result(x0, fed, live, took, out, oracle)
