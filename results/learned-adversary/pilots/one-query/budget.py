@@ -12,27 +12,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
+from common import FASTER, Vertices, arguments, drive_attack, vertex_check
 
 
 def main() -> None:
     p = arguments(20, "picker")
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
-    picker, shape = attack.picker, env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    dim, eps, rng = mask.size, np.float32(a.eps), np.random.default_rng(0)
-    fed = on_vertices(threat, shape)
+    picker, rng = attack.picker, np.random.default_rng(0)
+    v = Vertices(threat, env.observation_space.shape)
     held_rows, topk, ks = [], [], (1, 2, 3, 4, 8)
 
     def at_state(x: np.ndarray, held: np.ndarray | None) -> None:
         if held is None or np.isnan(held).any():
             return
-        point = fed(x, held)
-        works = victim.query(point).argmax(axis=1)[0] == FASTER
-        held_rows.append((float(picker.scores(point)[0]), bool(works)))
+        works = v.takes(victim, x, held)[0]
+        held_rows.append((float(picker.scores(v.fed(x, held))[0]), bool(works)))
         if not works:
-            pool = fed(x, eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(64, dim)) * mask)
+            pool = v.fed(x, v.random(rng, 64))
             best = np.argsort(-picker.scores(pool), kind="stable")[:max(ks)]
             hit = victim.query(pool[best]).argmax(axis=1) == FASTER
             topk.append([bool(hit[:k].any()) for k in ks])

@@ -67,6 +67,23 @@ def on_vertices(threat: ThreatModel, shape: tuple[int, ...]) -> Callable[[np.nda
     return fed
 
 
+class Vertices:
+    """The L-inf ball's vertices for the probes: `random(rng, k)` draws k flat vertices (every free coordinate
+    at +-eps, from `rng`), `fed(x, deltas)` is what is fed for them at clean observation x (1, *obs), projected,
+    and `takes(victim, x, deltas)` whether the victim takes FASTER on each (uncounted: analysis only)."""
+
+    def __init__(self, threat: ThreatModel, shape: tuple[int, ...]) -> None:
+        self.mask = threat.mask(shape).reshape(-1)
+        self.eps, self.dim = np.float32(threat.eps), self.mask.size
+        self.fed = on_vertices(threat, shape)
+
+    def random(self, rng: np.random.Generator, k: int) -> np.ndarray:
+        return self.eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(k, self.dim)) * self.mask
+
+    def takes(self, victim: Victim, x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+        return victim.query(self.fed(x, deltas)).argmax(axis=1) == FASTER
+
+
 def drive_attack(env: Any, victim: Victim, attack: Any, objective: Any, oracle: Any, seed0: int, episodes: int,
                  at_state: Callable[[np.ndarray, np.ndarray | None], None],
                  after: Callable[[Any], None] = lambda result: None) -> list[float]:

@@ -27,16 +27,12 @@ import copy
 import numpy as np
 import torch
 
-from common import FASTER, drive_attack, drive_counting, on_vertices, percent, vertex_check
+from common import FASTER, Vertices, drive_attack, drive_counting, percent, vertex_check
 
 
 def collect(a: argparse.Namespace) -> None:
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
-    shape = env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    fed = on_vertices(threat, shape)
-    eps, rng = np.float32(a.eps), np.random.default_rng(a.seed0)
-    signs = np.array([-1.0, 1.0], np.float32)
+    v, rng = Vertices(threat, env.observation_space.shape), np.random.default_rng(a.seed0)
     points, labels, steps, queries = [], [], [0], [0]
 
     def at_state(x: np.ndarray, held: np.ndarray | None) -> None:
@@ -44,9 +40,9 @@ def collect(a: argparse.Namespace) -> None:
         if held is None or np.isnan(held).any():
             return
         queries[0] += 1
-        if victim.query(fed(x, held)).argmax(axis=1)[0] == FASTER:
+        if v.takes(victim, x, held)[0]:
             return
-        pool = fed(x, eps * rng.choice(signs, size=(a.probes, mask.size)) * mask)
+        pool = v.fed(x, v.random(rng, a.probes))
         queries[0] += len(pool)
         points.append(pool.reshape(len(pool), -1).astype(np.float32))
         labels.append(victim.query(pool).argmax(axis=1) == FASTER)
@@ -92,20 +88,16 @@ def fine_tune(a: argparse.Namespace, attack) -> torch.nn.Module:
 def judge(a: argparse.Namespace) -> None:
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     net = fine_tune(a, attack)
-    shape = env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    fed = on_vertices(threat, shape)
-    eps, rng = np.float32(a.eps), np.random.default_rng(0)
-    signs = np.array([-1.0, 1.0], np.float32)
+    v, rng = Vertices(threat, env.observation_space.shape), np.random.default_rng(0)
     hits, failed = {"committed picker": 0, "fine-tuned on hard states": 0, "any of the 64": 0}, [0]
 
     def at_state(x0: np.ndarray, held: np.ndarray | None) -> None:
         if held is None or np.isnan(held).any():
             return
-        if victim.query(fed(x0, held)).argmax(axis=1)[0] == FASTER:
+        if v.takes(victim, x0, held)[0]:
             return
         failed[0] += 1
-        pool = fed(x0, eps * rng.choice(signs, size=(64, mask.size)) * mask)
+        pool = v.fed(x0, v.random(rng, 64))
         works = victim.query(pool).argmax(axis=1) == FASTER
         hits["committed picker"] += bool(works[int(attack.picker.scores(pool).argmax())])
         with torch.no_grad():

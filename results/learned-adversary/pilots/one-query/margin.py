@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
+from common import FASTER, Vertices, arguments, drive_attack, vertex_check
 from zodrive.attacks.picker import network
 
 
@@ -41,15 +41,11 @@ def main() -> None:
     p.add_argument("--epochs", type=int, default=10)
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
-    shape = env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    dim, eps, rng = mask.size, np.float32(a.eps), np.random.default_rng(0)
-    fed = on_vertices(threat, shape)
-    signs = np.array([-1.0, 1.0], np.float32)
+    v, rng = Vertices(threat, env.observation_space.shape), np.random.default_rng(0)
     xs, margins = [], []
 
     def collect(x: np.ndarray, held: np.ndarray | None) -> None:
-        points = fed(x, eps * rng.choice(signs, size=(a.probes, dim)) * mask)
+        points = v.fed(x, v.random(rng, a.probes))
         q = victim.query(points)
         others = np.delete(q, FASTER, axis=1).max(axis=1)
         xs.append(points.reshape(len(points), -1))
@@ -70,10 +66,10 @@ def main() -> None:
         nonlocal failed
         if held is None or np.isnan(held).any():
             return
-        if victim.query(fed(x, held)).argmax(axis=1)[0] == FASTER:
+        if v.takes(victim, x, held)[0]:
             return
         failed += 1
-        pool = fed(x, eps * rng.choice(signs, size=(64, dim)) * mask)
+        pool = v.fed(x, v.random(rng, 64))
         works = victim.query(pool).argmax(axis=1) == FASTER
         hits["committed picker"] += bool(works[int(attack.picker.scores(pool).argmax())])
         with torch.no_grad():

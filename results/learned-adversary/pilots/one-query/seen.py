@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from common import FASTER, arguments, drive, on_vertices, setup, show
+from common import FASTER, Vertices, arguments, drive, setup, show
 from zodrive.attacks.picker import Picker
 
 
@@ -25,17 +25,14 @@ def main() -> None:
     a = p.parse_args()
     _, victim, env, threat = setup(a.model, a.eps)
     picker, _ = Picker.load(a.picker)
-    shape = env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    dim, eps = mask.size, np.float32(a.eps)
-    fed = on_vertices(threat, shape)
-    signs = np.array([-1.0, 1.0], np.float32)
+    v = Vertices(threat, env.observation_space.shape)
+    fed = v.fed
 
     for seen in (False, True):
         rng = np.random.default_rng(0)
 
         def ranked(x: np.ndarray) -> np.ndarray:
-            pool = eps * rng.choice(signs, size=(64, dim)) * mask
+            pool = v.random(rng, 64)
             return pool[np.argsort(-picker.scores(fed(x, pool)), kind="stable")]
 
         def choose(x: np.ndarray, memory: dict[str, Any]) -> np.ndarray:

@@ -16,27 +16,26 @@ Tuning seeds 900000.., nothing written.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 
-from common import FASTER, arguments, drive_attack, on_vertices, vertex_check
+from common import Vertices, arguments, drive_attack, vertex_check
 
 
 def main() -> None:
     p = arguments(30, "picker")
     a = p.parse_args()
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
-    picker, shape = attack.picker, env.observation_space.shape
-    mask = threat.mask(shape).reshape(-1)
-    dim, eps = mask.size, np.float32(a.eps)
-    rng = np.random.default_rng(0)
+    picker, rng = attack.picker, np.random.default_rng(0)
+    v = Vertices(threat, env.observation_space.shape)
+    fed, dim, eps, mask = v.fed, v.dim, v.eps, v.mask
     names = ("picker-64", "picker-1024", "recent", "recent-best", "near-h", "gradient", "any-1024")
     hits = {n: 0 for n in names}
     failed, steps, winners = 0, 0, []
-    fed = on_vertices(threat, shape)
 
-    def works(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-        return victim.query(fed(x, deltas)).argmax(axis=1) == FASTER
+    works = functools.partial(v.takes, victim)
 
     def best(x: np.ndarray, deltas: np.ndarray) -> np.ndarray:
         return deltas[int(picker.scores(fed(x, deltas)).argmax())]
@@ -50,7 +49,7 @@ def main() -> None:
             return
         failed += 1
         h = held[0]
-        pool = eps * rng.choice(np.array([-1.0, 1.0], np.float32), size=(1024, dim)) * mask
+        pool = v.random(rng, 1024)
         ok = works(x, pool)
         hits["picker-64"] += bool(works(x, best(x, pool[:64])[None])[0])
         hits["picker-1024"] += bool(ok[int(picker.scores(fed(x, pool)).argmax())])
