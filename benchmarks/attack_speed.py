@@ -27,8 +27,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from zodrive.agents.loading import load_model
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.loading import load_model
+from zodrive.policies.victims import sb3_victim
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import attack_context, load_preset, make_env
 from zodrive.evaluation.evaluate import DEFAULT_ENVS

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zodrive.agents.training import load_recipe, train
+from zodrive.training.recipes import load_recipe, train
 from zodrive.envs import load_preset, make_env
 from zodrive.evaluation.evaluate import EvalJob, evaluate
 

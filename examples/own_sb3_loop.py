@@ -11,9 +11,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3 import DQN
 
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.victims import sb3_victim
 from zodrive.attacks import AttackSpec
-from zodrive.wrappers import AttackWrapper
+from zodrive.system import AttackWrapper
 
 
 def main(train_steps: int = 20_000, episodes: int = 5) -> dict[str, float]:

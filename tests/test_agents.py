@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from stable_baselines3 import DDPG, DQN
 
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.victims import sb3_victim
 from zodrive.envs import load_preset, make_env
 
 
@@ -30,7 +30,7 @@ def test_victim_acts_like_sb3_predict(algo, preset: str) -> None:
 
 
 def test_a_guided_dqn_collects_the_guides_actions_then_its_own() -> None:
-    from zodrive.agents.dqn_variants import GuidedDQN
+    from zodrive.training.dqn_variants import GuidedDQN
 
     env = make_env(load_preset("discrete", ["max_episode_steps=30"]))
     model = GuidedDQN("MlpPolicy", env, learning_starts=10, buffer_size=500, seed=0, device="cpu")
@@ -50,7 +50,7 @@ def test_a_guided_dqn_collects_the_guides_actions_then_its_own() -> None:
 def test_the_imitation_margin_pulls_the_greedy_action_to_the_guides() -> None:
     import torch as th
 
-    from zodrive.agents.dqn_variants import GuidedDQN
+    from zodrive.training.dqn_variants import GuidedDQN
 
     env = make_env(load_preset("discrete", ["max_episode_steps=30"]))
     model = GuidedDQN("MlpPolicy", env, seed=0, device="cpu")
@@ -74,8 +74,8 @@ def test_demonstrations_fill_the_buffer_and_pretraining_learns_them() -> None:
     pre-training updates (TD + margin) move the greedy action towards the guide's on them."""
     import torch as th
 
-    from zodrive.agents.dqn_variants import GuidedDQN
-    from zodrive.agents.rules import ObservationRules
+    from zodrive.training.dqn_variants import GuidedDQN
+    from zodrive.drivers.rules import ObservationRules
 
     preset = load_preset("discrete", ["max_episode_steps=40"])
     model = GuidedDQN("MlpPolicy", make_env(preset), seed=0, device="cpu", batch_size=32, n_steps=5, learning_rate=1e-3,
@@ -106,8 +106,8 @@ def test_demonstrations_fill_the_buffer_and_pretraining_learns_them() -> None:
 def test_recipe_guide_names_the_rules_it_follows() -> None:
     """`guide: {name: close-rules}` gives the DQN the close rules' decisions, not the rules'; an
     unknown name is a one-line error."""
-    from zodrive.agents.rules import named_rules
-    from zodrive.agents.training import _configure_guide
+    from zodrive.drivers.rules import named_rules
+    from zodrive.training.recipes import _configure_guide
     from zodrive.errors import ZodriveError
 
     preset = load_preset("discrete")
@@ -133,7 +133,7 @@ def test_a_resumed_run_keeps_the_recipes_n_step_returns_or_says_so() -> None:
     import gymnasium as gym
     from stable_baselines3 import PPO
 
-    from zodrive.agents.training import check_n_step_buffer
+    from zodrive.training.recipes import check_n_step_buffer
     from zodrive.errors import ZodriveError
 
     recipe = {"hyperparameters": {"n_steps": 30}}

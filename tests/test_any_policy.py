@@ -19,9 +19,9 @@ import torch
 sb3_contrib = pytest.importorskip("sb3_contrib")
 from stable_baselines3 import A2C, DDPG, DQN, PPO, SAC, TD3  # noqa: E402
 
-from zodrive.agents.loading import load_model  # noqa: E402
-from zodrive.agents.safe_load import load_policy_network  # noqa: E402
-from zodrive.agents.victims import network_victim, sb3_victim  # noqa: E402
+from zodrive.policies.loading import load_model  # noqa: E402
+from zodrive.policies.safe_load import load_policy_network  # noqa: E402
+from zodrive.policies.victims import network_victim, sb3_victim  # noqa: E402
 from zodrive.cli import main  # noqa: E402
 from zodrive.errors import ZodriveError  # noqa: E402
 

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zodrive.agents.baselines import BASELINES
-from zodrive.agents.policies import load_victim, make_policy_env, policy_kind, policy_label
+from zodrive.drivers.baselines import BASELINES
+from zodrive.policies.resolve import load_victim, policy_kind, policy_label
+from zodrive.system import make_policy_env
 from zodrive.cli import main
 from zodrive.envs import load_preset
 from zodrive.evaluation.rollout import run_episode
@@ -51,7 +52,7 @@ def test_idm_mobil_continuous_stays_on_the_road() -> None:
 def test_observation_rules_drive_and_can_be_attacked_on_their_decisions() -> None:
     """`baseline:rules` reads the observation: it speeds up on free road, brakes behind a close
     car, and an attack that changes its observation changes what it does."""
-    from zodrive.agents.rules import FASTER, LANE_LEFT, SLOWER, ObservationRules
+    from zodrive.drivers.rules import FASTER, LANE_LEFT, SLOWER, ObservationRules
     from zodrive.attacks import AttackSpec
     from zodrive.envs import attack_context
 
@@ -80,7 +81,7 @@ def test_continuous_rules_keep_the_lane_follow_and_finish_a_change() -> None:
     to the lane centre; behind a close, slower car it brakes; while it moves sideways it keeps
     heading for the next lane centre in that direction (no memory needed to finish a change);
     and it drives the real environment without a crash or leaving the road."""
-    from zodrive.agents.rules import ContinuousRules
+    from zodrive.drivers.rules import ContinuousRules
 
     preset = load_preset("continuous", ["max_episode_steps=150"])
     driver = ContinuousRules(preset)
@@ -132,7 +133,7 @@ def test_evaluate_a_baseline(tmp_path: Path, capsys) -> None:
 
 
 def test_attacking_a_constant_baseline_is_refused_since_it_changes_nothing(capsys) -> None:
-    from zodrive.agents.policies import load_victim
+    from zodrive.policies.resolve import load_victim
     from zodrive.envs import load_preset
 
     victim = load_victim("baseline:slower", load_preset("discrete"))
@@ -159,7 +160,7 @@ def test_bad_baselines(args: list[str], message: str, capsys) -> None:
 
 
 def test_card_reports_median_and_range_over_training_seeds(tmp_path: Path) -> None:
-    from zodrive.agents.card import seed_table
+    from zodrive.experiments.card import seed_table
 
     runs = []
     for seed, ret, speed in ((0, 300.0, 24.0), (1, 360.0, 26.0), (2, 340.0, 25.0)):
@@ -212,7 +213,7 @@ def test_robust_rules_never_speed_up_where_the_truth_says_brake() -> None:
     """`baseline:robust-rules@EPS` is pessimistic within the budget: on observations whose other
     vehicles were moved by up to eps (what the guarantee covers), it accelerates only if the plain
     rules on the true observation find the own lane free by their margin; at eps 0 it is the rules."""
-    from zodrive.agents.rules import FASTER, LANE_RIGHT, ObservationRules
+    from zodrive.drivers.rules import FASTER, LANE_RIGHT, ObservationRules
 
     preset = load_preset("discrete")
     rng = np.random.default_rng(0)
@@ -235,7 +236,7 @@ def test_robust_rules_never_speed_up_where_the_truth_says_brake() -> None:
 
 
 def test_robust_rules_are_a_named_budgeted_baseline() -> None:
-    from zodrive.agents.baselines import get_baseline
+    from zodrive.drivers.baselines import get_baseline
     from zodrive.errors import ZodriveError
 
     assert get_baseline("baseline:robust-rules").eps == 0.05
@@ -251,7 +252,7 @@ def test_close_rules_follow_closer_and_otherwise_decide_as_the_rules() -> None:
     """`baseline:close-rules` is the rules with IDM's time gap 0.3 s and a 5 m margin: a car 40 m
     ahead at the same speed leaves room to speed up for them (10 + 25 * 0.3 + 5 < 35 m) and not for
     the rules (10 + 25 * 1.0 + 15 > 35 m); far from any car, or close behind one, both decide alike."""
-    from zodrive.agents.rules import FASTER, IDLE, ObservationRules
+    from zodrive.drivers.rules import FASTER, IDLE, ObservationRules
 
     preset = load_preset("discrete")
     alone = np.zeros((1, 5, 5), np.float32)

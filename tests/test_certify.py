@@ -10,8 +10,8 @@ import torch
 from torch import nn
 
 from zodrive.attacks.spec import AttackSpec
-from zodrive.agents.victims import network_victim
-from zodrive.certify import certify, threat_box
+from zodrive.policies.victims import network_victim
+from zodrive.evaluation.certify import certify, threat_box
 from zodrive.cli import main
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
@@ -94,7 +94,7 @@ def test_bounds_hold_through_every_output_head(tmp_path: Path, algo: str, env_id
     import gymnasium as gym
     import stable_baselines3
 
-    from zodrive.agents.safe_load import load_policy_network
+    from zodrive.policies.safe_load import load_policy_network
 
     sb3_contrib = pytest.importorskip("sb3_contrib")
     cls = getattr(sb3_contrib, algo, None) or getattr(stable_baselines3, algo)

@@ -106,11 +106,11 @@ def argv(draw) -> list[str]:  # noqa: ANN001
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(args=argv())
 def test_any_argument_vector_ends_cleanly(args: list[str], monkeypatch, capsys) -> None:
-    import zodrive.agents.adversary as adversary
-    import zodrive.agents.picker as picker
-    import zodrive.agents.training as training
-    import zodrive.defense.adversarial as adversarial
-    import zodrive.defense.robust as robust
+    import zodrive.training.adversary as adversary
+    import zodrive.training.picker as picker
+    import zodrive.training.recipes as training
+    import zodrive.training.adversarial as adversarial
+    import zodrive.training.robust as robust
     import zodrive.experiments.compare as compare
     import zodrive.experiments.reproduce as reproduce
     import zodrive.experiments.select as select

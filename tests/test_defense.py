@@ -12,10 +12,10 @@ import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.victims import sb3_victim
 from zodrive.attacks import AttackSpec
 from zodrive.envs import load_preset, make_env
-from zodrive.wrappers import make_attacked_env
+from zodrive.system import make_attacked_env
 
 PRESET = load_preset("discrete", ["max_episode_steps=30"])
 
@@ -50,7 +50,7 @@ def test_replay_buffer_holds_attacked_observations_against_the_live_network() ->
 
 def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, monkeypatch) -> None:
     from zodrive.cli import main
-    from zodrive.wrappers import AttackWrapper
+    from zodrive.system import AttackWrapper
 
     base = tmp_path / "base"
     assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(base), "--no-progress",
@@ -82,7 +82,7 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, mon
     assert runs[0]["attack"] is None and runs[1]["attack"]["attack"] == "uniform-noise"
     seeds = [json.loads((folder / "run.json").read_text())["seed"] for folder in (control, attacked)]
     assert seeds[0] == seeds[1]
-    from zodrive.agents.safe_load import read_plain
+    from zodrive.policies.safe_load import read_plain
 
     # same settings, same seed, same warm-up, exploration and updates: the very same network, bit for bit
     first, second = read_plain(control / "model.zip")[1], read_plain(attacked / "model.zip")[1]
@@ -90,7 +90,7 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, mon
 
 
 def test_sa_dqn_regularizer_is_the_worst_case_margin_inside_the_ball() -> None:
-    from zodrive.agents.dqn_variants import SADQN
+    from zodrive.training.dqn_variants import SADQN
 
     model = SADQN("MlpPolicy", make_env(PRESET), seed=0, policy_kwargs={"net_arch": [16]})
     x = torch.from_numpy(np.stack([make_env(PRESET).reset(seed=s)[0] for s in range(8)])).float()
@@ -133,9 +133,9 @@ def test_robust_distillation_writes_a_model_every_command_reads(tmp_path: Path) 
     it harder to flip inside the ball than the teacher, on the teacher's own states."""
     import torch
 
-    from zodrive.agents.loading import load_network
+    from zodrive.policies.loading import load_network
     from zodrive.attacks.threat import worst_in_ball
-    from zodrive.defense.distill import distill
+    from zodrive.training.distill import distill
     from zodrive.envs import load_preset
 
     preset = load_preset("discrete", ["max_episode_steps=60"])
@@ -146,7 +146,7 @@ def test_robust_distillation_writes_a_model_every_command_reads(tmp_path: Path) 
     student = load_network(out, preset)  # the safe loader rebuilds it: nothing in the zip is unpickled
     assert student.n_outputs == 5 and not torch.equal(student.net[0].weight, teacher.net[0].weight)
     from zodrive.envs import make_env
-    from zodrive.agents.victims import network_victim
+    from zodrive.policies.victims import network_victim
     from zodrive.evaluation.rollout import clean_states
 
     x = torch.as_tensor(clean_states(make_env(preset), network_victim(teacher.net, "discrete", (5, 5)), 7, 60))
@@ -167,7 +167,7 @@ def test_sa_ddpg_shrinks_the_worst_action_change_inside_the_ball() -> None:
     the regular DDPG update is left as SB3 makes it."""
     from stable_baselines3.common.logger import configure
 
-    from zodrive.agents.state_adversarial import SADDPG
+    from zodrive.training.state_adversarial import SADDPG
     from zodrive.attacks.threat import worst_in_ball
     from zodrive.envs import load_preset
 
@@ -197,7 +197,7 @@ def test_sa_ddpg_shrinks_the_worst_action_change_inside_the_ball() -> None:
 
 
 def test_robust_train_sa_ddpg_and_a_teacher_distillation_run_from_the_cli(tmp_path: Path) -> None:
-    from zodrive.agents.loading import load_network
+    from zodrive.policies.loading import load_network
     from zodrive.cli import main
     from zodrive.envs import load_preset
 
@@ -217,7 +217,7 @@ def test_robust_train_sa_ddpg_and_a_teacher_distillation_run_from_the_cli(tmp_pa
 
 
 def test_a_robust_models_card_states_its_method_and_attacked_numbers(tmp_path: Path) -> None:
-    from zodrive.agents.card import write_card
+    from zodrive.experiments.card import write_card
 
     folder = tmp_path / "dqn-robust"
     (folder / "eval").mkdir(parents=True)

@@ -140,7 +140,7 @@ def test_white_box_pgd_is_at_least_as_strong_as_zo_signsgd() -> None:
 def test_the_attack_flips_the_shipped_dqn_on_real_states() -> None:
     """20 real highway states (tuning seeds) and the shipped paper-budget DQN: ZO-SignSGD at
     eps 0.2 lowers its objective and makes the policy pick FASTER on most of them."""
-    from zodrive.agents.policies import load_victim
+    from zodrive.policies.resolve import load_victim
     from zodrive.envs import attack_context, load_preset, make_env
     from zodrive.seeds import TUNING_SEED
 

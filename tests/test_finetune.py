@@ -9,8 +9,8 @@ import pytest
 import torch as th
 from stable_baselines3 import DQN
 
-from zodrive.agents.finetune import calibrate, collect, init_from_model
-from zodrive.agents.training import check_init
+from zodrive.training.finetune import calibrate, collect, init_from_model
+from zodrive.training.recipes import check_init
 from zodrive.envs import load_preset, make_env
 from zodrive.errors import ZodriveError
 
@@ -132,7 +132,7 @@ def test_init_options_with_defaults() -> None:
 def test_td_policy_evaluation_keeps_the_greedy_policy_and_syncs_the_target() -> None:
     from stable_baselines3.common.logger import configure
 
-    from zodrive.agents.finetune import evaluate_td
+    from zodrive.training.finetune import evaluate_td
 
     model = _dqn(0, [32, 32], n_steps=3, gamma=0.9, learning_rate=1e-3)
     model.set_logger(configure(None, []))

@@ -10,9 +10,9 @@ import torch as th
 from stable_baselines3 import DDPG, DQN, TD3
 from stable_baselines3.common.logger import configure
 
-from zodrive.agents.actor_critic_variants import GuidedDDPG, GuidedTD3
-from zodrive.agents.finetune import collect, evaluate_critic, init_actor_from_model
-from zodrive.agents.training import algorithm_class, check_init
+from zodrive.training.actor_critic_variants import GuidedDDPG, GuidedTD3
+from zodrive.training.finetune import collect, evaluate_critic, init_actor_from_model
+from zodrive.training.recipes import algorithm_class, check_init
 from zodrive.envs import load_preset, make_env
 from zodrive.errors import ZodriveError
 
@@ -122,7 +122,7 @@ def test_actor_critic_init_options_with_defaults() -> None:
                                    {"name": "idm", "imitation": 0.4}, {"name": "rules", "imitation": -1},
                                    {"name": "rules", "imitation": "0.4"}, {"name": "rules", "error": "huber"}])
 def test_a_guide_option_an_actor_critic_would_ignore_is_an_error(guide: dict, tmp_path: Path) -> None:
-    from zodrive.agents.training import load_recipe, train
+    from zodrive.training.recipes import load_recipe, train
 
     recipe = {**load_recipe("td3"), "guide": guide, "total_timesteps": 10}
     with pytest.raises(ZodriveError, match="guide") as info:
@@ -131,7 +131,7 @@ def test_a_guide_option_an_actor_critic_would_ignore_is_an_error(guide: dict, tm
 
 
 def test_the_init_guide_is_the_init_model_s_actor_frozen(tmp_path: Path) -> None:
-    from zodrive.agents.finetune import frozen_actor
+    from zodrive.training.finetune import frozen_actor
 
     clone = _td3(1, [16, 16])
     clone.save(tmp_path / "clone.zip")
@@ -146,7 +146,7 @@ def test_the_init_guide_is_the_init_model_s_actor_frozen(tmp_path: Path) -> None
 
 
 def test_the_init_guide_needs_an_init_model(tmp_path: Path) -> None:
-    from zodrive.agents.training import load_recipe, train
+    from zodrive.training.recipes import load_recipe, train
 
     recipe = {**load_recipe("td3"), "guide": {"name": "init"}, "total_timesteps": 10}
     with pytest.raises(ZodriveError, match="needs init") as info:

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from zodrive.attacks.victim import Victim
-from zodrive.defense.distill import agreement, class_weights, dagger_rounds, fit, folded, standardized
+from zodrive.training.distill import agreement, class_weights, dagger_rounds, fit, folded, standardized
 
 
 class Walk(gym.Env):
@@ -69,7 +69,7 @@ def test_the_standardized_layer_folds_away_exactly() -> None:
 def test_dagger_aggregates_the_students_states_labelled_by_the_teacher() -> None:
     """With a student that does not learn (refit is a no-op), round 1's states are exactly the
     ones the student drives into on its seeds, and every label is the teacher's."""
-    from zodrive.agents.victims import network_victim
+    from zodrive.policies.victims import network_victim
     from zodrive.evaluation.rollout import clean_states
 
     teacher, student, env = _teacher(), _net(3), Walk()
@@ -97,9 +97,9 @@ def test_dagger_distillation_writes_a_zip_that_reproduces_its_heldout_agreement(
     """On the paper's preset (short episodes): the saved zip, read by the safe loader, agrees
     with the rules on the held-out teacher states exactly as train.json says, and those
     states come from seeds no round drove on."""
-    from zodrive.agents.loading import load_network
-    from zodrive.agents.policies import load_victim
-    from zodrive.defense.distill import distill
+    from zodrive.policies.loading import load_network
+    from zodrive.policies.resolve import load_victim
+    from zodrive.training.distill import distill
     from zodrive.envs import load_preset, make_env
     from zodrive.evaluation.rollout import clean_states
 
@@ -121,7 +121,7 @@ def test_dagger_distillation_writes_a_zip_that_reproduces_its_heldout_agreement(
 
 
 def test_dagger_is_an_error_outside_distill(tmp_path: Path) -> None:
-    from zodrive.defense.robust import robust_train
+    from zodrive.training.robust import robust_train
     from zodrive.envs import load_preset
     from zodrive.errors import ZodriveError
 
@@ -133,7 +133,7 @@ def test_dagger_is_an_error_outside_distill(tmp_path: Path) -> None:
 def test_a_teacher_that_reads_the_simulator_gets_no_noisy_copies_and_the_record_says_so(tmp_path: Path) -> None:
     """The noisy labelled copies need a teacher that can label any observation; IDM + MOBIL reads
     the simulator, so none are made, and train.json records jitter 0 (it recorded 0.5)."""
-    from zodrive.defense.distill import distill
+    from zodrive.training.distill import distill
     from zodrive.envs import load_preset
 
     preset = load_preset("discrete", ["max_episode_steps=20"])

@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from zodrive.attacks.victim import Victim
-from zodrive.defense.distill import (action_error, dagger_rounds, fit, folded, labelled_rollout, scaled_l1,
+from zodrive.training.distill import (action_error, dagger_rounds, fit, folded, labelled_rollout, scaled_l1,
                                      scaled_mse, standardized)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -156,9 +156,9 @@ def test_the_absolute_loss_keeps_the_lane_where_a_decision_is_a_minority() -> No
 
 
 def test_the_student_zip_is_a_ddpg_zip_with_only_its_actor_replaced(tmp_path: Path) -> None:
-    from zodrive.agents.loading import load_model, load_network
-    from zodrive.agents.victims import sb3_victim
-    from zodrive.defense.distill import _write_zip
+    from zodrive.policies.loading import load_model, load_network
+    from zodrive.policies.victims import sb3_victim
+    from zodrive.training.distill import _write_zip
 
     source = load_network(DDPG)
     x = torch.rand(32, 25)
@@ -199,9 +199,9 @@ def test_cloning_idm_mobil_writes_a_zip_that_reproduces_its_heldout_action_error
     """On the continuous preset (short episodes): the saved zip, read by the safe loader, is as
     far from IDM + MOBIL on the held-out teacher states as train.json says, and those states
     come from seeds no round drove on."""
-    from zodrive.agents.loading import load_network
-    from zodrive.agents.policies import make_policy_env
-    from zodrive.defense.distill import distill
+    from zodrive.policies.loading import load_network
+    from zodrive.system import make_policy_env
+    from zodrive.training.distill import distill
     from zodrive.envs import load_preset
 
     preset = load_preset("continuous", ["max_episode_steps=40"])
@@ -227,7 +227,7 @@ def test_the_labelling_teacher_replans_from_a_lane_it_was_driven_into() -> None:
     """Put the ego, centred, in the lane beside its own (as a student may drive it): IDM + MOBIL
     as evaluated steers hard back to the lane it never left in its own mind; the labelling
     teacher (`replan`) keeps the lane it is in. In its own lane both agree exactly."""
-    from zodrive.agents.baselines import IdmMobilDriver
+    from zodrive.drivers.baselines import IdmMobilDriver
     from zodrive.envs import load_preset, make_env
 
     def steering(replan: bool, shift: int) -> float:
@@ -261,8 +261,8 @@ def test_the_labelling_teacher_replans_from_a_lane_it_was_driven_into() -> None:
 def test_cloning_the_continuous_rules_jitters_their_states_and_fits_the_median(tmp_path: Path) -> None:
     """An observation-reading continuous teacher (`baseline:rules`) gets the noisy labelled copies
     and the absolute loss; the record says so, and the zip drives."""
-    from zodrive.agents.policies import load_victim
-    from zodrive.defense.distill import distill
+    from zodrive.policies.resolve import load_victim
+    from zodrive.training.distill import distill
     from zodrive.envs import load_preset
 
     preset = load_preset("continuous", ["max_episode_steps=40"])

@@ -67,7 +67,7 @@ def test_the_attacker_queries_the_defended_system_and_the_policy_sees_filtered_o
     calls: list[np.ndarray] = []
     inner = defended_victim(victim, filt)
     spied = type(inner)(query=lambda b: (calls.append(b.copy()), inner.query(b))[1], kind="discrete", obs_shape=(5, 5))
-    from zodrive.wrappers import make_attacked_env
+    from zodrive.system import make_attacked_env
 
     env = FilterWrapper(make_attacked_env(PRESET, spied, AttackSpec(steps=5, n_directions=4, eps=0.2)), filt)
     obs, info = env.reset(seed=3)

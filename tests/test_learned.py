@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from toys import FEATURES, linear_victim, observations
-from zodrive.agents.adversary import AdversaryEnv
+from zodrive.training.adversary import AdversaryEnv
 from zodrive.attacks import AttackSpec, ThreatModel
 from zodrive.attacks.learned import apply_action, free_coordinates
 from zodrive.errors import ZodriveError
@@ -232,7 +232,7 @@ def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind
     import torch
     from stable_baselines3 import PPO
 
-    from zodrive.agents.amortized import Pretrain, _mean, pretrain
+    from zodrive.training.amortized import Pretrain, _mean, pretrain
     from zodrive.attacks.objectives import make_objective
     from zodrive.attacks.victim import Victim
 
@@ -304,7 +304,7 @@ def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversar
     """`--pretrain-probe vertices`: every probe is a vertex (+-1 per coordinate, before eps and
     the mask); the second half keep most of the adversary's signs (0-30 % flipped, 15 % on
     average), the first half are random (50 % agree); "ball" probes are inside, not on vertices."""
-    from zodrive.agents.amortized import Pretrain, probe_noise
+    from zodrive.training.amortized import Pretrain, probe_noise
     from zodrive.errors import ZodriveError
 
     rng = np.random.default_rng(0)
@@ -321,7 +321,7 @@ def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversar
         Pretrain(probe="corners")
     with pytest.raises(ZodriveError, match="loss must be one of scores, decisions"):
         Pretrain(loss="argmax")
-    from zodrive.agents.amortized import check
+    from zodrive.training.amortized import check
     from zodrive.attacks.objectives import make_objective
 
     with pytest.raises(ZodriveError, match="decisions fits a discrete victim's chosen action"):
@@ -329,7 +329,7 @@ def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversar
 
 
 def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
-    from zodrive.agents.adversary import _pretrain_lines
+    from zodrive.training.adversary import _pretrain_lines
 
     rounds = [{"round": 0, "steps": 9, "victim_return": 1.5, "target_share": 0.25, "surrogate_agreement": 0.9}]
     discrete = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds})

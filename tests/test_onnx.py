@@ -10,8 +10,8 @@ import pytest
 
 pytest.importorskip("onnxruntime")
 
-from zodrive.agents.onnx_policy import onnx_victim  # noqa: E402
-from zodrive.agents.policies import load_victim  # noqa: E402
+from zodrive.policies.onnx_policy import onnx_victim  # noqa: E402
+from zodrive.policies.resolve import load_victim  # noqa: E402
 from zodrive.cli import main  # noqa: E402
 from zodrive.envs import load_preset  # noqa: E402
 
@@ -60,8 +60,8 @@ def test_other_algorithms_export_with_their_output_heads(tmp_path: Path, algo: s
     model = getattr(stable_baselines3, algo)("MlpPolicy", gym.make(env_id), seed=0, device="cpu", **options)
     model.save(tmp_path / "m")
     assert main(["export", str(tmp_path / "m.zip"), "--out", str(tmp_path / "m.onnx")]) == 0
-    from zodrive.agents.safe_load import load_policy_network
-    from zodrive.agents.victims import network_victim
+    from zodrive.policies.safe_load import load_policy_network
+    from zodrive.policies.victims import network_victim
 
     network = load_policy_network(tmp_path / "m.zip")
     reference = network_victim(network.net, network.kind, network.obs_shape)

@@ -217,7 +217,7 @@ def test_picker_train_writes_a_folder_vertex_hold_reads_and_never_overwrites_it(
 
 
 def test_a_fit_with_an_unknown_loss_is_a_one_line_error() -> None:
-    from zodrive.agents.picker import PickerFit
+    from zodrive.training.picker import PickerFit
 
     with pytest.raises(ZodriveError, match="picker loss must be one of bce, rank, not 'listwise'"):
         PickerFit(loss="listwise").check()
@@ -226,7 +226,7 @@ def test_a_fit_with_an_unknown_loss_is_a_one_line_error() -> None:
 def test_the_rank_term_is_listnets_top_one_loss_over_the_kept_vertices() -> None:
     """Hand-computed: the softmax over a state's kept vertices against the uniform distribution over
     the kept ones that work; held-out vertices and states where no kept vertex works add nothing."""
-    from zodrive.agents.picker import rank_term
+    from zodrive.training.picker import rank_term
 
     logits = torch.tensor([[0.0, float(np.log(3.0)), 0.0], [1.0, 2.0, 3.0]])
     labels = torch.tensor([[1.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
@@ -246,7 +246,7 @@ def test_the_rank_loss_puts_a_working_vertex_first_where_bce_alone_does_not() ->
     On the same data and the same 60 Adam steps, the rank loss rates a working vertex first on nearly every
     held-out state; BCE alone, which must also learn each state's threshold, is far from it (a sign slip
     in the rank term would put a failing vertex first)."""
-    from zodrive.agents.picker import _fit
+    from zodrive.training.picker import _fit
 
     states, per_state = 300, 32
     rng = np.random.default_rng(0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zodrive.agents import planner as planner_module
-from zodrive.agents.planner import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, LookAheadPlanner
+from zodrive.drivers import planner as planner_module
+from zodrive.drivers.planner import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, LookAheadPlanner
 from zodrive.cli import main
 from zodrive.envs import load_preset, make_env
 

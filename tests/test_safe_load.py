@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import torch
 
-from zodrive.agents.loading import load_model, model_file
-from zodrive.agents.policies import load_victim
-from zodrive.agents.safe_load import sha256, shipped_sums
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.loading import load_model, model_file
+from zodrive.policies.resolve import load_victim
+from zodrive.policies.safe_load import sha256, shipped_sums
+from zodrive.policies.victims import sb3_victim
 from zodrive.cli import main
 from zodrive.envs import load_preset
 
@@ -102,7 +102,7 @@ def test_full_loading_needs_trust(tmp_path: Path) -> None:
 def test_a_model_is_loaded_once_per_process_until_the_file_changes(tmp_path: Path) -> None:
     import shutil
 
-    from zodrive.agents.loading import load_network
+    from zodrive.policies.loading import load_network
 
     copy = tmp_path / "model.zip"
     shutil.copy("models/dqn/model.zip", copy)

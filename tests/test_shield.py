@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from zodrive.agents.rules import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, ObservationRules, named_rules
+from zodrive.drivers.rules import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, ObservationRules, named_rules
 from zodrive.attacks.victim import Victim
 from zodrive.defense import defense_version, parse_defense
 from zodrive.defense.shield import DEFAULT_EPS, SHIELD_RULES, VERSION, Shield, shielded_victim
@@ -305,7 +305,7 @@ def test_shield_on_a_continuous_policy_is_one_line(capsys: pytest.CaptureFixture
 
 
 def test_the_policy_env_drives_with_the_shield() -> None:
-    from zodrive.agents.policies import make_policy_env
+    from zodrive.system import make_policy_env
     from zodrive.evaluation.rollout import act
 
     victim, env = make_policy_env("baseline:rules", load_preset("discrete", ["max_episode_steps=5"]),

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zodrive.agents.policies import load_victim
-from zodrive.agents.rules import MID_CHANGE_VY, ObservationRules
+from zodrive.policies.resolve import load_victim
+from zodrive.drivers.rules import MID_CHANGE_VY, ObservationRules
 from zodrive.envs import load_preset, make_env
 from zodrive.evaluation.rollout import act
 

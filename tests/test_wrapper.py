@@ -8,7 +8,7 @@ from gymnasium.utils.env_checker import check_env
 from toys import linear_victim
 from zodrive.attacks import AttackSpec
 from zodrive.envs import load_preset, make_env
-from zodrive.wrappers import AttackWrapper, make_attacked_env
+from zodrive.system import AttackWrapper, make_attacked_env
 
 PRESET = load_preset("discrete")
 

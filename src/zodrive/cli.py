@@ -18,6 +18,7 @@ import yaml
 from zodrive.config import MODELS_ENV
 from zodrive.defense import DEFENSE_NAMES, parse_defense
 from zodrive.errors import ZodriveError
+from zodrive.system import build_attacker
 
 log = logging.getLogger("zodrive")
 
@@ -330,7 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     atk.add_argument("--pretrain-rounds", type=_positive_int,
                      help="first fit the adversary as an amortized transfer attack: rounds of driving under it, "
                           "distilling a surrogate from counted victim queries, fitting the mean action to make the "
-                          "surrogate take the target action (zodrive.agents.amortized)")
+                          "surrogate take the target action (zodrive.training.amortized)")
     atk.add_argument("--pretrain-episodes", type=_positive_int, help="episodes driven per round (default 10)")
     atk.add_argument("--pretrain-probe", choices=("ball", "vertices"),  # amortized.PROBES (torch-free here)
                      help="where the surrogate's random queries are drawn around each visited state: uniformly in "
@@ -367,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     pick = sub.add_parser("picker-train", help="fit a picker for vertex hold from counted victim queries: which "
                                                 "random vertex to feed; use it with --attack vertex-hold:DIR or vertex-check:DIR")
-    from zodrive.agents.picker import LOSSES, PickerFit  # torch-free
+    from zodrive.training.picker import LOSSES, PickerFit  # torch-free
 
     pick.add_argument("model", help="SB3 zip or model folder: the victim (fixed)")
     pick.add_argument("--eps", type=_positive_float, required=True, help="L-inf radius of the perturbation")
@@ -560,7 +561,7 @@ def cmd_env(args: argparse.Namespace) -> int:
 
 
 def cmd_baselines(args: argparse.Namespace) -> int:
-    from zodrive.agents.baselines import BASELINES, PREFIX
+    from zodrive.drivers.baselines import BASELINES, PREFIX
 
     for b in BASELINES.values():
         print(f"{PREFIX + b.name:22} {'/'.join(b.kinds):20} reads {b.reads:10} {b.description}")
@@ -568,7 +569,7 @@ def cmd_baselines(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from zodrive.agents.training import load_recipe, train
+    from zodrive.training.recipes import load_recipe, train
 
     if args.resume and args.force:
         raise ZodriveError("--resume continues the run in --out, --force replaces it: give one of them")
@@ -587,7 +588,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _preset_of(args: argparse.Namespace) -> dict[str, Any]:
     """Where `args.model` drives: --preset, --env-id (with --obs-bounds) or its action kind's preset."""
-    from zodrive.agents.policies import resolve_preset
+    from zodrive.policies.resolve import resolve_preset
 
     return resolve_preset(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
                           getattr(args, "obs_bounds", None))
@@ -596,7 +597,7 @@ def _preset_of(args: argparse.Namespace) -> dict[str, Any]:
 def _check_trust(args: argparse.Namespace) -> None:
     """--trust-model reads SB3 zips; for anything else it would be ignored: an error."""
     if getattr(args, "trust_model", False):
-        from zodrive.agents.policies import is_sb3_zip
+        from zodrive.policies.resolve import is_sb3_zip
 
         if not is_sb3_zip(str(args.model)):
             raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")
@@ -617,7 +618,7 @@ def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> 
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from zodrive.agents.policies import check_policy, load_victim, policy_ref
+    from zodrive.policies.resolve import check_policy, load_victim, policy_ref
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
 
@@ -627,9 +628,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     _check_loss(args, spec, preset)
     check_policy(args.model, preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
-        from zodrive.envs import attack_context
 
-        spec.build(load_victim(args.model, preset, trust=args.trust_model), **attack_context(preset))
+        build_attacker(spec, load_victim(args.model, preset, trust=args.trust_model), preset)
     if args.defense is not None:
         from zodrive.defense import make_defense
 
@@ -648,7 +648,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from zodrive.agents.policies import make_policy_env, policy_ref
+    from zodrive.policies.resolve import policy_ref
+    from zodrive.system import make_policy_env
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
 
@@ -685,7 +686,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_adv_train(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
-    from zodrive.defense.adversarial import adversarial_train
+    from zodrive.training.adversarial import adversarial_train
 
     preset = _preset_of(args)
     if args.no_attack and (args.attack_set or args.attack):
@@ -699,8 +700,8 @@ def cmd_adv_train(args: argparse.Namespace) -> int:
 
 
 def cmd_attack_train(args: argparse.Namespace) -> int:
-    from zodrive.agents.adversary import attack_train
-    from zodrive.agents.amortized import Pretrain, surrogate_fit
+    from zodrive.training.adversary import attack_train
+    from zodrive.training.amortized import Pretrain, surrogate_fit
 
     preset = _preset_of(args)
     given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin),
@@ -732,7 +733,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
 def cmd_picker_train(args: argparse.Namespace) -> int:
     from dataclasses import fields, replace
 
-    from zodrive.agents.picker import PickerFit, picker_train
+    from zodrive.training.picker import PickerFit, picker_train
 
     given = {f.name: getattr(args, f.name) for f in fields(PickerFit) if getattr(args, f.name) is not None}
     path = picker_train(str(args.model), _preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
@@ -747,7 +748,7 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
 
 
 def cmd_robust_train(args: argparse.Namespace) -> int:
-    from zodrive.defense.robust import robust_train
+    from zodrive.training.robust import robust_train
 
     uses = {"sa": {"kappa", "pgd_steps", "warmup", "trust_model"}, "at": {"warmup", "trust_model"},
             "distill": {"kappa", "pgd_steps", "epochs", "teacher", "dagger"}}[args.method]
@@ -768,7 +769,7 @@ def cmd_robust_train(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from zodrive.agents.onnx_policy import export_onnx
+    from zodrive.policies.onnx_policy import export_onnx
 
     _refuse_nonempty(args.out, args.force, "a file")
     print(f"wrote {export_onnx(args.model, args.out)}")
@@ -823,14 +824,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from zodrive.agents.policies import policy_label, policy_ref
+    from zodrive.policies.resolve import policy_label, policy_ref
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary, plural
     from zodrive.config import demo_model
 
     model = args.model or str(demo_model())
-    from zodrive.agents.policies import resolve_preset
+    from zodrive.policies.resolve import resolve_preset
 
     preset = resolve_preset(model, None, [])
     ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
@@ -853,10 +854,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_certify(args: argparse.Namespace) -> int:
     from zodrive.attacks.registry import ATTACKS
-    from zodrive.agents.loading import model_kind
-    from zodrive.agents.policies import is_sb3_zip
+    from zodrive.policies.loading import model_kind
+    from zodrive.policies.resolve import is_sb3_zip
     from zodrive.attacks.spec import load_attack
-    from zodrive.certify import certify_model
+    from zodrive.evaluation.certify import certify_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.runinfo import command_line, write_json
 
@@ -912,7 +913,7 @@ def cmd_curves(args: argparse.Namespace) -> int:
 
 
 def cmd_card(args: argparse.Namespace) -> int:
-    from zodrive.agents.card import write_card
+    from zodrive.experiments.card import write_card
 
     if not args.folder.is_dir():
         raise ZodriveError(f"{args.folder} is not a model folder")
@@ -934,7 +935,7 @@ def _check_model_paths(args: argparse.Namespace) -> None:
     for model in named or []:
         if model is None or str(model).startswith("baseline:"):
             continue
-        from zodrive.agents.factory import is_factory, split_factory
+        from zodrive.policies.factory import is_factory, split_factory
 
         if is_factory(str(model)):
             split_factory(str(model))  # the file must exist

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -91,3 +92,12 @@ def write_run_info(folder: Path, config: dict[str, Any], seed: int | None) -> No
         folder / "run.json",
         {"command": command_line(), "seed": seed, "versions": versions()},
     )
+
+
+def sha256(path: Path) -> str:
+    """The file's SHA-256 (hex): what results and trained folders are keyed on."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -4,7 +4,7 @@ Zhang, Chen, Boning, Hsieh. "Robust Deep Reinforcement Learning against Adversar
 Perturbations on State Observations" (SA-MDP, NeurIPS 2020) and "Robust Reinforcement
 Learning on State Observations with Learned Optimal Adversary" (SA-RL, ICLR 2021); cf. PA-AD
 (Sun et al., ICLR 2022). The attacker is itself an agent, trained (`zodrive attack-train`,
-`zodrive.agents.adversary`) to minimize the victim's return over the whole episode instead
+`zodrive.training.adversary`) to minimize the victim's return over the whole episode instead
 of pushing it toward one action now: its action a in [-1, 1]^d becomes the perturbation
 delta = eps * a on the d perturbable coordinates, projected by the same `ThreatModel` as
 every other attack (mask, eps-ball, observation box).
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -32,7 +32,6 @@ from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel, distortion
-from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
 
 NAME = "learned"
@@ -105,7 +104,7 @@ def read_meta(folder: str | Path) -> dict[str, Any]:
 def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str, preset: dict[str, Any]) -> None:
     """Refuse a trained folder (its description `meta`) made against another model file (by SHA-256) or
     preset: one line, "`what` against ..., not ...: `verb` one against this model"."""
-    from zodrive.agents.safe_load import sha256
+    from zodrive.runinfo import sha256
 
     if not Path(model_file).is_file() or sha256(Path(model_file)) != meta["victim_sha256"]:
         raise ZodriveError(f"{what} against {meta.get('victim', '?')} (SHA-256 {meta['victim_sha256'][:12]}..), "
@@ -115,18 +114,19 @@ def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_fi
                            f"evaluation's: {verb} one for this preset")
 
 
-def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None) -> None:
+def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                    defense_version: int | None = None) -> None:
     """Refuse to run an adversary against another system than the one it was trained on
-    (another model file, preset or defense): one line saying which."""
+    (another model file, preset, defense or defense version): one line saying which."""
     meta = read_meta(folder)
     check_fitted_against(meta, f"adversary {folder} was trained", "train", model_file=model_file, preset=preset)
     if meta["defense"] != defense:
         raise ZodriveError(f"adversary {folder} was trained against the victim with defense "
                            f"{meta['defense'] or 'none'}, not {defense or 'none'}: train one against this system")
-    if defense is not None and meta.get("defense_version") != defense_version(defense):
+    if defense is not None and meta.get("defense_version") != defense_version:
         raise ZodriveError(f"adversary {folder} was trained against {defense} version "
                            f"{meta.get('defense_version') or 'before versions'}, this zodrive's is version "
-                           f"{defense_version(defense)}: train one against this system")
+                           f"{defense_version}: train one against this system")
 
 
 class LearnedAdversary(Attack):
@@ -140,14 +140,16 @@ class LearnedAdversary(Attack):
     unread = ("target", "loss", "weight", "kappa", "tol", "mu", "step_size")
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
 
-    def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
+    def __init__(self, threat: ThreatModel, *, adversary: str | None = None,
+                 load_network: Callable[[str], Any] | None = None, **kwargs: Any) -> None:
+        """`load_network(folder)` reads the adversary's network (the composition point passes the
+        safe loader, `zodrive.policies.loading.load_network`); without it only the folder's
+        description is checked (an options check before any episode)."""
         super().__init__(threat, **kwargs)
         self.refuse_search_options()
         if adversary is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR "
                                "(a folder written by `zodrive attack-train`)")
-        from zodrive.agents.loading import load_network
-
         self.folder = str(adversary)
         self.meta = read_meta(self.folder)
         if threat.mode != "budgeted":
@@ -158,6 +160,9 @@ class LearnedAdversary(Attack):
                                f"{self.meta['eps']:g}, not {threat.norm} eps {threat.eps:g}: pass --eps "
                                f"{self.meta['eps']:g} or train one at this eps")
         self.victim_action = bool(self.meta["victim_action"])
+        self.net = None
+        if load_network is None:
+            return
         network = load_network(self.folder)  # the safe loader: rebuilt from plain data, nothing unpickled
         if network.kind != "continuous" or network.n_outputs != int(self.meta["action_dim"]):
             raise ZodriveError(f"{self.folder}/model.zip is not the adversary its {META_FILE} describes")
@@ -184,6 +189,9 @@ class LearnedAdversary(Attack):
     def actions(self, inputs: np.ndarray) -> np.ndarray:
         """The adversary's deterministic actions (N, d), one row per forward pass (a row's
         action does not depend on the batch it came in)."""
+        if self.net is None:
+            raise ZodriveError("attack learned was built without its network: build it through "
+                               "zodrive.system.build_attacker, which reads the folder with the safe loader")
         with torch.no_grad():
             return np.concatenate([self.net(torch.from_numpy(row[None])).numpy() for row in inputs]).astype(np.float32)
 

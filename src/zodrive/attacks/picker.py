@@ -2,11 +2,11 @@
 
 Vertex hold feeds a random vertex of the L-inf ball after every step on which the victim did not take
 the target, and holds one that works. A picker is a small MLP fitted offline, from counted training
-queries (`zodrive picker-train`, `zodrive.agents.picker`), to the probability that the victim takes
+queries (`zodrive picker-train`, `zodrive.training.picker`), to the probability that the victim takes
 the target on an observation; at attack time it ranks `candidates` random vertices by that
 probability and the best one is fed. It also drops a held vertex that it rates below `switch` at the
 new state. Scoring is local: the attack still makes one victim query per step. The surrogate only ranks random vertices
-and is never optimized against, unlike the fitted adversary's (`zodrive.agents.amortized`). That
+and is never optimized against, unlike the fitted adversary's (`zodrive.training.amortized`). That
 optimization finds the surrogate's errors on models/dqn-close (results/learned-adversary).
 
 The folder holds `picker.json` (what it was fitted against, its settings) and `picker.pt` (the MLP's
@@ -119,7 +119,7 @@ def check_picker(folder: str | Path, *, model_file: str, preset: dict[str, Any],
 def digest(folder: str | Path) -> str:
     """The SHA-256 of a picker's weights and description together: what an evaluation's key records (a
     refitted picker, or one with other `candidates` or `switch`, is another attack)."""
-    from zodrive.agents.safe_load import sha256
+    from zodrive.runinfo import sha256
 
     return "sha256:" + sha256(Path(folder) / WEIGHTS_FILE) + "+" + sha256(Path(folder) / META_FILE)
 

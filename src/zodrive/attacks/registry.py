@@ -40,6 +40,7 @@ def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
         raise ZodriveError(f"check_below (a picker's rating) applies to vertex-check:DIR, not {name}")
     if name == NAME:
         return LearnedAdversary(threat, **hyper)
+    hyper.pop("load_network", None)  # only a learned adversary reads a network from a folder
     if name not in PICKER_ATTACKS and hyper.pop("adversary", None) is not None:  # NAME:DIR reads a picker
         raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR, vertex-hold:DIR and "
                            f"vertex-check:DIR, not {name}")

@@ -61,8 +61,8 @@ class AttackSpec:
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
         """A spec from a mapping (YAML, overrides, a record), typed and range-checked by
-        `zodrive.schema` (a boolean must be a boolean, a number a number)."""
-        from zodrive.schema import validate_attack
+        `zodrive.attacks.schema` (a boolean must be a boolean, a number a number)."""
+        from zodrive.attacks.schema import validate_attack
 
         values = validate_attack({k: v for k, v in data.items() if k not in ("name", "description")}, context)
         if values["attack"] not in ATTACKS and values["attack"] != LEARNED:
@@ -114,13 +114,14 @@ class AttackSpec:
         return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,  # type: ignore[arg-type]
                            features=features, low=float(bounds[0]), high=float(bounds[1]))
 
-    def _make(self, threat: ThreatModel, steps: int) -> Attack:
+    def _make(self, threat: ThreatModel, steps: int, load_network: Any = None) -> Attack:
         return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
                            step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
                            patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
                            restarts=self.restarts, timing=self.timing, max_change=self.max_change,
                            seed=self.seed, **{k: v for k, v in (("adversary", self.adversary),
-                                                                 ("check_below", self.check_below)) if v is not None})
+                                                                 ("check_below", self.check_below),
+                                                                 ("load_network", load_network)) if v is not None})
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
@@ -156,12 +157,14 @@ class AttackSpec:
     def build(
         self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int,
         action_names: tuple[str, ...] | None = None, action_bounds: tuple[Any, Any] | None = None,
+        load_network: Any = None,
     ) -> tuple[Attack, Objective, QueryOracle]:
         """The attack, its objective for this victim, and the oracle that counts queries.
 
         `features`, `bounds` (the observation box) and `n_actions` describe the preset
         (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
-        name) and `action_bounds` the continuous action box (targets inside it)."""
+        name) and `action_bounds` the continuous action box (targets inside it); `load_network`
+        reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader)."""
         if self.access not in ("score", "decision"):
             raise ZodriveError(f"access must be score or decision, not {self.access!r}")
         if self.access == "decision":
@@ -174,7 +177,7 @@ class AttackSpec:
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps, threat.low, threat.high)
-        attack = self._make(threat, self.steps)
+        attack = self._make(threat, self.steps, load_network)
         if self.attack == LEARNED:
             attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)

@@ -2,7 +2,7 @@
 
 A `Victim` is a callable (observation batch -> outputs) plus how outputs map to the action
 taken. The attack library needs nothing else; adapters for SB3 models and torch networks
-live in `zodrive.agents.victims`.
+live in `zodrive.policies.victims`.
 """
 
 from __future__ import annotations

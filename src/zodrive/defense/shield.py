@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.agents.rules import SLOWER, ObservationRules
+from zodrive.drivers.rules import SLOWER, ObservationRules
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
@@ -90,7 +90,7 @@ class Shield:
     whose gap the room test asks for."""
 
     def __init__(self, preset: dict[str, Any], eps: float = DEFAULT_EPS, name: str = "shield") -> None:
-        from zodrive.agents.rules import named_rules
+        from zodrive.drivers.rules import named_rules
         from zodrive.envs import action_kind
 
         if action_kind(preset) != "discrete":

@@ -136,7 +136,7 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
         raise ZodriveError(f"preset {name!r}: 'highway' must be a mapping")
     if not is_highway(env_id):
         raise ZodriveError(f"preset {name!r}: {env_id} is not a highway-env scenario; give its options as env_kwargs")
-    from zodrive.schema import validate_highway
+    from zodrive.envs.schema import validate_highway
 
     cls = _env_class(env_id)
     validate_highway(hw, cls.default_config() if cls is not None else {}, f"preset {name!r}")

@@ -20,18 +20,21 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from zodrive.agents.baselines import is_baseline
-from zodrive.agents.factory import is_factory, split_factory
-from zodrive.agents.policies import check_policy, make_policy_env
+from zodrive.drivers.baselines import is_baseline
+from zodrive.policies.factory import is_factory, split_factory
+from zodrive.policies.resolve import check_policy
+from zodrive.system import make_policy_env
 from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.spec import PICKER_ATTACKS, AttackSpec
 from zodrive.compute import torch_threads
+from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
 from zodrive.runinfo import command_line, to_json, versions, write_json
 from zodrive.seeds import EVAL_SEED
+from zodrive.system import build_attacker
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +58,7 @@ class EvalJob:
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
         not), the preset, the attack (with the version of the attack engine that ran it) and
         the first seed."""
-        from zodrive.agents.safe_load import sha256
+        from zodrive.runinfo import sha256
 
         if is_baseline(self.model):
             model = self.model
@@ -74,7 +77,6 @@ class EvalJob:
             else:
                 key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
-            from zodrive.defense import defense_version
 
             key["defense"] = self.defense
             if defense_version(self.defense) is not None:
@@ -92,7 +94,7 @@ _WORKER: dict[str, Any] = {}
 def lockstep_blocker(job: EvalJob) -> str | None:
     """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
     policy that reads nothing but the observation and keeps no state between steps."""
-    from zodrive.agents.baselines import get_baseline
+    from zodrive.drivers.baselines import get_baseline
     from zodrive.defense import keeps_state
 
     if job.defense is not None and keeps_state(job.defense):
@@ -110,11 +112,11 @@ def _setup(job: EvalJob, envs: int = 1) -> None:
         victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
         _WORKER.update(job=job, victim=victim, env=env)
         return
-    from zodrive.agents.policies import load_policy
-    from zodrive.envs import attack_context, make_env
+    from zodrive.system import load_policy
+    from zodrive.envs import make_env
 
     victim = load_policy(job.model, job.preset, job.defense, trust=job.trust)  # a defense here keeps no state
-    attacker = spec.build(victim, **attack_context(job.preset)) if spec is not None else None
+    attacker = build_attacker(spec, victim, job.preset) if spec is not None else None
     _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
 
 
@@ -237,7 +239,8 @@ def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict
 
         if attack.get("adversary") is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
-        check_adversary(attack["adversary"], model_file=model, preset=preset, defense=defense)
+        check_adversary(attack["adversary"], model_file=model, preset=preset, defense=defense,
+                        defense_version=defense_version(defense) if defense is not None else None)
     if attack is not None and attack.get("attack") in PICKER_ATTACKS and attack.get("adversary") is not None:
         from zodrive.attacks.picker import check_picker
 

@@ -12,7 +12,7 @@ from zodrive.attacks.base import Attack
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.victim import Victim
-from zodrive.wrappers import AttackWrapper, attack_observations, episode_seed, step_stats
+from zodrive.system import AttackWrapper, attack_observations, episode_seed, step_stats
 
 
 @dataclass

@@ -14,8 +14,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from zodrive.agents.baselines import get_baseline, is_baseline
-from zodrive.agents.policies import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
+from zodrive.drivers.baselines import get_baseline, is_baseline
+from zodrive.policies.resolve import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob

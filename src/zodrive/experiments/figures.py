@@ -7,12 +7,13 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.agents.policies import load_victim
+from zodrive.policies.resolve import load_victim
 from zodrive.attacks.spec import AttackSpec
-from zodrive.envs import attack_context, make_env
+from zodrive.envs import make_env
 from zodrive.evaluation.rollout import clean_states
 
 from zodrive.seeds import TUNING_SEED  # states come from seeds outside the evaluation range
+from zodrive.system import build_attacker
 
 
 def _plt():
@@ -29,7 +30,7 @@ def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: in
     """Attack clean-rollout states with early stopping off; return the trace of the first success."""
     victim = load_victim(str(model), preset)
     x0 = clean_states(make_env(preset), victim, seed, max_states)
-    attack, objective, oracle = spec.build(victim, **attack_context(preset))
+    attack, objective, oracle = build_attacker(spec, victim, preset)
     result = attack.perturb(x0, oracle, objective, trace=True)
     hits = np.flatnonzero(result.success)
     if hits.size == 0:

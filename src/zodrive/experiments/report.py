@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from zodrive.agents.baselines import get_baseline
+from zodrive.drivers.baselines import get_baseline
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
 from zodrive.runinfo import write_atomic, write_json

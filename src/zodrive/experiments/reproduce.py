@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from zodrive.agents.loading import model_file
-from zodrive.agents.policies import policy_ref
+from zodrive.policies.loading import model_file
+from zodrive.policies.resolve import policy_ref
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.config import models_dir
 from zodrive.envs import load_preset
@@ -75,8 +75,8 @@ def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> 
         for name, path in paths.items():
             model_file(path)  # a clear error if a shipped model is missing
         return paths
-    from zodrive.agents.training import load_recipe, train
-    from zodrive.defense.adversarial import adversarial_train
+    from zodrive.training.recipes import load_recipe, train
+    from zodrive.training.adversarial import adversarial_train
 
     paths: dict[str, Path] = {}
     for algo in ("dqn", "ddpg"):
@@ -165,7 +165,7 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
 def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
     """The robustness grid into `out` (resumable cells, robustness.md, robustness.png); returns
     the episodes per cell (0: skipped). Quick mode: eps 0.2 and random search only."""
-    from zodrive.agents.baselines import is_baseline
+    from zodrive.drivers.baselines import is_baseline
     from zodrive.experiments.compare import compare, plot_robustness, robustness_markdown, write_tables
 
     if episodes < 1:
@@ -217,7 +217,7 @@ def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick:
 
 def render_crash(model: Path, spec: AttackSpec, fig: Path, *, tries: int) -> dict[str, Any]:
     """Fig. 3: the first attacked DQN episode (from seed 100000) that ends in a collision."""
-    from zodrive.agents.policies import make_policy_env
+    from zodrive.system import make_policy_env
     from zodrive.evaluation.video import record_episode, save_gif, save_png
 
     victim, env = make_policy_env(str(model), load_preset("discrete"), spec, render_mode="rgb_array")

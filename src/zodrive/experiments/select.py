@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from zodrive.agents.training import checkpoints
+from zodrive.training.recipes import checkpoints
 from zodrive.config import read_yaml
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError

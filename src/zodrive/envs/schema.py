@@ -1,0 +1,78 @@
+"""A preset's `highway:` mapping, typed from the scenario's own default config (a key whose
+default is an integer takes integers, and so on), with the ranges that keep highway-env from
+silently doing nonsense (a negative duration, a zero frequency)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal, Optional, Union
+
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError, create_model
+
+from zodrive.errors import ZodriveError
+from zodrive.validation import Number, one_line
+
+
+RANGES: dict[str, dict[str, float]] = {  # keys highway-env accepts nonsense for
+    "duration": {"gt": 0}, "vehicles_count": {"ge": 0}, "controlled_vehicles": {"ge": 1}, "lanes_count": {"ge": 1},
+    "simulation_frequency": {"ge": 1}, "policy_frequency": {"ge": 1}, "initial_lane_id": {"ge": 0},
+    "ego_spacing": {"gt": 0}, "vehicles_density": {"gt": 0}, "screen_width": {"ge": 1}, "screen_height": {"ge": 1},
+    "scaling": {"gt": 0}, "initial_vehicle_count": {"ge": 0}, "spawn_probability": {"ge": 0, "le": 1},
+}
+OBSERVATION_FIELDS: dict[str, Any] = {
+    "type": (Optional[str], None), "vehicles_count": (StrictInt, Field(None, ge=1)), "features": (list[str], None),
+    "features_range": (Optional[dict[str, list[float]]], None), "absolute": (StrictBool, None),
+    "normalize": (StrictBool, None), "clip": (StrictBool, None), "see_behind": (StrictBool, None),
+    "observe_intentions": (StrictBool, None), "order": (Literal["sorted", "shuffled"], None),
+    "flatten": (StrictBool, None), "include_obstacles": (StrictBool, None),
+}
+
+
+INTEGER_KEYS = {"vehicles_count", "controlled_vehicles", "lanes_count", "simulation_frequency", "policy_frequency",
+                "initial_lane_id", "screen_width", "screen_height", "initial_vehicle_count", "other_vehicles"}
+
+
+def _field_type(key: str, default: Any) -> Any:
+    """The type a highway-env key takes, from its default value (counts stay integers; other
+    integer defaults such as rewards take any number)."""
+    if isinstance(default, bool):
+        return StrictBool
+    if isinstance(default, int):
+        return StrictInt if key in INTEGER_KEYS else Number
+    if isinstance(default, float):
+        return Number
+    if isinstance(default, str):
+        return Union[str, None]
+    if isinstance(default, (list, tuple)):
+        return list
+    if isinstance(default, dict):
+        return dict
+    return Any
+
+
+def _highway_model(defaults: dict[str, Any]) -> type[BaseModel]:
+    fields: dict[str, Any] = {}
+    for key, default in defaults.items():
+        kind = _field_type(key, default)
+        rules = RANGES.get(key, {})
+        fields[key] = (Optional[kind] if default is None or kind is Any else kind, Field(None, **rules))
+    fields["observation"] = (dict, None)
+    return create_model("HighwayConfig", __config__=ConfigDict(extra="forbid", strict=True), **fields)
+
+
+_OBSERVATION = create_model("ObservationConfig", __config__=ConfigDict(extra="allow", strict=True),
+                            **OBSERVATION_FIELDS)
+
+
+def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: str) -> None:
+    """Check a preset's `highway:` mapping against the scenario's default config: types from
+    the defaults, ranges from `RANGES`, the Kinematics options typed (`OBSERVATION_FIELDS`)."""
+    try:
+        _highway_model(defaults).model_validate(config)
+    except ValidationError as exc:
+        raise ZodriveError(one_line(exc, context, set(defaults), "highway.")) from None
+    observation = config.get("observation")
+    if isinstance(observation, dict):
+        try:
+            _OBSERVATION.model_validate(observation)
+        except ValidationError as exc:
+            raise ZodriveError(one_line(exc, context, set(OBSERVATION_FIELDS), "highway.observation.")) from None

@@ -1,0 +1,145 @@
+"""Open DQN/DDPG zips and check that they fit a preset, with one-line errors.
+
+By default nothing in a model file is unpickled (see `safe_load`): the acting network is
+rebuilt from the zip's plain JSON and its weights. `load_model(..., trust=True)` uses SB3's
+full loader, which unpickles and can run code from the file: only for models you trust
+(the shipped ones are checked against `models/SHA256SUMS`), and only where an SB3 object is
+needed (adversarial training continues training one).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3 import DDPG, DQN, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from zodrive.policies.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
+from zodrive.errors import ZodriveError
+
+ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
+"""The algorithms zodrive trains, by recipe name (`algo:`); other SB3 classes load by their class name."""
+
+
+def model_file(path: str | Path) -> Path:
+    """`path` itself, or `path/model.zip` for a model folder."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "model.zip"
+    if not path.is_file():
+        raise ZodriveError(f"model file not found: {path}")
+    return path
+
+
+def inspect_model(path: Path) -> dict[str, Any]:
+    """Algorithm and space shapes stored in an SB3 zip, read without unpickling anything."""
+    return describe(*read_plain(path), path)
+
+
+def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None:
+    """Raise if the model's kind of action or its spaces do not match the preset's environment."""
+    from zodrive.envs import scenario
+
+    env = scenario(preset)
+    if info["kind"] != env.kind:
+        raise ZodriveError(
+            f"{path} is a {info.get('sb3_class', info['algo'].upper())} policy with {info['kind']} actions; "
+            f"preset {preset['name']!r} has {env.kind} actions"
+        )
+    if tuple(info["obs_shape"] or ()) != env.obs_shape:
+        raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset "
+                           f"{preset['name']!r} gives {env.obs_shape}")
+    if info["n_actions"] != env.n_actions:
+        raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {env.n_actions}")
+    if env.kind == "continuous" and info.get("action_low") is not None:
+        if (list(map(float, info["action_low"])) != list(env.action_low)
+                or list(map(float, info["action_high"])) != list(env.action_high)):
+            raise ZodriveError(f"{path} acts in [{info['action_low']}, {info['action_high']}]; preset "
+                               f"{preset['name']!r} takes actions in [{list(env.action_low)}, {list(env.action_high)}]")
+
+
+def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
+    """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it.
+
+    Loaded once per process and file version (path, size, modification time): validating a
+    command and running its episodes share one load."""
+    file = model_file(path)
+    stat = file.stat()
+    info, network = _load_network(str(file.resolve()), stat.st_size, stat.st_mtime_ns)
+    if preset is not None:
+        check_fits(info, preset, file)
+    return network
+
+
+@functools.lru_cache(maxsize=8)
+def _load_network(file: str, size: int, mtime_ns: int) -> tuple[dict[str, Any], PolicyNetwork]:
+    data, weights = read_plain(Path(file))  # the zip is read once
+    return describe(data, weights, Path(file)), network_from(data, weights, Path(file))
+
+
+def is_shipped(file: Path) -> bool:
+    """True if `file` is one of the repository's shipped models and its SHA-256 matches."""
+    from zodrive.config import models_dir
+
+    models = models_dir()
+    try:
+        relative = file.resolve().relative_to(models.resolve())
+    except ValueError:
+        return False
+    expected = shipped_sums(models).get(str(relative))
+    if expected is None:
+        return False
+    if sha256(file) != expected:
+        raise ZodriveError(f"{file} does not match its SHA-256 in {models / 'SHA256SUMS'}: it was changed")
+    return True
+
+
+def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False,
+               cls: type[BaseAlgorithm] | None = None) -> BaseAlgorithm:
+    """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model);
+    `cls` loads it as a subclass of its algorithm (e.g. `SADQN` to continue with a regularizer)."""
+    file = model_file(path)
+    info = inspect_model(file)
+    if preset is not None:
+        check_fits(info, preset, file)
+    if not (trust or is_shipped(file)):
+        raise ZodriveError(f"loading {file} with stable-baselines3 would unpickle it, which can run code from "
+                           "the file; pass --trust-model if you trust where it came from")
+    try:
+        with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
+            warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
+            algo = ALGOS.get(info["algo"]) or sb3_class(info["sb3_class"])
+            if cls is not None and not issubclass(cls, algo):
+                raise ZodriveError(f"{file} is a {info['algo'].upper()} model; {cls.__name__} cannot continue it")
+            return (cls or algo).load(file, device="cpu")
+    except ZodriveError:
+        raise
+    except Exception as exc:
+        raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
+
+
+def sb3_class(name: str) -> type[BaseAlgorithm]:
+    """An SB3 or sb3-contrib algorithm class by name (QRDQN and TQC need sb3-contrib)."""
+    import stable_baselines3
+
+    if hasattr(stable_baselines3, name):
+        return getattr(stable_baselines3, name)
+    try:
+        import sb3_contrib
+    except ImportError:
+        raise ZodriveError(f"loading a {name} with stable-baselines3 needs sb3-contrib: pip install sb3-contrib") from None
+    return getattr(sb3_contrib, name)
+
+
+def model_algo(path: str | Path) -> str:
+    """The model's family (dqn, qrdqn, ddpg, sac, ppo), read from its weights."""
+    return inspect_model(model_file(path))["algo"]
+
+
+def model_kind(path: str | Path) -> str:
+    """`discrete` or `continuous`: the model's action space, read from its plain data."""
+    return inspect_model(model_file(path))["kind"]

@@ -1,0 +1,153 @@
+"""One name for "what drives": a trained model (SB3 zip, run folder, ONNX file), a Python
+factory (`FILE.py:NAME`) or `baseline:NAME`.
+
+Every command that accepts a model goes through here, so a baseline can stand wherever a
+model can: `policy_kind` picks the default preset, `policy_label` names it in tables,
+`policy_ref` is what an evaluation is keyed on, and `make_policy_env` builds the victim with
+its (optionally attacked) environment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+
+from zodrive.drivers import baselines as bl
+from zodrive.policies.factory import is_factory
+from zodrive.attacks.victim import Victim
+from zodrive.envs import action_kind, n_actions, observation_shape
+from zodrive.errors import ZodriveError
+
+
+def policy_kind(model: str) -> str:
+    """`discrete` or `continuous`: the preset kind the policy drives by default."""
+    if bl.is_baseline(model):
+        return bl.get_baseline(model).kinds[0]
+    if is_factory(model):
+        raise ZodriveError(f"{model} is Python code: say where it drives with --preset or --env-id")
+    from zodrive.policies.onnx_policy import is_onnx, onnx_metadata
+
+    if is_onnx(model):
+        return onnx_metadata(Path(model))["kind"]
+    from zodrive.policies.loading import model_kind
+
+    return model_kind(model)
+
+
+def has_gradients(model: str) -> bool:
+    """Whether white-box attacks can differentiate the policy (SB3 networks and torch
+    factories; not baselines or ONNX)."""
+    if bl.is_baseline(model):
+        return False
+    from zodrive.policies.onnx_policy import is_onnx
+
+    return not is_onnx(model)
+
+
+def policy_ref(model: str) -> str:
+    """What identifies the policy in results: `baseline:NAME`, the model file's path, or
+    `FILE.py:NAME` with the file's path resolved."""
+    if bl.is_baseline(model):
+        return f"{bl.PREFIX}{bl.get_baseline(model).name}"
+    if is_factory(model):
+        from zodrive.policies.factory import split_factory
+
+        file, name = split_factory(model)
+        return f"{file}:{name}"
+    from zodrive.policies.loading import model_file
+
+    return str(model_file(model))
+
+
+def policy_label(model: str) -> str:
+    """A short name for tables: `baseline:NAME`, the run folder's name, the zip's stem, or
+    `STEM:NAME` for a Python factory."""
+    if bl.is_baseline(model):
+        return policy_ref(model)
+    if is_factory(model):
+        file, _, name = str(model).rpartition(":")
+        return f"{Path(file).stem}:{name}"
+    path = Path(model)
+    return path.name if path.is_dir() else path.stem
+
+
+def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
+                   obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Where `model` drives: `preset`, `env_id` (any gymnasium id), or the paper's preset of its
+    action kind (discrete / continuous)."""
+    from zodrive.envs import gym_preset, load_preset
+
+    if env_id is not None:
+        if preset is not None:
+            raise ZodriveError("--preset and --env-id both say where the policy drives: give one")
+        return gym_preset(env_id, env_set, obs_bounds)
+    if obs_bounds is not None:
+        raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
+    return load_preset(preset or policy_kind(model), env_set)
+
+
+def is_sb3_zip(model: str) -> bool:
+    """Whether `model` names an SB3 zip or model folder (not a baseline, ONNX file or Python factory)."""
+    from zodrive.policies.onnx_policy import is_onnx
+
+    return not (bl.is_baseline(model) or is_onnx(model) or is_factory(model))
+
+
+def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) -> None:
+    """Raise a one-line error if `model` cannot drive `preset` (or be attacked there)."""
+    if bl.is_baseline(model):
+        baseline = bl.get_baseline(model)
+        bl.check_baseline_fits(baseline, preset)
+        if attacked and baseline.reads == "simulator":
+            raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator, not the observation: "
+                               "an observation attack cannot reach it")
+        if attacked and baseline.reads == "nothing":
+            raise ZodriveError(f"{bl.PREFIX}{baseline.name} takes one constant action whatever it observes: an "
+                               "observation attack cannot change it (evaluate it clean: it is the floor)")
+        if baseline.reads == "observation":
+            load_victim(model, preset)  # the rules check the observation they are given
+        return
+    if is_factory(model):
+        load_victim(model, preset)  # builds the policy and checks its outputs against the scenario
+        return
+    from zodrive.policies.loading import check_fits, inspect_model, model_file
+    from zodrive.policies.onnx_policy import is_onnx, onnx_metadata
+
+    file = model_file(model)
+    check_fits(onnx_metadata(file) if is_onnx(file) else inspect_model(file), preset, file)
+
+
+def load_victim(model: str, preset: dict[str, Any], *, trust: bool = False) -> Victim:
+    """The black-box victim of an observation-reading policy (a model, a Python factory, or an
+    observation-reading or constant baseline). `trust` reads an SB3 zip with SB3's own loader
+    (unpickles: only for files you trust)."""
+    kind = action_kind(preset)
+    if bl.is_baseline(model):
+        baseline = bl.get_baseline(model)
+        bl.check_baseline_fits(baseline, preset)
+        if baseline.reads == "simulator":
+            raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator; it needs its environment "
+                               "(use make_policy_env)")
+        if baseline.reads == "observation":
+            from zodrive.drivers.rules import rules_victim
+
+            return rules_victim(preset, observation_shape(preset), n_actions(preset),
+                                baseline.name.partition("@")[0], baseline.eps or 0.0)  # NAME@EPS: the budget is eps
+        from zodrive.envs import action_names
+
+        return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset), action_names(preset))
+    from zodrive.policies.loading import load_model, load_network
+    from zodrive.policies.onnx_policy import is_onnx, onnx_victim
+    from zodrive.policies.victims import network_victim, sb3_victim
+
+    if is_factory(model):
+        from zodrive.policies.factory import factory_victim
+
+        return factory_victim(model, preset)
+    if is_onnx(model):
+        return onnx_victim(Path(model), preset)
+    if trust:
+        return sb3_victim(load_model(model, preset, trust=True))
+    network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
+    return network_victim(network.net, kind, network.obs_shape)

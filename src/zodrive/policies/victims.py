@@ -1,0 +1,118 @@
+"""Adapters that turn models into `Victim`s (query functions) for the attack library.
+
+Attacks only ever see a `zodrive.attacks.victim.Victim`; SB3 / sb3-contrib models, torch
+networks and plain callables are wrapped here. The outputs are what the policy acts on
+(see `zodrive.policies.safe_load`): scores of discrete actions, or the continuous action.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Literal
+
+import numpy as np
+import torch
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from zodrive.policies.safe_load import unscale
+from zodrive.attacks.victim import Victim
+
+
+def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
+    """A torch network over flattened observations (scores or action) as a victim."""
+    flat = int(np.prod(obs_shape))
+    net.eval()
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        batch = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)).reshape(-1, flat)
+        with torch.inference_mode():
+            return net(batch).numpy()
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return net(obs.reshape(-1, flat).float())
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
+
+
+def module_victim(module: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
+    """A user's torch module over observation batches (B, *obs_shape) as a victim (white-box
+    attacks may differentiate it)."""
+    module.eval()
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return module(obs.reshape(-1, *obs_shape).float())
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            out = forward(torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)))
+        return np.asarray(out.detach().cpu().numpy(), dtype=np.float32).reshape(len(obs), -1)
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
+
+
+def callable_victim(fn: Callable[[np.ndarray], Any], kind: Literal["discrete", "continuous"],
+                    obs_shape: tuple[int, ...]) -> Victim:
+    """Any numpy callable (observation batch -> scores or actions) as a black-box victim."""
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        batch = np.ascontiguousarray(obs, dtype=np.float32).reshape(-1, *obs_shape)
+        return np.asarray(fn(batch), dtype=np.float32).reshape(len(batch), -1)
+
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape))
+
+
+def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torch.Tensor], str]:
+    """What the loaded SB3 policy acts on, as a torch function of an observation batch."""
+    from stable_baselines3 import DQN, TD3, SAC
+    from stable_baselines3.common.policies import ActorCriticPolicy
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
+    policy = model.policy
+    space = model.action_space
+    if isinstance(model, DQN):  # the MLP after the flatten extractor: same arithmetic, less Python per query
+        net = policy.q_net
+        head = net.q_net if isinstance(net.features_extractor, FlattenExtractor) else None
+        return (lambda x: head(x.flatten(1))) if head is not None else net, "discrete"
+    name = type(model).__name__
+    if name == "QRDQN":
+        net = policy.quantile_net
+        return (lambda x: net(x).mean(dim=1)), "discrete"  # (B, quantiles, actions) -> mean per action
+    low = torch.as_tensor(getattr(space, "low", np.zeros(0)), dtype=torch.float32)
+    high = torch.as_tensor(getattr(space, "high", np.zeros(0)), dtype=torch.float32)
+    identity = bool(low.numel()) and bool(torch.all(low == -1.0) and torch.all(high == 1.0))
+
+    def squashed(action: torch.Tensor) -> torch.Tensor:
+        return action if identity else unscale(action, low, high)
+
+    if isinstance(model, TD3):  # DDPG is a TD3 subclass; the actor's MLP ends in tanh
+        actor = policy.actor
+        mu = actor.mu if isinstance(actor.features_extractor, FlattenExtractor) else None
+        return (lambda x: squashed(mu(x.flatten(1)) if mu is not None else actor(x))), "continuous"
+    if isinstance(model, SAC) or name == "TQC":
+        return (lambda x: squashed(policy.actor(x, deterministic=True))), "continuous"
+    if isinstance(policy, ActorCriticPolicy):
+        def forward(x: torch.Tensor) -> torch.Tensor:
+            features = policy.extract_features(x, policy.pi_features_extractor)
+            out = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            if not hasattr(space, "n"):
+                out = squashed(torch.tanh(out)) if policy.squash_output else torch.clamp(out, low, high)
+            return out
+
+        return forward, "discrete" if hasattr(space, "n") else "continuous"
+    raise TypeError(f"no victim adapter for {name}")
+
+
+def sb3_victim(model: BaseAlgorithm) -> Victim:
+    """Wrap a loaded SB3 / sb3-contrib model as a black-box victim: a live view of its
+    networks (training them changes the victim)."""
+    obs_shape = tuple(model.observation_space.shape)
+    model.policy.set_training_mode(False)
+    forward_fn, kind = _acting_forward(model)
+
+    def forward(obs: torch.Tensor) -> torch.Tensor:
+        return forward_fn(obs.reshape(-1, *obs_shape).float())
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            return forward(torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))).numpy()
+
+    return Victim(query=query, kind=kind, obs_shape=obs_shape, differentiable=forward)

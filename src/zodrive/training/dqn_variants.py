@@ -1,0 +1,170 @@
+"""SB3's DQN with two opt-in changes to its loss, sharing one training loop.
+
+- `DoubleDQN`: the Double-DQN target (van Hasselt, Guez & Silver, AAAI 2016): the online
+  network picks the next action, the target network values it. Recipes opt in with
+  `double_q: true`.
+- `SADQN`: the state-adversarial regularizer of SA-DQN (Zhang, Chen, Xiao, Li, Boning,
+  Hsieh, "Robustness of Deep Reinforcement Learning against Adversarial Perturbations on
+  State Observations", NeurIPS 2020): for every state of the batch,
+  R = max(max_{x' in B(x, eps)} [max_{a != a*} Q(x', a) - Q(x', a*)], -c), a* = argmax Q(x),
+  the inner max found by `pgd_steps` signed-gradient steps inside the threat model (box,
+  frozen presence), added to the TD loss with weight `kappa`; eps ramps up linearly over the
+  first `eps_ramp` of training. Costs `pgd_steps` extra forward+backward passes per update.
+
+Everything else (n-step replay, Huber loss, gradient clipping, target updates,
+exploration) is SB3's DQN unchanged; the saved zip is an ordinary SB3 DQN zip.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from stable_baselines3 import DQN
+from torch.nn import functional as F
+
+from zodrive.training.state_adversarial import SAMixin
+from zodrive.attacks.threat import worst_in_ball
+
+
+class LossHookDQN(DQN):
+    """SB3's DQN `train()` with two hooks: the TD target and an extra loss term."""
+
+    def td_target(self, data: Any, discounts: Any) -> th.Tensor:
+        with th.no_grad():
+            next_q = self.q_net_target(data.next_observations).max(dim=1, keepdim=True)[0]
+            return data.rewards + (1 - data.dones) * discounts * next_q
+
+    def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
+        return None
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        losses, extras = [], []
+        for _ in range(gradient_steps):
+            data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
+            discounts = data.discounts if data.discounts is not None else self.gamma  # n-step aware
+            target = self.td_target(data, discounts)
+            current = th.gather(self.q_net(data.observations), 1, data.actions.long())
+            loss = F.smooth_l1_loss(current, target)
+            losses.append(loss.item())
+            extra = self.extra_loss(data.observations)
+            if extra is not None:
+                extras.append(extra.item())
+                loss = loss + extra
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", np.mean(losses))
+        if extras:
+            self.logger.record("train/regularizer", np.mean(extras))
+
+
+class DoubleDQN(LossHookDQN):
+    def td_target(self, data: Any, discounts: Any) -> th.Tensor:
+        with th.no_grad():
+            next_actions = self.q_net(data.next_observations).argmax(dim=1, keepdim=True)
+            next_q = th.gather(self.q_net_target(data.next_observations), 1, next_actions)
+            return data.rewards + (1 - data.dones) * discounts * next_q
+
+
+class SADQN(SAMixin, LossHookDQN):
+    """DQN + the SA-DQN regularizer; set `robust` (see `configure_robust`) before learning."""
+
+    def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
+        r = self.robust
+        eps = self.current_eps()
+        if eps <= 0:
+            return None
+        x0 = observations.detach()
+        mask = self.ball_mask(x0)
+        with th.no_grad():
+            best = self.q_net(x0).argmax(dim=1, keepdim=True)
+        others = th.ones(x0.shape[0], self.action_space.n, dtype=th.bool).scatter_(1, best, False)
+
+        def margin(x: th.Tensor) -> th.Tensor:  # > 0: some other action beats a* at x
+            q = self.q_net(x)
+            return q.masked_fill(~others, float("-inf")).amax(dim=1) - q.gather(1, best).squeeze(1)
+
+        x = worst_in_ball(margin, x0, eps, r["pgd_steps"], mask, r["low"], r["high"])  # maximize the margin
+        reg = th.clamp(margin(x), min=-r["hinge"]).mean()  # gradient flows into the network only
+        return r["kappa"] * reg
+
+
+class GuidedDQN(LossHookDQN):
+    """DQN whose exploration is guided by a driver that reads the same observation.
+
+    With probability `rate(t)` the behaviour action is the guide's (`baseline:rules`),
+    decaying linearly from `start` to 0 over the first `fraction` of training; otherwise SB3's
+    epsilon-greedy (or, before `learning_starts`, uniform) action. The learner is unchanged:
+    off-policy Q-learning on the collected transitions (n-step returns then carry the guide's
+    good returns early on). The guide decides which transitions get collected, as
+    demonstrations do in DQfD (Hester et al., AAAI 2018); with `imitation` > 0 DQfD's
+    large-margin loss on the guide's labels is added to the TD loss (`extra_loss`). The saved
+    zip is an ordinary SB3 DQN zip; the guide is not part of the policy.
+    """
+
+    guide: Any = None
+    guide_schedule: tuple[float, int] = (0.0, 1)
+    margin: tuple[float, float] = (0.0, 0.8)  # (weight, margin) of the large-margin imitation loss
+
+    def configure_guide(self, guide: Any, start: float, steps: int, imitation: float = 0.0,
+                        margin: float = 0.8) -> None:
+        self.guide, self.guide_schedule = guide, (float(start), max(int(steps), 1))
+        self.margin = (float(imitation), float(margin))
+
+    def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
+        """DQfD's large-margin loss (Hester et al. 2018), with the guide labelling every sampled
+        state: weight * mean(max_a [Q(s, a) + margin * (a != a_G)] - Q(s, a_G)), a_G = guide(s).
+        It keeps the guide's action ahead by the margin unless the TD loss shows a better one."""
+        weight, margin = self.margin
+        if weight <= 0 or self.guide is None:
+            return None
+        labels = th.as_tensor(np.asarray(self.guide(observations.detach().cpu().numpy())), dtype=th.long,
+                              device=observations.device)[:, None]
+        q = self.q_net(observations)
+        bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
+        return weight * ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
+
+    def add_demonstrations(self, env: Any, episodes: int, seed: int) -> dict[str, float]:
+        """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the guide and put
+        every transition in the replay buffer, as DQfD's demonstration data (n-step returns are
+        computed from it like from any other transitions). Returns the demonstrations' mean return."""
+        returns = []
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done = 0.0, False
+            while not done:
+                action = int(np.asarray(self.guide(obs[None]))[0])
+                next_obs, reward, terminated, truncated, _ = env.step(action)
+                done = terminated or truncated
+                self.replay_buffer.add(obs[None], next_obs[None], np.array([[action]]), np.array([reward]),  # type: ignore[union-attr]
+                                       np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
+                obs, total = next_obs, total + float(reward)
+            returns.append(total)
+        return {"episodes": episodes, "transitions": int(self.replay_buffer.size()),  # type: ignore[union-attr]
+                "mean_return": float(np.mean(returns))}
+
+    def pretrain(self, gradient_steps: int, batch_size: int, sync_every: int = 2500) -> None:
+        """DQfD's pre-training phase: TD + large-margin updates on the buffer before the first
+        environment step; the target network copies the online one every `sync_every` updates."""
+        while gradient_steps > 0:
+            chunk = min(sync_every, gradient_steps)
+            self.train(chunk, batch_size)
+            self.q_net_target.load_state_dict(self.q_net.state_dict())
+            gradient_steps -= chunk
+
+    def guide_rate(self) -> float:
+        start, steps = self.guide_schedule
+        return start * max(0.0, 1.0 - self.num_timesteps / steps)
+
+    def _sample_action(self, learning_starts: int, action_noise: Any = None, n_envs: int = 1) -> Any:
+        if self.guide is not None and np.random.rand() < self.guide_rate():
+            action = np.asarray(self.guide(self._last_obs), dtype=np.int64).reshape(n_envs)
+            return action, action
+        return super()._sample_action(learning_starts, action_noise, n_envs)

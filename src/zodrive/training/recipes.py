@@ -1,0 +1,404 @@
+"""Train DQN / DDPG agents with stable-baselines3 from a recipe config."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import logging
+import shutil
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from zodrive.compute import one_torch_thread
+from zodrive.config import check_keys, load_config, read_yaml
+from zodrive.envs import action_kind, load_preset, make_env
+from zodrive.errors import ZodriveError
+from zodrive.policies.loading import ALGOS
+from zodrive.runinfo import command_line, write_atomic, write_json, write_run_info
+
+log = logging.getLogger(__name__)
+
+KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
+ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
+RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
+               "double_q", "guide", "init", "calibrate"}
+GUIDES = ("rules", "close-rules")  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
+DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
+CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
+CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
+GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation", "error"}  # DDPG / TD3: TD3+BC's imitation term only
+GUIDES_ACTOR_CRITIC = ("rules", "init")  # the continuous rules, or the recipe's init actor kept frozen
+
+
+def algorithm_class(recipe: dict[str, Any]):
+    """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target) or DDPG."""
+    if recipe.get("double_q"):
+        if recipe["algo"] != "dqn" or recipe.get("guide"):
+            raise ZodriveError("double_q applies to dqn recipes without a guide only")
+        from zodrive.training.dqn_variants import DoubleDQN
+
+        return DoubleDQN
+    if recipe.get("guide") or (recipe["algo"] in ACTOR_CRITIC and recipe.get("init")):
+        # an actor-critic started from a clone needs GuidedTD3's critic-only updates even without a guide
+        from zodrive.training.actor_critic_variants import GuidedDDPG, GuidedTD3
+        from zodrive.training.dqn_variants import GuidedDQN
+
+        return {"dqn": GuidedDQN, "ddpg": GuidedDDPG, "td3": GuidedTD3}[recipe["algo"]]
+    return ALGOS[recipe["algo"]]
+
+
+def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
+    """A training recipe (algorithm, preset, step budget, hyperparameters)."""
+    recipe = load_config(name, "recipes", overrides)
+    algo = recipe.get("algo")
+    if algo not in ALGOS:
+        raise ZodriveError(f"recipe {name!r}: algo must be one of {sorted(ALGOS)}, not {algo!r}")
+    check_keys(recipe, RECIPE_KEYS, f"recipe {name!r}")
+    params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
+                                                                        "verbose", "tensorboard_log", "action_noise"}
+    check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
+    from zodrive.training.schema import validate_hyperparameters
+
+    validate_hyperparameters(recipe.get("hyperparameters") or {}, f"recipe {name!r}")
+    steps = recipe.get("total_timesteps")
+    if not isinstance(steps, int) or steps < 1:
+        raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
+    check_init(recipe, f"recipe {name!r}")
+    return recipe
+
+
+def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
+    """Check a recipe's `init: MODEL` and `calibrate:` (start from a cloned network, then evaluate
+    its policy; `finetune`): for a DQN `{episodes, epsilon, ridge, min_scale, td_steps}`, for a DDPG /
+    TD3 `{episodes, td_steps}` (critic-only updates). Returns the calibration settings with
+    defaults, or None. Options that would be ignored are errors."""
+    init, spec = recipe.get("init"), recipe.get("calibrate")
+    if init is None:
+        if spec is not None:
+            raise ZodriveError(f"{context}: calibrate needs init: MODEL (it calibrates the values of an initial network)")
+        return None
+    if recipe.get("double_q"):
+        raise ZodriveError(f"{context}: init applies to recipes without double_q only")
+    if not isinstance(init, str) or not init:
+        raise ZodriveError(f"{context}: init must be a model path (a zip or model folder), not {init!r}")
+    if recipe["algo"] in ACTOR_CRITIC:
+        return _check_calibrate(spec, CALIBRATE_KEYS_ACTOR_CRITIC, context)
+    guide = recipe.get("guide") or {}
+    if isinstance(guide, dict) and (guide.get("demonstrations") or guide.get("pretrain_steps")):
+        raise ZodriveError(f"{context}: init with guide demonstrations/pretrain_steps is not supported "
+                           "(the calibration replaces DQfD's pre-training)")
+    settings = _check_calibrate(spec, CALIBRATE_KEYS, context)
+    if settings is not None and not (0 <= settings["epsilon"] <= 1 and settings["ridge"] > 0
+                                     and settings["min_scale"] > 0):
+        raise ZodriveError(f"{context}: calibrate needs epsilon in [0, 1], ridge > 0 and min_scale > 0")
+    return settings
+
+
+def _check_calibrate(spec: Any, defaults: dict[str, float], context: str) -> dict[str, float] | None:
+    """`calibrate:` with `defaults` filled in: known keys, numbers, integer episodes >= 1 and td_steps >= 0."""
+    if spec is None:
+        return None
+    if not isinstance(spec, dict) or set(spec) - set(defaults):
+        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(defaults)}}}, not {spec!r}")
+    settings = {**defaults, **spec}
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in settings.values()):
+        raise ZodriveError(f"{context}: calibrate values must be numbers, not {spec!r}")
+    if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1
+            and isinstance(settings["td_steps"], int) and settings["td_steps"] >= 0):
+        raise ZodriveError(f"{context}: calibrate needs episodes >= 1 and td_steps >= 0 (integers)")
+    return settings
+
+
+def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
+    """Load `init` into the online and target networks; with `calibrate`, let it drive and
+    evaluate its policy (`finetune.collect`, `finetune.calibrate`). Returns what was done."""
+    if recipe.get("init") is None:
+        return None
+    from zodrive.training import finetune
+
+    actor_critic = recipe["algo"] in ACTOR_CRITIC
+    init = finetune.init_actor_from_model if actor_critic else finetune.init_from_model
+    done: dict[str, Any] = {"init": init(model, recipe["init"])}
+    settings = check_init(recipe, "recipe")
+    if settings is not None:
+        start = time.perf_counter()
+        env = make_env(preset)
+        done["collect"] = finetune.collect(model, env, int(settings["episodes"]), DEMO_SEEDS + 1000 * seed,
+                                           float(settings.get("epsilon", 0.0)))
+        env.close()
+        if actor_critic:
+            done["evaluate_critic"] = finetune.evaluate_critic(model, int(settings["td_steps"]), int(model.batch_size))
+            done["wall_time_s"] = round(time.perf_counter() - start, 1)
+            log.info("critic of %s evaluated: %s", recipe["init"], done["evaluate_critic"])
+            return done
+        done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
+        if settings["td_steps"]:
+            margin = float((recipe.get("guide") or {}).get("margin", 0.8))
+            done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
+        done["wall_time_s"] = round(time.perf_counter() - start, 1)
+        log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
+    return done
+
+
+def _actor_critic_guide(recipe: dict[str, Any], model: Any, preset: dict[str, Any]) -> tuple[Any, float, str]:
+    """A DDPG / TD3 recipe's `guide: {name: init|rules, imitation: W, error: squared|absolute}` as
+    (guide function, weight, error): the init model's actor kept frozen, or the continuous rules."""
+    from zodrive.training.actor_critic_variants import IMITATION_ERRORS
+
+    spec = recipe["guide"]
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES_ACTOR_CRITIC or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
+        raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES_ACTOR_CRITIC)}, "
+                           f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), not {spec!r}")
+    weight, error = spec.get("imitation", 0.4), spec.get("error", "squared")
+    if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
+        raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
+    if error not in IMITATION_ERRORS:
+        raise ZodriveError(f"recipe guide: error must be one of {', '.join(IMITATION_ERRORS)}, not {error!r}")
+    if spec["name"] == "rules":
+        from zodrive.drivers.rules import ContinuousRules
+
+        return ContinuousRules(preset).controls, float(weight), error
+    if recipe.get("init") is None:
+        raise ZodriveError("recipe guide: name init needs init: MODEL (the actor it keeps the learner near)")
+    from zodrive.training.finetune import frozen_actor
+
+    return frozen_actor(model, recipe["init"]), float(weight), error
+
+
+def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
+    """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F, ...}`,
+    a GuidedTD3 / GuidedDDPG from `guide: {name: init|rules, imitation: W, error: E}` (TD3+BC's term)."""
+    if recipe["algo"] in ACTOR_CRITIC:
+        model.configure_guide(*_actor_critic_guide(recipe, model, preset))
+        return
+    spec = recipe["guide"]
+    keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
+        raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
+                           f"imitation: W, margin: M, demonstrations: EPISODES, pretrain_steps: N}}, not {spec!r}")
+    start, fraction = float(spec.get("start", 0.5)), float(spec.get("fraction", 0.3))
+    imitation, margin = float(spec.get("imitation", 0.0)), float(spec.get("margin", 0.8))
+    if not (0 <= start <= 1 and 0 < fraction <= 1 and imitation >= 0 and margin >= 0
+            and int(spec.get("demonstrations", 0)) >= 0 and int(spec.get("pretrain_steps", 0)) >= 0):
+        raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation, margin, demonstrations "
+                           "and pretrain_steps >= 0")
+    from zodrive.drivers.rules import named_rules
+
+    rules = named_rules(preset, spec["name"])
+    model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])),
+                          imitation=imitation, margin=margin)
+
+
+def _pretrain_from_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
+    """DQfD's start (Hester et al. 2018): the guide's episodes into the replay buffer, then
+    `pretrain_steps` TD + margin updates on them before the agent's first step. Returns what was
+    done (episodes, transitions, the guide's mean return, minutes), or None if the recipe asks none."""
+    spec = recipe.get("guide") or {}
+    episodes, steps = int(spec.get("demonstrations", 0)), int(spec.get("pretrain_steps", 0))
+    if not episodes:
+        return None
+    start = time.perf_counter()
+    env = make_env(preset)
+    stats = model.add_demonstrations(env, episodes, DEMO_SEEDS + 1000 * seed)
+    env.close()
+    model.pretrain(steps, int(model.batch_size))
+    return {**stats, "pretrain_steps": steps, "seeds_from": DEMO_SEEDS + 1000 * seed,
+            "wall_time_s": round(time.perf_counter() - start, 1)}
+
+
+def action_noise(spec: dict[str, Any] | None, n_actions: int):
+    """SB3 action noise from `{type, sigma}`; DDPG explores with it."""
+    if not spec:
+        return None
+    mean, sigma = np.zeros(n_actions), float(spec.get("sigma", 0.1)) * np.ones(n_actions)
+    kind = spec.get("type", "normal")
+    if kind == "normal":
+        return NormalActionNoise(mean, sigma)
+    if kind == "ornstein-uhlenbeck":
+        return OrnsteinUhlenbeckActionNoise(mean, sigma)
+    raise ZodriveError(f"unknown action noise type {kind!r} (normal, ornstein-uhlenbeck)")
+
+
+def make_training_env(preset: dict[str, Any], seed: int, log_dir: Path, *, append: bool = False) -> DummyVecEnv:
+    """One monitored environment; its episode returns become the training curve."""
+
+    def build():
+        return Monitor(make_env(preset), filename=str(log_dir / "monitor"), override_existing=not append)
+
+    venv = DummyVecEnv([build])
+    venv.seed(seed)
+    return venv
+
+
+def checkpoints(out: Path, algo: str) -> list[tuple[int, Path]]:
+    """Every `checkpoints/{algo}_{N}_steps.zip` of a run folder as (N, path), oldest first."""
+    found = []
+    for path in (out / "checkpoints").glob(f"{algo}_*_steps.zip"):
+        try:
+            found.append((int(path.stem.split("_")[1]), path))
+        except (IndexError, ValueError):
+            continue
+    return sorted(found)
+
+
+def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
+    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
+    found = checkpoints(out, algo)
+    if not found:
+        return None
+    steps, path = found[-1]
+    return path, steps
+
+
+def _without_budget(recipe: Any) -> Any:
+    return {k: v for k, v in recipe.items() if k != "total_timesteps"} if isinstance(recipe, dict) else recipe
+
+
+def check_run_folder(out: Path, *, resume: bool, force: bool, resumable: bool = True) -> None:
+    """Refuse to write a run into a folder that already holds one, unless told what to do."""
+    if resume or force or not out.exists() or not any(out.iterdir()):
+        return
+    how = "use --resume to continue it, --force to overwrite it" if resumable else "use --force to overwrite it"
+    raise ZodriveError(f"{out} already holds a run; {how}, or choose another --out")
+
+
+@one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
+def train(
+    recipe: dict[str, Any],
+    out: Path,
+    *,
+    seed: int | None = None,
+    preset_overrides: list[str] | None = None,
+    progress_bar: bool = True,
+    tensorboard: bool = False,
+    resume: bool = False,
+    force: bool = False,
+) -> Path:
+    """Train per `recipe` into run folder `out`; returns the saved model path.
+
+    Checkpoints (model and replay buffer) are written every `checkpoint_every` steps; with
+    `resume`, training continues from the newest one with the run's own recipe and seed (the
+    environment restarts from a fresh episode, so a resumed run is not bit-identical to an
+    uninterrupted one)."""
+    check_run_folder(out, resume=resume, force=force)
+    if resume and not (out / "config.yaml").is_file():
+        raise ZodriveError(f"nothing to resume in {out}: it holds no run (drop --resume to start one)")
+    previous = read_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
+    if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
+        raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "
+                           "(only --steps may change, to train it longer)")
+    seed = int(recipe.get("seed", 0) if seed is None else seed)
+    if previous is not None:
+        seed = int(json.loads((out / "run.json").read_text())["seed"])
+    algo = recipe["algo"]
+    preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
+    if action_kind(preset) != KIND_OF_ALGO[algo]:
+        raise ZodriveError(f"{algo} needs a {KIND_OF_ALGO[algo]} preset, not {preset['name']!r}")
+    fresh = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
+                      tensorboard=tensorboard)
+    except (ZodriveError, TypeError, ValueError, AssertionError) as exc:  # a recipe option (guide, init) or SB3
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
+        if isinstance(exc, ZodriveError):
+            raise
+        raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
+
+
+def check_n_step_buffer(model: Any, recipe: dict[str, Any]) -> None:
+    """A resumed off-policy run keeps the recipe's n-step returns, or a one-line error. On a load SB3 (2.6+)
+    warns that `n_steps` "is ignored because a custom replay_buffer_class was passed": the class is the
+    `NStepReplayBuffer` it chose itself when the run started, and the saved buffer arguments still carry
+    `n_steps`, so the returns stay n-step. This checks that instead of trusting the warning."""
+    if not hasattr(model, "replay_buffer_kwargs"):  # on-policy (PPO): n_steps is the rollout's length
+        return
+    want = int((recipe.get("hyperparameters") or {}).get("n_steps", 1))
+    got = int(getattr(model.replay_buffer, "n_steps", 1))
+    if got != want:
+        raise ZodriveError(f"the checkpoint resumes with {got}-step returns, the recipe says n_steps: {want}")
+
+
+def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
+           previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool) -> Path:
+    algo = recipe["algo"]
+    checkpoint = latest_checkpoint(out, algo) if resume else None
+    if previous is None:
+        write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
+    else:  # the run folder keeps the command that started it and lists those that continued it
+        run = json.loads((out / "run.json").read_text())
+        run["continued_by"] = [*run.get("continued_by", []), command_line()]
+        write_json(out / "run.json", run)
+        write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
+
+    env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,
+                            append=checkpoint is not None)
+    if checkpoint is None:
+        kwargs = dict(recipe.get("hyperparameters") or {})
+        if algo in ACTOR_CRITIC:
+            kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
+        model = algorithm_class(recipe)(
+            "MlpPolicy",
+            env,
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=str(out / "tb") if tensorboard else None,
+            **kwargs,
+        )
+        done = 0
+    else:
+        path, done = checkpoint
+        with warnings.catch_warnings():  # SB3 says n_steps is ignored, wrongly on a load: `check_n_step_buffer`
+            warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
+            model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+        check_n_step_buffer(model, recipe)
+        buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
+        if buffer.is_file():
+            model.load_replay_buffer(buffer)
+        log.warning("resuming %s from step %d (%s)", out, done, path.name)
+    if recipe.get("guide"):
+        _configure_guide(model, recipe, preset)
+    model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
+    initial = _start_from_init(model, recipe, preset, seed) if checkpoint is None else None
+    demonstrations = _pretrain_from_guide(model, recipe, preset, seed) if checkpoint is None else None
+    every = int(recipe.get("checkpoint_every", 0) or 0)
+    if initial and every:  # the calibrated start is a checkpoint too: the curve's first point, a candidate
+        (out / "checkpoints").mkdir(exist_ok=True)
+        model.save(out / "checkpoints" / f"{algo}_0_steps.zip")
+    callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
+                                  save_replay_buffer=True) if every else None
+    start = time.perf_counter()
+    total = int(recipe["total_timesteps"])
+    if done < total:
+        model.learn(
+            total_timesteps=total - done,
+            callback=callback,
+            progress_bar=progress_bar,
+            log_interval=1 if algo in ACTOR_CRITIC else 4,
+            reset_num_timesteps=checkpoint is None,
+        )
+    wall = time.perf_counter() - start  # of this invocation: steps done-total
+    path = out / "model.zip"
+    model.save(path)
+    write_json(
+        out / "train.json",
+        {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
+         "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1),
+         **({"demonstrations": demonstrations} if demonstrations else {}),
+         **({"initial": initial} if initial else {})},
+    )
+    env.close()
+    log.info("trained %s for %d steps in %.0f s", algo, recipe["total_timesteps"], wall)
+    return path

@@ -1,0 +1,59 @@
+"""Train one zoo policy with plain stable-baselines3 (no zodrive), as a researcher would.
+
+The zoo is the first user of "bring your own model": each policy is an SB3 zip made here by SB3
+alone, then benched by `zodrive bench`. DQN with highway-env's documented SB3 settings (two
+256-unit layers, learning rate 5e-4, buffer 15,000, batch 32, gamma 0.8, target update every 50
+steps) on one environment, so that a run fits on one core. Checkpoints every `--every` steps are
+kept so that the one to ship is chosen on tuning seeds, never on the evaluation seeds.
+
+Run: python zoo/train.py --scenario highway-fast --seed 0 --out models/zoo/highway-fast-dqn/seed-0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers the highway-env scenarios)
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.monitor import Monitor
+
+#: zodrive preset -> the highway-env id a user trains on (same class, same defaults)
+ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
+           "intersection": "intersection-v2"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", choices=sorted(ENV_IDS), required=True)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--every", type=int, default=2_000, help="checkpoint interval in steps")
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    if (args.out / "model.zip").exists():
+        print(f"{args.out / 'model.zip'} exists: skipped")
+        return
+    args.out.mkdir(parents=True, exist_ok=True)
+    env = Monitor(gym.make(ENV_IDS[args.scenario]), str(args.out / "monitor"))
+    model = DQN("MlpPolicy", env, policy_kwargs=dict(net_arch=[256, 256]), learning_rate=5e-4,
+                buffer_size=15_000, learning_starts=200, batch_size=32, gamma=0.8, train_freq=1,
+                gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
+                seed=args.seed, device="cpu", verbose=0)
+    start = time.perf_counter()
+    model.learn(total_timesteps=args.steps,
+                callback=CheckpointCallback(args.every, str(args.out / "checkpoints"), name_prefix="step"))
+    model.save(args.out / "model")
+    (args.out / "train.json").write_text(json.dumps(
+        {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
+         "algo": "dqn", "steps": args.steps, "seed": args.seed,
+         "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
+    print(f"saved {args.out / 'model.zip'}")
+
+
+if __name__ == "__main__":
+    main()
