@@ -190,9 +190,11 @@ def test_an_adversary_trained_against_another_shield_version_is_refused(trained,
         (old / "adversary.json").write_text(json.dumps({**meta, "defense": "shield@0.02", "defense_version": version}))
         if refused:
             with pytest.raises(ZodriveError, match=f"this zodrive's is version {VERSION}"):
-                check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02")
+                check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02",
+                                defense_version=VERSION)
         else:
-            check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02")
+            check_adversary(old, model_file=str(victim), preset=meta["preset"], defense="shield@0.02",
+                                defense_version=VERSION)
 
 
 @pytest.mark.parametrize("horizon", [10, 25])

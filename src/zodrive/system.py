@@ -22,10 +22,10 @@ from zodrive.defense import keeps_state, make_defense
 from zodrive.defense.kinematic import FilterWrapper, defended_victim
 from zodrive.defense.shield import shielded_victim
 from zodrive.drivers import baselines as bl
-from zodrive.envs import action_kind, attack_context, make_env, n_actions, observation_shape
+from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape
 from zodrive.errors import ZodriveError
 from zodrive.policies.loading import load_network
-from zodrive.policies.resolve import check_policy, load_victim
+from zodrive.policies.policy import Policy, resolve
 
 
 def episode_seed(attack_seed: int, env_seed: int) -> int:
@@ -113,11 +113,13 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return info
 
 
-def build_attacker(spec: AttackSpec, victim: Victim, preset: dict[str, Any]) -> tuple[Attack, Objective, QueryOracle]:
-    """The attack `spec` against `victim` on the preset's observation (its features, box and
-    actions), with the safe loader for a learned adversary's network: the one place an attack
-    is put together."""
-    return spec.build(victim, **attack_context(preset), load_network=load_network)
+def build_attacker(spec: AttackSpec, victim: Victim,
+                   where: dict[str, Any] | Scenario) -> tuple[Attack, Objective, QueryOracle]:
+    """The attack `spec` against `victim` on the observation of `where` (a preset, or the
+    `Scenario` of an environment: its features, box and actions), with the safe loader for a
+    learned adversary's network: the one place an attack is put together."""
+    context = where.attack_context() if isinstance(where, Scenario) else attack_context(where)
+    return spec.build(victim, **context, load_network=load_network)
 
 
 def make_attacked_env(preset: dict[str, Any], victim: Victim, spec: AttackSpec | None = None, *,
@@ -130,36 +132,38 @@ def make_attacked_env(preset: dict[str, Any], victim: Victim, spec: AttackSpec |
     return AttackWrapper(env, attack, objective, oracle, trace=trace)
 
 
-def make_policy_env(model: str, preset: dict[str, Any], spec=None, *, render_mode: str | None = None,
-                    trace: bool = False, defense: str | None = None, trust: bool = False) -> tuple[Victim, gym.Env]:
+def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: AttackSpec | None = None, *,
+                    render_mode: str | None = None, trace: bool = False, defense: str | None = None,
+                    trust: bool = False) -> tuple[Victim, gym.Env]:
     """The policy's victim and the preset's environment, wrapped in the attack `spec` if given
     and, with `defense`, in the defense between the (attacked) sensor and the policy; the
-    attacker then queries the defended system."""
-    if bl.is_baseline(model) and bl.get_baseline(model).reads == "simulator":
-        check_policy(model, preset, attacked=spec is not None)
+    attacker then queries the defended system. `model` is anything `resolve` reads."""
+    policy = resolve(model)
+    if policy.reads_simulator:
+        policy.check(preset, attacked=spec is not None)
         if defense is not None:
-            raise ZodriveError(f"{model} reads the simulator: an observation defense does not apply to it")
+            raise ZodriveError(f"{policy.ref} reads the simulator: an observation defense does not apply to it")
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
-        driver = bl.simulator_driver(bl.get_baseline(model), env, preset, kind)
+        driver = bl.simulator_driver(bl.get_baseline(policy.ref), env, preset, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
     if defense is None or not keeps_state(defense):
-        policy = load_policy(model, preset, defense, trust=trust)
-        return policy, make_attacked_env(preset, policy, spec, render_mode=render_mode, trace=trace)
-    victim = load_victim(model, preset, trust=trust)  # checks that the policy fits the preset
+        victim = load_policy(policy, preset, defense, trust=trust)
+        return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
+    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
     filt = make_defense(defense, preset)
     env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
     return victim, FilterWrapper(env, filt)
 
 
-def load_policy(model: str, preset: dict[str, Any], defense: str | None = None, *, trust: bool = False) -> Victim:
+def load_policy(model: Policy | str | Any, preset: dict[str, Any], defense: str | None = None, *,
+                trust: bool = False) -> Victim:
     """What drives and what the attacker queries when nothing keeps per-episode state: the
-    model's victim, behind a stateless defense (the shield) if one is named."""
-    victim = load_victim(model, preset, trust=trust)  # checks that the policy fits the preset
+    policy's victim, behind a stateless defense (the shield) if one is named."""
+    victim = resolve(model).victim(preset, trust=trust)  # checks that the policy fits the preset
     if defense is None:
         return victim
     if keeps_state(defense):
         raise ZodriveError(f"the {defense} defense tracks an episode: it wraps the environment (make_policy_env)")
     return shielded_victim(victim, make_defense(defense, preset))
-

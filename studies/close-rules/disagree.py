@@ -1,9 +1,9 @@
 """Replay a student on evaluation seeds and list where it and baseline:close-rules disagree (the last 8).
-Usage: python results/close-rules/disagree.py MODEL SEED ..."""
+Usage: python studies/close-rules/disagree.py MODEL SEED ..."""
 import sys, numpy as np
 from zodrive.envs import load_preset, make_env
-from zodrive.agents.policies import load_victim
-from zodrive.agents.rules import named_rules
+from zodrive.policies.resolve import load_victim
+from zodrive.drivers.rules import named_rules
 preset = load_preset("discrete")
 student = load_victim(sys.argv[1], preset)
 teacher = named_rules(preset, "close-rules")

@@ -1,10 +1,10 @@
 #!/bin/bash
 # models/dqn-close under attack, bare and behind the certified shield: the cells of the shield's v4
-# table (results/shield/run-v4.sh, on models/dqn-driver) on the new driver, and the shield asking for
+# table (studies/shield/run-v4.sh, on models/dqn-driver) on the new driver, and the shield asking for
 # close-rules' gap (close-shield), 100 episodes per cell on
 # seeds 100000-100099, into results/close-rules/attacked/. Two cells at a time (one per core);
 # a cell already complete is skipped by zodrive's resume, so the script can be run again after an
-# interruption. Usage: bash results/close-rules/run-attacks.sh
+# interruption. Usage: bash studies/close-rules/run-attacks.sh
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate

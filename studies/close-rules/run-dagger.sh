@@ -2,7 +2,7 @@
 # DAgger students of baseline:close-rules (the shipped dqn-imitation recipe: ROUNDS rounds of 10,000 states,
 # 100 epochs, from the paper DQN's network), their 100 tuning episodes (seeds 900000-900099: how the
 # number of rounds was chosen) and their 100 evaluation episodes (seeds 100000-100099).
-# Usage: sh results/close-rules/run-dagger.sh SEED [ROUNDS]   (SEED: 20000, 21000 or 22000; ROUNDS: 6 (default)
+# Usage: sh studies/close-rules/run-dagger.sh SEED [ROUNDS]   (SEED: 20000, 21000 or 22000; ROUNDS: 6 (default)
 # or 10; one job per core)
 set -e
 S=$1

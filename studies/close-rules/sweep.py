@@ -1,9 +1,9 @@
 """The tuning sweep behind baseline:close-rules: baseline:rules with its margin [m], IDM time gap [s] and
 assumed own speed [m/s] overridden, on tuning seeds only.
-Usage: python results/close-rules/sweep.py FIRST_SEED N MARGIN,HEADWAY,ASSUMED ..."""
+Usage: python studies/close-rules/sweep.py FIRST_SEED N MARGIN,HEADWAY,ASSUMED ..."""
 import sys
 import numpy as np
-import zodrive.agents.rules as R
+import zodrive.drivers.rules as R
 from zodrive.envs.presets import load_preset, make_env
 preset = load_preset("discrete")
 first, n = int(sys.argv[1]), int(sys.argv[2])

@@ -1,9 +1,9 @@
 """The close-rules table: teacher, DAgger students and baselines on tuning (900000+) and evaluation
-(100000+) seeds, from each run's summary.json. Usage: python results/close-rules/table.py > results/close-rules/table.md"""
+(100000+) seeds, from each run's summary.json. Usage: python studies/close-rules/table.py > results/close-rules/table.md"""
 import json
 from pathlib import Path
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).resolve().parents[2] / "results" / "close-rules"  # the data: results/close-rules
 ROWS = [("baseline:close-rules (teacher)", "tune-teacher", "eval", None)]
 ROWS += [(f"DAgger {r} rounds, seed {s}", f"tune-dagger{r}-s{s}", f"eval-dagger{r}-s{s}", f"train-dagger{r}-s{s}.json")
          for r in (6, 10) for s in (20000, 21000, 22000)]

@@ -2,13 +2,13 @@
 the bare driver drives seeds 900000-900002 (tuning seeds); at every step the shield's decision on the
 same observation is compared with the driver's. Prints the vetoed (proposed, shield's) pairs and the
 own lane's pessimistic room [m] at the vetoes.
-Usage: python results/close-rules/veto.py EPS shield|close-shield"""
+Usage: python studies/close-rules/veto.py EPS shield|close-shield"""
 import collections
 import sys
 
 import numpy as np
 
-from zodrive.agents.policies import load_victim
+from zodrive.policies.resolve import load_victim
 from zodrive.defense.shield import Shield
 from zodrive.envs import load_preset, make_env
 

@@ -4,7 +4,7 @@ Drives 5 tuning episodes (seeds 50000-50004) with each given actor checkpoint an
 visits, prints its mean action, the clone's (`models/ddpg-imitation`) and the continuous rules', the
 mean absolute differences per dimension [acceleration, steering], and the steering's spread.
 Actors are read without unpickling (plain weights of SB3's DDPG/TD3 actor, ReLU MLP, tanh output).
-Usage: python results/finetune-continuous/drift.py CHECKPOINT.zip [...]
+Usage: python studies/finetune-continuous/drift.py CHECKPOINT.zip [...]
 """
 import sys
 from pathlib import Path
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import torch as th
 
-from zodrive.agents.rules import ContinuousRules
-from zodrive.agents.safe_load import read_plain
+from zodrive.drivers.rules import ContinuousRules
+from zodrive.policies.safe_load import read_plain
 from zodrive.envs import load_preset, make_env
 
 

@@ -1,6 +1,6 @@
 """Per-episode comparison of two evaluations on the same seeds (issue 22, item 2).
 
-Usage: python results/finetune-continuous/paired.py BASE_EVAL_DIR OTHER_EVAL_DIR [...]
+Usage: python studies/finetune-continuous/paired.py BASE_EVAL_DIR OTHER_EVAL_DIR [...]
 Prints, for each OTHER against BASE: the mean per-episode return difference, the crashed seeds of
 each, and on the episodes neither crashed the mean difference and how many went up / down.
 """

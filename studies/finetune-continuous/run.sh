@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 22, item 2, continuous side: TD3 from models/ddpg-imitation (recipe td3-finetune), one seed.
-# Usage (from the repository root): results/finetune-continuous/run.sh SEED NAME [--set KEY=VALUE ...]
+# Usage (from the repository root): studies/finetune-continuous/run.sh SEED NAME [--set KEY=VALUE ...]
 # Train into runs/td3-finetune/NAME-sSEED, choose a checkpoint on 20 tuning episodes (seeds
 # 50000-50019, the start included), evaluate the choice on 100 evaluation episodes (100000-100099).
 # The recipe as committed is NAME "init1" (seeds 1000 and 2000 were trained with --steps 20000

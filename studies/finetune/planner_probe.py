@@ -3,12 +3,12 @@
 Not a zodrive driver (it copies the environment, which no policy can): at every step each of the five
 meta-actions is taken in a deep copy of the environment, followed by `baseline:rules` for H - 1 more
 steps; a crash scores -1000 (+ the step it came at), ties go to the rules' own action. H = 0 is the rules.
-Usage: python results/finetune/planner_probe.py H SEED[,SEED...]   (one line per episode)
+Usage: python studies/finetune/planner_probe.py H SEED[,SEED...]   (one line per episode)
 """
 import copy, sys, time
 import numpy as np
 from zodrive.envs import load_preset, make_env
-from zodrive.agents.rules import ObservationRules
+from zodrive.drivers.rules import ObservationRules
 
 H = int(sys.argv[1]); seeds = [int(s) for s in sys.argv[2].split(",")]
 preset = load_preset("discrete")

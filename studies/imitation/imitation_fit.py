@@ -9,7 +9,7 @@ of each batch labelled by the rules). Then where the plain fit's held-out SLOWER
 per episode, and the gap and closing speed of the vehicle ahead (the rules' own terms).
 One torch thread, one process.
 
-    python benchmarks/imitation_fit.py --train 40000 --heldout 10000 > results/imitation/ablation.txt
+    python studies/imitation/imitation_fit.py --train 40000 --heldout 10000 > results/imitation/ablation.txt
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from zodrive.agents.loading import load_network
-from zodrive.agents.policies import load_victim
-from zodrive.defense.distill import agreement, class_weights, fit, folded, jitter, standardized
+from zodrive.policies.loading import load_network
+from zodrive.policies.resolve import load_victim
+from zodrive.training.distill import agreement, class_weights, fit, folded, jitter, standardized
 from zodrive.envs import make_env
 from zodrive.envs.presets import load_preset, scenario
 from zodrive.evaluation.rollout import clean_states
@@ -164,7 +164,7 @@ def print_rounds(path: str) -> None:
 
 def confusion(student: str, env: object, rules: object, preset: dict, count: int) -> None:
     """Rows: the rules' action, columns: the student's, on the states the student drives into."""
-    from zodrive.agents.victims import network_victim
+    from zodrive.policies.victims import network_victim
 
     net = load_network(student, preset).net
     states = clean_states(env, network_victim(net, "discrete", rules.obs_shape), 90000, count)

@@ -10,8 +10,8 @@ fresh initialization, the loss (`scaled_mse` or plain MSE), epochs, data, the in
 the ego's row alone.
 One torch thread, one process.
 
-    python benchmarks/imitation_fit_continuous.py > results/imitation-continuous/ablation.txt
-    python benchmarks/imitation_fit_continuous.py --train 40000 --heldout-seed 60000 > results/imitation-continuous/ablation-40000.txt
+    python studies/imitation/imitation_fit_continuous.py > results/imitation-continuous/ablation.txt
+    python studies/imitation/imitation_fit_continuous.py --train 40000 --heldout-seed 60000 > results/imitation-continuous/ablation-40000.txt
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from zodrive.agents.loading import load_network
-from zodrive.agents.policies import make_policy_env
-from zodrive.defense.distill import action_error, fit, labelled_rollout, reinitialized, restandardize, scaled_mse, \
+from zodrive.policies.loading import load_network
+from zodrive.system import make_policy_env
+from zodrive.training.distill import action_error, fit, labelled_rollout, reinitialized, restandardize, scaled_mse, \
     standardized
 from zodrive.envs import load_preset
 

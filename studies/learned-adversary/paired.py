@@ -2,7 +2,7 @@
 mean of (learned - per-step) return per seed with its bootstrap 95 % CI (`zodrive.evaluation.stats.
 paired_difference_ci`). Both start every episode from the same traffic, so the pairs are correlated and
 the difference is measured more precisely than the two CIs side by side show. Positive: the learned
-adversary left the victim more return (it is weaker). Usage: python results/learned-adversary/paired.py"""
+adversary left the victim more return (it is weaker). Usage: python studies/learned-adversary/paired.py"""
 import json
 from pathlib import Path
 

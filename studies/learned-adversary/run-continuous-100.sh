@@ -2,7 +2,7 @@
 # The continuous victims' learned-adversary cells and their random-search comparisons extended from 30 to
 # 100 episodes (seeds 100000-100099): each 30-episode cell is copied to a "-100" folder and the resumable
 # `zodrive evaluate` adds episodes 30-99 under the same key (model SHA-256, preset, attack, seeds).
-# Usage: sh results/learned-adversary/run-continuous-100.sh   (one job; about 10 minutes on one core)
+# Usage: sh studies/learned-adversary/run-continuous-100.sh   (one job; about 10 minutes on one core)
 set -e
 Z="python -m zodrive"
 C=results/learned-adversary/cells

@@ -1,7 +1,7 @@
 #!/bin/sh
 # The fitted start with the fallback target FASTER,not:SLOWER (FASTER, else at least not SLOWER), training seeds
-# 0, 1, 2, each evaluated on 100 episodes, seeds 100000-100099 (README.md, section "A fallback target").
-# Usage: sh run-fallback-fitted.sh VICTIM EPS   (VICTIM: a folder under models/). A finished adversary is kept.
+# 0, 1, 2, each evaluated on 100 episodes, seeds 100000-100099 (results/learned-adversary/README.md, section "A fallback target").
+# Usage: sh studies/learned-adversary/run-fallback-fitted.sh VICTIM EPS   (VICTIM: a folder under models/). A finished adversary is kept.
 set -e
 cd "$(dirname "$0")/../.."
 Z="python -m zodrive"

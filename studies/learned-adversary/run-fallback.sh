@@ -1,7 +1,7 @@
 #!/bin/sh
 # Per-step attacks with the fallback target FASTER,not:SLOWER (FASTER, else at least not SLOWER), 100 episodes on
-# seeds 100000-100099 (README.md, section "A fallback target"). The fitted start with that target:
-# run-fallback-fitted.sh. Usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close
+# seeds 100000-100099 (results/learned-adversary/README.md, section "A fallback target"). The fitted start with that target:
+# run-fallback-fitted.sh. Usage: sh studies/learned-adversary/run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close
 #   rs:  random search on models/dqn-robust at eps 0.05, attack seeds 0, 1, 2
 #   rs-driver: random search on the DQN driver at eps 0.02 (~450 queries per step for ~400 steps an episode),
 #        without the fallback, or with it given `fallback`
@@ -35,5 +35,5 @@ elif [ "$1" = rs-close ]; then
   $Z evaluate models/dqn-close --attack random-search --eps 0.02 --target $T --episodes 100 \
     --seed 100000 --workers 1 --no-progress --out $A/cells/$cell > $A/cells/$cell.txt 2>&1
 else
-  echo "usage: sh run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close" >&2; exit 2
+  echo "usage: sh studies/learned-adversary/run-fallback.sh rs|pgd|rs-driver [fallback]|rs-close" >&2; exit 2
 fi

@@ -1,9 +1,9 @@
 #!/bin/sh
 # The learned adversary trained by PPO from the fitted start (attack-train --pretrain-rounds 4 --steps 50000)
 # and its evaluations in results/learned-adversary/README.md, section "PPO from the fitted start".
-# Usage: sh run-ppo.sh VICTIM EPS SEED EPISODES [TAG OPTION...]
+# Usage (from the repository root): sh studies/learned-adversary/run-ppo.sh VICTIM EPS SEED EPISODES [TAG OPTION...]
 #   VICTIM: a folder under models/; one job per core. TAG names a variant whose extra attack-train
-#   options follow it, e.g. `sh run-ppo.sh dqn-robust 0.05 0 100 std0.2-w10k --explore-std 0.2 --critic-warmup 10000`.
+#   options follow it, e.g. `sh studies/learned-adversary/run-ppo.sh dqn-robust 0.05 0 100 std0.2-w10k --explore-std 0.2 --critic-warmup 10000`.
 set -e
 Z="python -m zodrive"
 A=results/learned-adversary

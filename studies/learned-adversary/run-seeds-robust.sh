@@ -1,7 +1,7 @@
 #!/bin/sh
 # Training seeds 1 and 2 of the fitted start on models/dqn-robust (seed 0: run-amortized.sh), so that its two
 # cells report the median of three training seeds; each evaluated on 100 episodes, seeds 100000-100099.
-# Usage: sh results/learned-adversary/run-seeds-robust.sh EPS   (0.05 or 0.02)
+# Usage: sh studies/learned-adversary/run-seeds-robust.sh EPS   (0.05 or 0.02)
 set -e
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate

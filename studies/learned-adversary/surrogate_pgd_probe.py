@@ -8,7 +8,7 @@ scores) is fitted to every answer so far. Attack time: zodrive's own PGD (target
 runs against the surrogate (`Victim` with the surrogate as query and gradient), and its perturbation is
 fed to the victim: 0 victim queries per step. Evaluated on tuning seeds 900000.. (not the 100000 seeds).
 
-    python results/learned-adversary/surrogate_pgd_probe.py MODEL EPS [--rounds 3] [--episodes 30]
+    python studies/learned-adversary/surrogate_pgd_probe.py MODEL EPS [--rounds 3] [--episodes 30]
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import argparse
 import numpy as np
 import torch
 
-from zodrive.agents.policies import load_victim
+from zodrive.policies.resolve import load_victim
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.spec import load_attack
 from zodrive.attacks.victim import Victim

@@ -1,9 +1,9 @@
 """baseline:rules with the safe gap at (a) the assumed 25 m/s, (b) the ego's target speed
 (what one integer of memory, counting its own FASTER / SLOWER, would know), (c) its true speed (read from the simulator). Tuning seeds only.
-Usage: python results/planner/known_speed.py {assumed,target,true} FIRST_SEED N"""
+Usage: python studies/planner/known_speed.py {assumed,target,true} FIRST_SEED N"""
 import sys
 import numpy as np
-import zodrive.agents.rules as R
+import zodrive.drivers.rules as R
 from zodrive.envs.presets import load_preset, make_env
 
 mode = sys.argv[1]; seeds = range(int(sys.argv[2]), int(sys.argv[2]) + int(sys.argv[3]))

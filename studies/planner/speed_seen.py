@@ -1,9 +1,9 @@
 """What the discrete preset shows of the ego's own speed: `baseline:rules` drives three tuning
 seeds and each step's true speed (the simulator's) is printed beside the observed one (vx of the
-ego row times the preset's vx range). Usage: python results/planner/speed_seen.py"""
+ego row times the preset's vx range). Usage: python studies/planner/speed_seen.py"""
 import numpy as np
 
-from zodrive.agents.rules import ObservationRules
+from zodrive.drivers.rules import ObservationRules
 from zodrive.envs.presets import load_preset, make_env
 
 preset = load_preset("discrete")

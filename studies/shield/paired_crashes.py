@@ -2,7 +2,7 @@
 (`zodrive.evaluation.stats.rate_ci`), the seeds only one of them crashes on, and the exact McNemar
 test on those discordant seeds (two-sided binomial test, p = 0.5: under "the same collision rate"
 either cell is as likely to be the one that crashes). Both cells start every episode from the same
-traffic, so the pairs are what differs. Usage: python results/shield/paired_crashes.py CELL_A CELL_B"""
+traffic, so the pairs are what differs. Usage: python studies/shield/paired_crashes.py CELL_A CELL_B"""
 import json
 import sys
 from pathlib import Path

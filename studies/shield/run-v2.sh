@@ -1,6 +1,6 @@
 #!/bin/bash
 # The shield after the lane-existence fix (v2: a lane change only towards a lane that exists for
-# every ego lateral position within eps), 30 episodes per cell, seeds 100000-100029, into cells-v2/
+# every ego lateral position within eps), 30 episodes per cell, seeds 100000-100029, into results/shield/cells-v2/
 # (the results key does not include the code version, so v1's folders must not be resumed).
 set -u
 cd "$(dirname "$0")/../.."

@@ -1,7 +1,7 @@
 #!/bin/bash
 # The shield v3 (superseded by v4, run-v4.sh; `zodrive.defense.shield.VERSION` 3: the lane beyond checked while the ego may be
 # mid-change, and the escape from an own lane too close to stay in), 100 episodes per cell on
-# seeds 100000-100099, into cells-v3/; one process, one cell at a time. The learned adversary is
+# seeds 100000-100099, into results/shield/cells-v3/ (removed: in git history, commit 323cf59); one process, one cell at a time. The learned adversary is
 # retrained against v3 (one trained against v2 is refused: its version differs).
 set -u
 cd "$(dirname "$0")/../.."

@@ -1,7 +1,7 @@
 #!/bin/bash
 # The shield v4 under the learned adversary with a fitted start (attack-train --pretrain-rounds,
 # results/learned-adversary/README.md "A fitted start"), trained against each shielded system;
-# 100 episodes per cell on seeds 100000-100099, into cells-v4/, as run-v4.sh.
+# 100 episodes per cell on seeds 100000-100099, into results/shield/cells-v4/, as run-v4.sh.
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate

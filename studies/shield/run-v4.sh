@@ -1,7 +1,7 @@
 #!/bin/bash
 # The shield v4 (`zodrive.defense.shield.VERSION`: v3's mid-change test and escape, the escape
 # minding the lane beyond its target and a car centred in it), 100 episodes per cell on
-# seeds 100000-100099, into cells-v4/; one process, one cell at a time. The learned adversary is
+# seeds 100000-100099, into results/shield/cells-v4/; one process, one cell at a time. The learned adversary is
 # retrained against v4 (one trained against an earlier version is refused: its version differs).
 set -u
 cd "$(dirname "$0")/../.."

@@ -1,7 +1,7 @@
 #!/bin/bash
 # shield@0.05 under PGD at eps 0.05 and the constant brake (always SLOWER) on 300 episodes
 # (seeds 100000-100299): is the shield's 3 % against the brake's 2 % on 100 episodes a difference?
-# Paired by seed with results/shield/paired_crashes.py. One process; resumable.
+# Paired by seed with studies/shield/paired_crashes.py. One process; resumable.
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate

@@ -1,7 +1,7 @@
 #!/bin/bash
 # The shield v5 (`zodrive.defense.shield.VERSION`: v4 with the sound escape, every vehicle that may
 # be in the target lane counts) at eps 0.02, 100 episodes per cell on seeds 100000-100099, into
-# cells-v5/. Two lanes of work, one per core. The learned adversaries (PPO, and the fitted start)
+# results/shield/cells-v5/. Two lanes of work, one per core. The learned adversaries (PPO, and the fitted start)
 # are retrained against v5 (one trained against v4 is refused: its version differs).
 # shield@0.05 is not re-run: at eps >= 0.045 the ego may always be mid-change, so neither v4 nor
 # v5 ever escapes and their decisions are the same (tests/test_shield.py, the corner test).

@@ -1,9 +1,9 @@
 """Trace one shielded episode step by step: what the driver proposed, what the shield let through,
 and the room test on the observation the policy saw and on the true one (a diagnostic, not a
 product command). Used to diagnose the crashes of shield v2 under the learned adversary
-(README.md, "v3"):
+(results/shield/README.md, "From v2 to v4"):
 
-    python results/shield/trace_episode.py models/dqn-driver ATTACK EPS SEED shield@0.02 [--last N] [--every K]
+    python studies/shield/trace_episode.py models/dqn-driver ATTACK EPS SEED shield@0.02 [--last N] [--every K]
 
 ATTACK: `none`, a registry/config name, or `learned:DIR`; `--transfer` runs an adversary trained
 against another shield version (the evaluation refuses it). Columns: own / left / right = the
@@ -19,11 +19,12 @@ import argparse
 
 import numpy as np
 
-from zodrive.agents.policies import load_victim, make_policy_env
+from zodrive.policies.resolve import load_victim
+from zodrive.system import make_policy_env
 from zodrive.attacks.spec import load_attack
 from zodrive.defense import make_defense
 from zodrive.envs import load_preset
-from zodrive.evaluation.rollout import _find_attack, act
+from zodrive.evaluation.rollout import find_attack_wrapper as _find_attack, act
 
 NAMES = ("LEFT", "IDLE", "RIGHT", "FASTER", "SLOWER")
 

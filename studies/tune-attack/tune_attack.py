@@ -4,7 +4,7 @@ Collects observations from clean rollouts of MODEL on seeds 50,000+ (disjoint fr
 evaluation seeds 100,000+), then attacks them all at once (batched across states) for each
 setting, and prints success rate on applicable states, mean iterations, queries and L-inf.
 
-    python benchmarks/tune_attack.py models/dqn --grid loss=margin,paper step_size=0.01,0.02,0.05
+    python studies/tune-attack/tune_attack.py models/dqn --grid loss=margin,paper step_size=0.01,0.02,0.05
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import time
 import numpy as np
 import yaml
 
-from zodrive.agents.loading import load_model
-from zodrive.agents.victims import sb3_victim
+from zodrive.policies.loading import load_model
+from zodrive.policies.victims import sb3_victim
 from zodrive.attacks.spec import load_attack
 from zodrive.cli import resolve_model_preset
 from zodrive.envs import attack_context, make_env

@@ -1,8 +1,8 @@
 """Vertex hold (1 query per step) against the strongest per-step attack and the learned adversary on the
 same 100 seeds (100000-100099): mean of (vertex hold - other) return per seed with its bootstrap 95 % CI
 (`zodrive.evaluation.stats.paired_difference_ci`); positive: vertex hold left the victim more return (it
-is weaker). The other cells are the ones results/learned-adversary/paired.py compares (the shielded
-rows: results/shield). Usage: python results/vertex-hold/paired.py > results/vertex-hold/paired.txt"""
+is weaker). The other cells are the ones studies/learned-adversary/paired.py compares (the shielded
+rows: results/shield). Usage: python studies/vertex-hold/paired.py > results/vertex-hold/paired.txt"""
 import json
 from pathlib import Path
 
@@ -63,7 +63,7 @@ PAIRS = [  # (vertex-hold cell, other cell)
       for name in ("dqn-close-eps0.02", "dqn-close-rank-eps0.02") for s in (0, 1, 2)
       if (H / f"../picker/cells/check-below0.998-{name}-seed{s}/episodes.jsonl").is_file()
       for other in (K / "random-search-eps0.02", H / f"../picker/cells/check-{name}-seed{s}")],
-    # against PGD with the fallback target FASTER,not:SLOWER (results/learned-adversary/run-fallback.sh)
+    # against PGD with the fallback target FASTER,not:SLOWER (studies/learned-adversary/run-fallback.sh)
     ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.02", C / "dqn-robust-pgd-fallback-eps0.02-100"),
     ("dqn-robust-eps0.05", C / "dqn-robust-random-search-fallback-eps0.05-100"),

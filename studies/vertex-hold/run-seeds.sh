@@ -1,7 +1,7 @@
 #!/bin/bash
 # Vertex hold is random (its vertices): the cells where it matters, again with attack seeds 1 and 2
-# (run.sh used 0), 100 episodes on seeds 100000-100099, into cells/NAME-seedS. Two lanes; resumable.
-# The DQN driver at eps 0.02 was added for the pickers' comparison (picker/README.md).
+# (run.sh used 0), 100 episodes on seeds 100000-100099, into results/vertex-hold/cells/NAME-seedS. Two lanes; resumable.
+# The DQN driver at eps 0.02 was added for the pickers' comparison (results/vertex-hold/picker/README.md).
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate

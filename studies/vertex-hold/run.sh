@@ -2,12 +2,12 @@
 # Vertex hold (`--attack vertex-hold`, 1 query per step) on every victim of the learned adversary's
 # table (results/learned-adversary) and behind the shield, 100 episodes on seeds 100000-100099 per
 # cell, into results/vertex-hold/cells/. Two lanes in parallel (long episodes / short ones); resumable.
-# Usage: bash results/vertex-hold/run.sh; then python results/vertex-hold/paired.py > results/vertex-hold/paired.txt
+# Usage: bash studies/vertex-hold/run.sh; then python studies/vertex-hold/paired.py > results/vertex-hold/paired.txt
 set -u
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate
 C=results/vertex-hold/cells
-. results/vertex-hold/cell.sh
+. studies/vertex-hold/cell.sh
 hold() { cell vertex-hold "$@"; }  # NAME MODEL ARGS...
 long() {
   hold dqn-driver-eps0.02 models/dqn-driver --eps 0.02

@@ -16,6 +16,7 @@ from zodrive.envs.presets import (
     preset_names,
     preset_summary,
     scenario,
+    scenario_of_env,
 )
 
 __all__ = [
@@ -34,4 +35,5 @@ __all__ = [
     "preset_names",
     "preset_summary",
     "scenario",
+    "scenario_of_env",
 ]

@@ -51,6 +51,12 @@ class Scenario:
     normalized: bool = False           # highway-env rows normalized by `feature_ranges`
     lanes: int | None = None           # lanes of a highway-env road
 
+    def attack_context(self) -> dict[str, Any]:
+        """What an attack needs to know about these observations and actions (`AttackSpec.build`)."""
+        return {"features": self.features, "bounds": self.bounds, "n_actions": self.n_actions,
+                "action_names": self.action_names,
+                "action_bounds": (self.action_low, self.action_high) if self.kind == "continuous" else None}
+
 
 def register() -> None:
     """Register zodrive's highway-env scenarios with gymnasium (idempotent)."""
@@ -260,10 +266,15 @@ def action_names(config: dict[str, Any]) -> tuple[str, ...]:
 
 def attack_context(config: dict[str, Any]) -> dict[str, Any]:
     """What an attack needs to know about the preset's observations and actions."""
-    env = scenario(config)
-    return {"features": env.features, "bounds": env.bounds, "n_actions": env.n_actions,
-            "action_names": env.action_names,
-            "action_bounds": (env.action_low, env.action_high) if env.kind == "continuous" else None}
+    return scenario(config).attack_context()
+
+
+def scenario_of_env(env: gym.Env) -> Scenario:
+    """The facts of an environment built elsewhere (a user's own): its observation's features
+    and box, its actions. A highway-env environment is reset once, with seed 0, since
+    highway-env fills in its feature ranges at the first observation."""
+    name = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
+    return _read_scenario({"name": name, "env_id": name}, env)
 
 
 def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:

@@ -151,7 +151,7 @@ def run_episode(
     `max_return` None: no percentage of the maximum.
     """
     policy = policy or victim
-    wrapper = _find_attack(env)
+    wrapper = find_attack_wrapper(env)
     attacked = wrapper is not None
     obs, info = env.reset(seed=seed)
     tracker = Episode(env, policy, episode=episode, seed=seed, max_return=max_return)
@@ -252,7 +252,7 @@ def left_road(env: gym.Env, terminated: bool, crashed: bool) -> bool:
     return bool(terminated and not crashed and ego is not None and not ego.on_road)
 
 
-def _find_attack(env: gym.Env) -> AttackWrapper | None:
+def find_attack_wrapper(env: gym.Env) -> AttackWrapper | None:
     while isinstance(env, gym.Env):
         if isinstance(env, AttackWrapper):
             return env

@@ -62,27 +62,7 @@ def build(model: str) -> Any:
 
 
 def factory_victim(model: str, preset: dict[str, Any]) -> Victim:
-    """The victim of `FILE.py:NAME` for a preset's scenario, its outputs checked on one query."""
-    import numpy as np
-    import torch
+    """The victim of `FILE.py:NAME` for a preset's scenario, its outputs checked on one batch."""
+    from zodrive.policies.victims import object_victim
 
-    from zodrive.policies.victims import callable_victim, module_victim
-    from zodrive.envs import scenario
-
-    env = scenario(preset)
-    policy = build(model)
-    if isinstance(policy, torch.nn.Module):
-        victim = module_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
-    elif callable(policy):
-        victim = callable_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
-    else:
-        raise ZodriveError(f"{model} returned {type(policy).__name__}, not a torch module or a callable")
-    try:
-        out = victim.query(np.zeros((2, *env.obs_shape), dtype=np.float32))
-    except Exception as exc:  # noqa: BLE001
-        raise ZodriveError(f"{model}: the policy failed on a batch of observations of shape "
-                           f"(2, {', '.join(map(str, env.obs_shape))}): {type(exc).__name__}: {exc}") from exc
-    if out.shape != (2, env.n_actions):
-        raise ZodriveError(f"{model} returns outputs of shape {out.shape[1:]} per observation; preset "
-                           f"{preset['name']!r} needs {env.n_actions} ({'scores' if env.kind == 'discrete' else 'action dims'})")
-    return victim
+    return object_victim(build(model), preset, model)

@@ -15,6 +15,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.policies.safe_load import unscale
 from zodrive.attacks.victim import Victim
+from zodrive.envs import Scenario, scenario
+from zodrive.errors import ZodriveError
 
 
 def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
@@ -116,3 +118,26 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
             return forward(torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))).numpy()
 
     return Victim(query=query, kind=kind, obs_shape=obs_shape, differentiable=forward)
+
+
+def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> Victim:
+    """The victim of a torch module or a numpy callable on `preset`'s scenario, its outputs
+    checked on one batch of two zero observations (a harness call, not an attack query);
+    `where` is a preset or the `Scenario` of an environment."""
+    env = where if isinstance(where, Scenario) else scenario(where)
+    if isinstance(policy, torch.nn.Module):
+        victim = module_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+    elif callable(policy):
+        victim = callable_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+    else:
+        raise ZodriveError(f"{label} is a {type(policy).__name__}, not a torch module or a callable")
+    try:
+        out = victim.query(np.zeros((2, *env.obs_shape), dtype=np.float32))
+    except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
+        raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
+                           f"(2, {', '.join(map(str, env.obs_shape))}): {type(exc).__name__}: {exc}") from exc
+    if out.shape != (2, env.n_actions):
+        raise ZodriveError(f"{label} returns outputs of shape {out.shape[1:]} per observation; preset "
+                           f"{env.name!r} needs {env.n_actions} "
+                           f"({'scores' if env.kind == 'discrete' else 'action dims'})")
+    return victim

@@ -1,7 +1,7 @@
 #!/bin/bash
 # Vertex check (`--attack vertex-check:DIR`) with the pickers run.sh fitted: the same picker folders, evaluated on
-# 100 episodes, seeds 100000-100099, into cells/PREFIX-NAME. Each command's printed output is in the .txt beside.
-# Usage: bash results/vertex-hold/picker/check.sh MODEL EPS PREFIX "OPTIONS" NAME...
+# 100 episodes, seeds 100000-100099, into results/vertex-hold/picker/cells/PREFIX-NAME. Each command's printed output is in the .txt beside the cell.
+# Usage: bash studies/vertex-hold/picker/check.sh MODEL EPS PREFIX "OPTIONS" NAME...
 #   models/dqn-close 0.02 check "" dqn-close-eps0.02-seed0 ...                          (1 query per step)
 #   models/dqn-close 0.02 check-below0.998 "--check-below 0.998" dqn-close-eps0.02-seed0 ...  (<= 1 on average)
 set -u

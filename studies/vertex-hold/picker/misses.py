@@ -2,7 +2,7 @@
 `zodrive evaluate`, not committed: rerun the cell to get it): the share of steps on which the victim did not
 take the target, split into misses right after a step that hit (a held vertex that stopped working, or an
 episode's first step) and misses after a miss (a fresh vertex that did not work), and the actions taken on
-the missed steps. Usage: python results/vertex-hold/picker/misses.py CELL [CELL ...]"""
+the missed steps. Usage: python studies/vertex-hold/picker/misses.py CELL [CELL ...]"""
 import collections
 import json
 import sys

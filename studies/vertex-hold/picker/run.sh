@@ -1,10 +1,10 @@
 #!/bin/bash
 # Vertex hold with a picker (`zodrive picker-train`, then `--attack vertex-hold:DIR`, 1 query per step):
 # fit with seed SEED against MODEL at EPS into results/vertex-hold/picker/NAME-seedSEED, then evaluate it on
-# 100 episodes, seeds 100000-100099, into cells/NAME-seedSEED. Each command's printed output is in the .txt beside.
-# Usage: bash results/vertex-hold/picker/run.sh NAME MODEL EPS SEED [PICKER-TRAIN OPTIONS]
+# 100 episodes, seeds 100000-100099, into results/vertex-hold/picker/cells/NAME-seedSEED. Each command's printed output is in the .txt beside the cell.
+# Usage: bash studies/vertex-hold/picker/run.sh NAME MODEL EPS SEED [PICKER-TRAIN OPTIONS]
 #   dqn-close models/dqn-close 0.02 0                                 (seeds 0, 1, 2)
-#   dqn-driver models/dqn-driver 0.02 0 --probes 128 --switch 0       (450-step episodes; see README.md)
+#   dqn-driver models/dqn-driver 0.02 0 --probes 128 --switch 0       (450-step episodes; see results/vertex-hold/picker/README.md)
 set -u
 cd "$(dirname "$0")/../../.."
 . .venv/bin/activate

@@ -2,7 +2,8 @@
 # Can a better-fitted surrogate make the fitted start transfer to models/dqn-close? (issue 23)
 # Three variants of `attack-train --pretrain-rounds 4` at eps 0.02 beside the committed adversary
 # (uniform ball probes, MSE on scores), each evaluated on tuning seeds 900000-900029, with random
-# search on the same seeds; adversaries and cells in runs/adv-vert (not committed), printed output here.
+# search on the same seeds; adversaries and cells in runs/adv-vert (not committed), printed output in
+# results/learned-adversary/pilots/decision-focused.
 set -u
 cd "$(dirname "$0")/../../../.."
 . .venv/bin/activate

@@ -10,7 +10,7 @@ for the vertices that worked at step t, the share that still work at step t + 1 
 found at one state carries to the next, 1 s later and nearly the same state: what an adversary that
 maps states to perturbations with no query needs). 0 queries are spent on any attack; nothing is written.
 
-    python results/learned-adversary/pilots/decision-focused/vertex_persistence.py MODEL EPS [--episodes 10] [--k 64]
+    python studies/learned-adversary/pilots/decision-focused/vertex_persistence.py MODEL EPS [--episodes 10] [--k 64]
         [--under ADVERSARY_DIR]
 """
 
@@ -20,7 +20,7 @@ import argparse
 
 import numpy as np
 
-from zodrive.agents.policies import load_victim
+from zodrive.policies.resolve import load_victim
 from zodrive.attacks.learned import LearnedAdversary, apply_action, free_coordinates
 from zodrive.attacks.spec import load_attack
 from zodrive.envs import attack_context, load_preset, make_env

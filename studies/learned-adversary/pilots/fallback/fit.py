@@ -4,7 +4,7 @@ with a second goal where the target is out of reach. Its loss is the target's ma
 fitted start dqn-robust brakes on 15.3 % of steps (tuning seeds), under random search on 11.1 %; braking
 delays the crash. Runs `attack_train` with that objective in place of the default one; nothing else changes.
 
-    python results/learned-adversary/pilots/fallback/fit.py MODEL EPS OUT [--avoid-weight W] [--seed S]
+    python studies/learned-adversary/pilots/fallback/fit.py MODEL EPS OUT [--avoid-weight W] [--seed S]
 
 With --avoid-weight 1 this is `zodrive attack-train MODEL --eps EPS --steps 0 --pretrain-rounds 4 --pretrain-episodes
 10 --reward horizon --target FASTER,not:SLOWER` (the product's form of it, which gives the same model.zip, policy
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import torch
 
-import zodrive.agents.adversary as adversary
-from zodrive.agents.amortized import Pretrain
+import zodrive.training.adversary as adversary
+from zodrive.training.amortized import Pretrain
 from zodrive.attacks.objectives import DiscreteAvoid, DiscreteTargeted
 from zodrive.envs import load_preset
 

@@ -4,15 +4,16 @@
 # crash. The fitted start is refitted with FASTER's margin loss plus W times "not SLOWER"'s (fit.py; W = 1 is
 # `attack-train --target FASTER,not:SLOWER`), training seeds 0-2, beside the committed fitted start and random
 # search with and without that target. Adversaries and cells in runs/prefer (scratch, not committed); printed
-# output here; paired differences in paired.txt.
+# output in results/learned-adversary/pilots/fallback; paired differences in paired.txt there.
 set -u
 cd "$(dirname "$0")/../../../.."
 . .venv/bin/activate
+S=studies/learned-adversary/pilots/fallback
 D=results/learned-adversary/pilots/fallback
 R=runs/prefer
 A=results/learned-adversary/amortized-dqn-robust-eps0.05
 fit() {  # NAME WEIGHT SEED
-  [ -f $R/$1/model.zip ] || python $D/fit.py models/dqn-robust 0.05 $R/$1 --avoid-weight $2 --seed $3 > $D/$1.fit.txt 2>&1
+  [ -f $R/$1/model.zip ] || python $S/fit.py models/dqn-robust 0.05 $R/$1 --avoid-weight $2 --seed $3 > $D/$1.fit.txt 2>&1
 }
 ev() {  # ADVERSARY_DIR
   n=$(basename $1)

@@ -5,7 +5,7 @@ every step with a held vertex the victim is also asked on it: the probe prints h
 by the picker's rating of them, and, where one fails, how often one of the picker's best k of 64 fresh
 vertices works. Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/budget.py MODEL EPS PICKER_DIR [--episodes 20]
+    python studies/learned-adversary/pilots/one-query/budget.py MODEL EPS PICKER_DIR [--episodes 20]
 """
 
 from __future__ import annotations

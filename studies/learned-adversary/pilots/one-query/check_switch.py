@@ -6,7 +6,7 @@ picker folder stores its switch, so another value is another attack; this asks w
 Drives the product's `vertex-check:PICKER` on tuning seeds 900000+; prints the return, the victim's action shares
 and the counted queries per step.
 
-    python results/learned-adversary/pilots/one-query/check_switch.py MODEL EPS PICKER_DIR SWITCH [--episodes 30]
+    python studies/learned-adversary/pilots/one-query/check_switch.py MODEL EPS PICKER_DIR SWITCH [--episodes 30]
 """
 
 from __future__ import annotations

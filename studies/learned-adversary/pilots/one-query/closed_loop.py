@@ -3,7 +3,7 @@ After a step on which the victim did not take FASTER, the adversary's sign patte
 coordinates flipped (a new draw each such step); else its own perturbation. --m 0 is the fitted adversary
 (signs of its action: at the box's corners already). Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/closed_loop.py MODEL EPS ADVERSARY_DIR [--m 1 3]
+    python studies/learned-adversary/pilots/one-query/closed_loop.py MODEL EPS ADVERSARY_DIR [--m 1 3]
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from zodrive.agents.policies import load_victim
+from zodrive.policies.resolve import load_victim
 from zodrive.attacks.spec import load_attack
 from zodrive.attacks.threat import ThreatModel
 from zodrive.attacks.victim import Victim

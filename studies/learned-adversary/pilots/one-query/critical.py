@@ -4,7 +4,7 @@ the fitted start (0 queries per step) not? The victim drives under random search
 adversary's perturbation is also fed to the victim, for analysis only (not counted, not driven). Steps are
 split by how far they are from the episode's end, since a crash ends it. Seeds --seed0.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/critical.py MODEL EPS ADVERSARY_DIR [--episodes 20]
+    python studies/learned-adversary/pilots/one-query/critical.py MODEL EPS ADVERSARY_DIR [--episodes 20]
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ query (a lane change towards a car beside the ego in the next lane, |dx| < --bes
 actor is vertex hold (one query per step). If a lane change into a car beside were reachable, the crash
 would come sooner than by speeding into the car ahead. Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/director.py MODEL EPS [--episodes 30] [--beside 5]
+    python studies/learned-adversary/pilots/one-query/director.py MODEL EPS [--episodes 30] [--beside 5]
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from common import FASTER, arguments, drive, setup, show, vertex_hold
-from zodrive.agents.rules import LANE_LEFT, LANE_RIGHT, LANE_WIDTH, ObservationRules
+from zodrive.drivers.rules import LANE_LEFT, LANE_RIGHT, LANE_WIDTH, ObservationRules
 
 
 def main() -> None:

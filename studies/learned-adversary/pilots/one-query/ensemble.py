@@ -4,7 +4,7 @@ adversary in turn takes over, and one that works is kept, as vertex hold keeps a
 (extra queries, not an attack) it also counts on how many of the steps driven under that rule each adversary,
 and any of them, would have given FASTER. Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/ensemble.py MODEL EPS ADVERSARY_DIR [ADVERSARY_DIR ...]
+    python studies/learned-adversary/pilots/one-query/ensemble.py MODEL EPS ADVERSARY_DIR [ADVERSARY_DIR ...]
 """
 
 from __future__ import annotations

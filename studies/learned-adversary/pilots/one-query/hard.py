@@ -1,6 +1,6 @@
 """A probe (issue 23, item 1; not a product command): a picker for the hard states. Vertex check's misses on
 dqn-close come where the held vertex fails its check and the picker's best fresh vertex, fed unasked, fails
-too (it works on about two of three such steps, `unasked-dqn-close.txt`). The committed picker saw few such
+too (it works on about two of three such steps, `results/learned-adversary/pilots/one-query/unasked-dqn-close.txt`). The committed picker saw few such
 states: they are the last steps before a crash, a few per training episode. This collects many of them and
 fine-tunes a copy of the committed picker on them alone, to be used only where a check failed.
 
@@ -14,9 +14,9 @@ fine-tunes a copy of the committed picker on them alone, to be used only where a
            copy choosing only the vertex fed unasked where a check failed (the committed picker everything else);
            print the return and the victim's action shares, to set beside the product's on the same seeds.
 
-    python results/learned-adversary/pilots/one-query/hard.py collect MODEL EPS PICKER_DIR --seed0 700000 \
+    python studies/learned-adversary/pilots/one-query/hard.py collect MODEL EPS PICKER_DIR --seed0 700000 \
         --episodes 150 --out runs/hard/a.npz
-    python results/learned-adversary/pilots/one-query/hard.py judge MODEL EPS PICKER_DIR runs/hard/a.npz ...
+    python studies/learned-adversary/pilots/one-query/hard.py judge MODEL EPS PICKER_DIR runs/hard/a.npz ...
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ product's `vertex-check:PICKER` (its counted queries, its picker, its random str
            until a step whose action it does not know (a vertex fed unasked); what a one-query attacker knows
   truth    FASTER, or IDLE where the simulator says the ego is at the top speed (an upper bound)
 
-    python results/learned-adversary/pilots/one-query/idle.py MODEL EPS PICKER_DIR RULE [--episodes 30]
+    python studies/learned-adversary/pilots/one-query/idle.py MODEL EPS PICKER_DIR RULE [--episodes 30]
 """
 
 from __future__ import annotations

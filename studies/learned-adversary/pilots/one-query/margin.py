@@ -7,7 +7,7 @@ check with a committed picker), each ranks the same 64 random vertices and the p
 best one works, beside the committed picker's. Data: --episodes-fit episodes from seed 900100 under the same
 attack, --probes vertices per state (queries counted and printed). Nothing written.
 
-    python results/learned-adversary/pilots/one-query/margin.py MODEL EPS PICKER_DIR [--episodes-fit 15]
+    python studies/learned-adversary/pilots/one-query/margin.py MODEL EPS PICKER_DIR [--episodes-fit 15]
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ seeds 0-19, 1000-1019, ... one block per round) to "the victim takes FASTER on t
 --per random vertices queried per state met; compared on tuning seeds 900000-900029 with plain vertex hold.
 --save / --load keep the classifier; with --load and --seed0 100000 --episodes 100 it runs on the evaluation
 seeds and pairs with the committed random-search cell of dqn-close at eps 0.02. Commands and printed output:
-tuning.txt. The product (`zodrive.agents.picker`, `zodrive.attacks.picker`) is this, cleaned up.
+results/learned-adversary/pilots/one-query/tuning.txt. The product (`zodrive.training.picker`, `zodrive.attacks.picker`) is this, cleaned up.
 """
 import argparse, os, sys, numpy as np, torch
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))

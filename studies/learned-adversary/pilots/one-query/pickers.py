@@ -4,7 +4,7 @@ fits) whose ratings are averaged, against each picker alone, at one query per st
 held one rates below the pickers' `switch` at the new state, feed the best-rated of `candidates` random
 vertices. Seeds --seed0.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/pickers.py MODEL EPS PICKER_DIR [PICKER_DIR ...]
+    python studies/learned-adversary/pilots/one-query/pickers.py MODEL EPS PICKER_DIR [PICKER_DIR ...]
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ the victim is also asked on every vertex of the pool, and on the steps where the
 probe prints how often some vertex of the pool would have given it, and the pool's share that would.
 Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/pool.py MODEL EPS PICKER_DIR [--k 64] [--episodes 10]
+    python studies/learned-adversary/pilots/one-query/pool.py MODEL EPS PICKER_DIR [--k 64] [--episodes 10]
 """
 
 from __future__ import annotations

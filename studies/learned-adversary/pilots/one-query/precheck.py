@@ -5,7 +5,7 @@ adversary's perturbation first; where the victim would brake on it (--trigger br
 (--trigger miss), a random vertex of the ball is fed instead, unasked: a fresh one each time (--hold off), or
 one kept until a check says the adversary works again (--hold on). Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/precheck.py MODEL EPS ADVERSARY_DIR [--trigger brake]
+    python studies/learned-adversary/pilots/one-query/precheck.py MODEL EPS ADVERSARY_DIR [--trigger brake]
 """
 
 from __future__ import annotations

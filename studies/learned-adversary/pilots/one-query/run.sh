@@ -1,14 +1,16 @@
 #!/bin/bash
 # Issue 23, item 1: three probes of what one query per step can do on the two cells where it stays weaker than
-# the per-step searches (dqn-close eps 0.02, dqn-robust eps 0.05); tuning seeds only; printed output beside.
+# the per-step searches (dqn-close eps 0.02, dqn-robust eps 0.05); tuning seeds only; printed output in
+# results/learned-adversary/pilots/one-query.
 set -u
 cd "$(dirname "$0")/../../../.."
 . .venv/bin/activate
+S=studies/learned-adversary/pilots/one-query
 P=results/learned-adversary/pilots/one-query
 A=results/learned-adversary/amortized-dqn-robust-eps0.05
 run() {  # OUT SCRIPT ARGS...
   out=$1; shift
-  { echo "\$ python $P/$*"; python $P/"$@" 2>&1 | grep -v "^WARN"; } > $P/$out.txt
+  { echo "\$ python $S/$*"; python $S/"$@" 2>&1 | grep -v "^WARN"; } > $P/$out.txt
 }
 run director-dqn-close director.py models/dqn-close 0.02 &
 run director-dqn-robust director.py models/dqn-robust 0.05

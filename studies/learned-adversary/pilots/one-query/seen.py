@@ -7,7 +7,7 @@ the same 64 unasked; but where the vertex about to be fed is one fed unasked at 
 have failed there, check the picker's best fresh vertex instead of it. Beside it, the product's rule in the
 same loop. Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/seen.py MODEL EPS PICKER_DIR [--episodes 30]
+    python studies/learned-adversary/pilots/one-query/seen.py MODEL EPS PICKER_DIR [--episodes 30]
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ perturbation; after a step on which it did not give FASTER (--trigger miss) or g
 feed a held vertex (kept while the victim does not brake, else a fresh random one) for --m steps, then the
 adversary again. Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/switch.py MODEL EPS ADVERSARY_DIR [--m 1 3 10] [--trigger miss]
+    python studies/learned-adversary/pilots/one-query/switch.py MODEL EPS ADVERSARY_DIR [--m 1 3 10] [--trigger miss]
 """
 
 from __future__ import annotations

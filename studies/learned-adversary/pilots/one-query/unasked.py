@@ -11,7 +11,7 @@ held vertex fails at the new state, the victim is also asked, for analysis only 
   any-1024     whether any of those 1024 random vertices works (what a search could find).
 Tuning seeds 900000.., nothing written.
 
-    python results/learned-adversary/pilots/one-query/unasked.py MODEL EPS PICKER_DIR [--episodes 30]
+    python studies/learned-adversary/pilots/one-query/unasked.py MODEL EPS PICKER_DIR [--episodes 30]
 """
 
 from __future__ import annotations

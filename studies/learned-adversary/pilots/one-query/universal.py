@@ -7,7 +7,7 @@ the share of states each vertex makes the victim take FASTER (mean, best, 90th p
 (each next vertex the one taking FASTER on most states the earlier ones miss), and on tuning seeds
 900000..: vertex hold beside a hold over that ranked list (on a miss, the next vertex of the list).
 
-    python results/learned-adversary/pilots/one-query/universal.py MODEL EPS [--under ADVERSARY_DIR]
+    python studies/learned-adversary/pilots/one-query/universal.py MODEL EPS [--under ADVERSARY_DIR]
 """
 
 from __future__ import annotations

@@ -1,0 +1,225 @@
+"""zodrive from Python: three calls for a notebook or a script.
+
+- `evaluate(policy, scenario, attack=None, ...)` drives episodes, clean or attacked, and returns a
+  `Result` (summary, per-episode records, a plot);
+- `attack(policy, observations, scenario, ...)` attacks a batch of observations once;
+- `AttackWrapper(env, policy, attack="random-search", eps=0.05)` attacks what an agent observes
+  in any gymnasium environment, reading features, bounds and actions from the environment.
+
+`policy` is anything `zodrive.policies.policy.resolve` reads: a model path, `baseline:NAME`,
+`FILE.py:NAME`, a stable-baselines3 model, a torch module or a numpy callable. Attack options are
+the fields of `AttackSpec` (`eps`, `steps`, `n_directions`, `target`, ...), given as keywords.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from zodrive.attacks.base import AttackResult
+from zodrive.attacks.spec import AttackSpec, load_attack
+from zodrive.envs import Scenario, gym_preset, load_preset, scenario, scenario_of_env
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
+from zodrive.evaluation.rollout import run_episode, run_lockstep
+from zodrive.policies.policy import Policy, resolve
+from zodrive.seeds import EVAL_SEED
+from zodrive.system import AttackWrapper as _AttackWrapper, attack_observations, build_attacker, load_policy, \
+    make_policy_env
+
+__all__ = ["AttackWrapper", "Result", "attack", "evaluate"]
+
+
+@dataclass
+class Result:
+    """What `evaluate` measured: `summary` (as in `summary.json`: mean return with its 95 % CI,
+    collision rate, speed, and the attack's success and queries per step) and `episodes` (one
+    record per episode, as in `episodes.jsonl`)."""
+
+    summary: dict[str, Any]
+    episodes: list[dict[str, Any]] = field(repr=False)
+
+    def __repr__(self) -> str:
+        s = self.summary
+        attack = f", {s['attack']} eps {s['eps']:g}" if s.get("attack") and s.get("eps") is not None else ""
+        return (f"Result({s['model']} on {s['preset']}{attack}: return {s['mean_return']:.2f} "
+                f"(95% CI {s['ci95'][0]:.2f}-{s['ci95'][1]:.2f}), collisions {100 * s['collision_rate']:.0f}%, "
+                f"{s['episodes']} episodes)")
+
+    def plot(self, path: str | Path | None = None, ax: Any = None) -> Any:
+        """Each episode's return, crashes marked, with the mean and its 95 % CI; saved to `path`
+        if given. Returns the matplotlib axes."""
+        import matplotlib
+
+        if ax is None and path is not None:
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 3.2))
+        returns = np.array([r["return"] for r in self.episodes])
+        crashed = np.array([bool(r["crashed"]) for r in self.episodes])
+        index = np.arange(len(returns))
+        ax.bar(index[~crashed], returns[~crashed], color="tab:blue", label="episode")
+        ax.bar(index[crashed], returns[crashed], color="tab:red", label="episode (crashed)")
+        low, high = self.summary["ci95"]
+        ax.axhspan(low, high, color="0.5", alpha=0.25, label="mean, 95% CI")
+        ax.axhline(self.summary["mean_return"], color="0.2", lw=1)
+        ax.set_xlabel("episode")
+        ax.set_ylabel("return")
+        ax.set_title(repr(self).removeprefix("Result(").removesuffix(")"), fontsize=8)
+        ax.legend(fontsize=7, loc="lower right")
+        if path is not None:
+            ax.figure.tight_layout()
+            ax.figure.savefig(path, dpi=120)
+        return ax
+
+
+def _preset(policy: Policy, scenario_name: str | dict[str, Any] | None, env_id: str | None) -> dict[str, Any]:
+    if isinstance(scenario_name, dict):
+        return scenario_name
+    if env_id is not None:
+        if scenario_name is not None:
+            raise ZodriveError("scenario and env_id both say where the policy drives: give one")
+        return gym_preset(env_id)
+    if scenario_name is None:
+        raise ZodriveError("say where the policy drives: scenario='discrete', 'highway-fast', ... "
+                           "(`zodrive env` lists them) or env_id='CartPole-v1'")
+    return load_preset(scenario_name)
+
+
+def _spec(attack: str | AttackSpec | None, where: Scenario, options: dict[str, Any]) -> AttackSpec | None:
+    """The attack spec from a name (or spec) and keyword options; the default target is the
+    paper's where the scenario has that action, else untargeted."""
+    if attack is None:
+        if options:
+            raise ZodriveError(f"attack options {sorted(options)} given without an attack")
+        return None
+    spec = attack if isinstance(attack, AttackSpec) else load_attack(attack)
+    if "target" not in options and spec.target == "auto" and not _paper_target_fits(where):
+        options = {**options, "target": "none"}
+    return spec.with_overrides(**options) if options else spec
+
+
+def _paper_target_fits(where: Scenario) -> bool:
+    if where.kind == "discrete":
+        return "FASTER" in where.action_names
+    return tuple(where.action_names) == ("acceleration", "steering")
+
+
+def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: str | AttackSpec | None = None, *,
+             defense: str | None = None, episodes: int = 10, seed: int = EVAL_SEED, envs: int = 1,
+             env_id: str | None = None, out: str | Path | None = None, trust_model: bool = False,
+             progress: bool = False, **options: Any) -> Result:
+    """Drive `episodes` episodes from seeds `seed`, `seed + 1`, ..., clean or under `attack`.
+
+    :param policy: a model path, `baseline:NAME`, `FILE.py:NAME`, an SB3 model, a torch module or a callable.
+    :param scenario: a preset name (`zodrive env` lists them) or a preset mapping.
+    :param attack: an attack name (`random-search`, `zo-signsgd`, ...), a config name or an `AttackSpec`.
+    :param defense: a runtime defense (`shield`, `shield@0.05`, `kinematic`).
+    :param episodes: how many episodes.
+    :param seed: the first episode's seed.
+    :param envs: episodes driven side by side (their observations attacked in one call); same numbers.
+    :param env_id: any gymnasium id instead of `scenario`.
+    :param out: a run folder (resumable; policies on disk only).
+    :param trust_model: read an SB3 zip with SB3's own loader (unpickles: only for files you trust).
+    :param progress: show a progress bar.
+    :param options: the attack's options (`eps=0.05`, `steps=50`, ...).
+    :returns: the `Result`.
+    """
+    resolved = resolve(policy)
+    preset = _preset(resolved, scenario, env_id)
+    spec = _spec(attack, globals()["scenario"](preset), options)
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ZodriveError(f"episodes must be a positive integer, not {episodes!r}")
+    attack_dict = spec.to_dict() if spec is not None else None
+    if not resolved.in_memory:
+        job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model)
+        summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress)
+        records = _records(Path(out)) if out is not None else summary.pop("_records", None)
+        return Result(summary, records if records is not None else [])
+    if out is not None:
+        raise ZodriveError(f"{resolved.label} lives in memory: a run folder is keyed on a model's content; "
+                       "save the model and pass its path to write and resume a run folder")
+    job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense)
+    records = [r.to_dict() for r in _drive(resolved, preset, spec, defense, episodes, seed, envs)]
+    return Result(summarize(records, job), records)
+
+
+def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defense: str | None,
+           episodes: int, seed: int, envs: int):
+    """Episodes of an in-memory policy, in this process."""
+    max_return = scenario(preset).max_return
+    if envs > 1 and (defense is None or defense.startswith(("shield", "close-shield"))):
+        from zodrive.envs import make_env
+
+        victim = load_policy(policy, preset, defense)
+        attacker = build_attacker(spec, victim, preset) if spec is not None else None
+        records = list(run_lockstep([make_env(preset) for _ in range(min(envs, episodes))], victim,
+                                    [(i, seed + i) for i in range(episodes)], max_return=max_return,
+                                    attacker=attacker))
+        return sorted(records, key=lambda r: r.episode)
+    victim, env = make_policy_env(policy, preset, spec, defense=defense)
+    try:
+        return [run_episode(env, victim, episode=i, seed=seed + i, max_return=max_return) for i in range(episodes)]
+    finally:
+        env.close()
+
+
+def _records(out: Path) -> list[dict[str, Any]]:
+    import json
+
+    lines = (out / "episodes.jsonl").read_text().splitlines()
+    return sorted((json.loads(line) for line in lines if line.strip()), key=lambda r: r["episode"])
+
+
+def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any] | None = None,
+           attack: str | AttackSpec = "random-search", *, env_id: str | None = None, seed: int = 0,
+           **options: Any) -> AttackResult:
+    """Attack a batch of clean observations once (each row its own problem, as one environment
+    step of `observations.shape[0]` environments).
+
+    :param policy: anything `evaluate` takes.
+    :param observations: clean observations, shape (N, *observation shape) or one observation.
+    :param scenario: the preset they come from (its features, bounds and actions define the threat model).
+    :param attack: the attack's name or `AttackSpec`.
+    :param env_id: any gymnasium id instead of `scenario`.
+    :param seed: the attack's random stream.
+    :param options: the attack's options (`eps=0.05`, ...).
+    :returns: `AttackResult`: `x_adv` (what the policy would see), per-row `success`, `queries`, `linf`, ...
+    """
+    resolved = resolve(policy)
+    preset = _preset(resolved, scenario, env_id)
+    where = globals()["scenario"](preset)
+    obs = np.asarray(observations, dtype=np.float32)
+    if obs.shape == where.obs_shape:
+        obs = obs[None]
+    if obs.shape[1:] != where.obs_shape:
+        raise ZodriveError(f"observations of shape {obs.shape[1:]} per row; {where.name} gives {where.obs_shape}")
+    spec = _spec(attack, where, {"seed": seed, **options})
+    attacker, objective, oracle = build_attacker(spec, resolved.victim(preset), preset)
+    attacker.reseed([seed * 1_000_003 + row for row in range(len(obs))])
+    result, _ = attack_observations(obs, attacker, objective, oracle)
+    return result
+
+
+class AttackWrapper(_AttackWrapper):
+    """A gymnasium wrapper that feeds the agent attacked observations of any Box-observation
+    environment: the threat model's features and bounds and the target's actions are read from
+    `env` (highway-env's observer, or the observation space's box). The default target is the
+    paper's (FASTER) where the environment has that action, else untargeted.
+
+    :param env: the environment (reset once here, with seed 0, to read highway-env's observer).
+    :param policy: the victim the attacker queries (anything `evaluate` takes).
+    :param attack: the attack's name or `AttackSpec`.
+    :param options: the attack's options (`eps=0.05`, ...).
+    """
+
+    def __init__(self, env: gym.Env, policy: Any, attack: str | AttackSpec = "random-search", **options: Any) -> None:
+        where = scenario_of_env(env)
+        spec = _spec(attack, where, options)
+        super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where))
