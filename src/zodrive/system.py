@@ -8,7 +8,7 @@ both use it; inside SB3's vectorized envs each copy attacks its own environment.
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -59,6 +59,40 @@ def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
     }
 
 
+class Attacker:
+    """One attack's episode lifecycle, the same for one environment (`AttackWrapper`) and for N
+    run in lockstep (`zodrive.evaluation.rollout.run_lockstep`): each row's random stream is
+    seeded by its episode's seed, nothing is carried across episodes, and the oracle counts
+    each row's queries per step and per episode."""
+
+    def __init__(self, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False) -> None:
+        self.attack, self.objective, self.oracle, self.trace = attack, objective, oracle, trace
+
+    def start(self, env_seeds: Sequence[int | None]) -> None:
+        """Rows begin episodes reset with `env_seeds` (one None: an unseeded reset, whose
+        attack stream goes on where it was)."""
+        if any(seed is None for seed in env_seeds):
+            self.attack.begin_episode()
+        else:
+            self.attack.reseed([episode_seed(self.attack.seed, int(seed)) for seed in env_seeds])
+        self.oracle.begin_step(rows=len(env_seeds))
+        self.oracle.begin_episode()
+
+    def restart_row(self, row: int, env_seed: int) -> None:
+        """Row `row` begins the episode reset with `env_seed` while the others go on."""
+        self.attack.restart_row(row, episode_seed(self.attack.seed, env_seed))
+        self.oracle.begin_episode(row)
+
+    def keep_rows(self, rows: np.ndarray) -> None:
+        """Only `rows` go on (their episodes ended with none waiting)."""
+        self.attack.keep_rows(rows)
+        self.oracle.keep_rows(rows)
+
+    def step(self, obs: np.ndarray) -> tuple[AttackResult, float]:
+        """Attack one step's observations (N rows); the result and the wall time [s]."""
+        return attack_observations(obs, self.attack, self.objective, self.oracle, trace=self.trace)
+
+
 class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """Feed the policy attacked observations; `info["attack"]` has the step's stats.
 
@@ -70,7 +104,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, attack=attack, objective=objective, oracle=oracle, trace=trace)
         gym.ObservationWrapper.__init__(self, env)
         self.attack, self.objective, self.oracle = attack, objective, oracle
-        self.trace = trace
+        self.attacker = Attacker(attack, objective, oracle, trace=trace)
         self.last: AttackResult | None = None
         self.last_stats: dict[str, Any] = {}
         self.last_wall_time = 0.0  # [s] spent attacking the latest observation
@@ -79,9 +113,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         self.clean_obs = observation
-        result, wall = attack_observations(
-            observation[None], self.attack, self.objective, self.oracle, trace=self.trace
-        )
+        result, wall = self.attacker.step(observation[None])
         self.last, self.last_stats, self.last_wall_time = result, step_stats(result, 0), wall
         self._episode_hits += int(result.success[0])
         self._episode_applicable += int(not result.already[0])
@@ -90,11 +122,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def reset(self, **kwargs: Any):  # type: ignore[override]
         """Reset; a seeded reset also restarts the attack's random stream from that seed, so an
         episode's perturbations depend only on (attack seed, episode seed)."""
-        if kwargs.get("seed") is not None:  # (reseeding also begins the attack's episode)
-            self.attack.reseed(episode_seed(self.attack.seed, kwargs["seed"]))
-        else:
-            self.attack.begin_episode()  # no warm start across episodes
-        self.oracle.begin_episode()
+        self.attacker.start([kwargs.get("seed")])
         self._episode_hits = self._episode_applicable = 0
         obs, info = super().reset(**kwargs)
         return obs, self._info(info)

@@ -12,7 +12,7 @@ from zodrive.attacks.base import Attack
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.victim import Victim
-from zodrive.system import AttackWrapper, attack_observations, episode_seed, step_stats
+from zodrive.system import Attacker, AttackWrapper, step_stats
 
 
 @dataclass
@@ -195,7 +195,7 @@ def run_lockstep(
     waiting = list(episodes)
     rows: list[tuple[gym.Env, Episode]] = []
     obs: list[np.ndarray] = []
-    attack, objective, oracle = attacker if attacker is not None else (None, None, None)
+    attack = Attacker(*attacker) if attacker is not None else None
 
     def start(env: gym.Env, row: int | None) -> None:  # the next waiting episode on `env`
         index, seed = waiting.pop(0)
@@ -207,19 +207,16 @@ def run_lockstep(
         else:
             rows[row], obs[row] = (env, tracker), first
             if attack is not None:
-                attack.restart_row(row, episode_seed(attack.seed, seed))
-                oracle.begin_episode(row)
+                attack.restart_row(row, seed)
 
     for env in envs[: len(waiting)]:
         start(env, None)
     if attack is not None:
-        attack.reseed([episode_seed(attack.seed, tracker.seed) for _, tracker in rows])
-        oracle.begin_step(rows=len(rows))
-        oracle.begin_episode()
+        attack.start([tracker.seed for _, tracker in rows])
     while rows:
         seen, result, share = np.stack(obs), None, 0.0
         if attack is not None:
-            result, wall = attack_observations(seen, attack, objective, oracle)
+            result, wall = attack.step(seen)
             seen, share = result.x_adv, wall / len(rows)
         ended = []
         for row, (env, tracker) in enumerate(rows):
@@ -242,7 +239,6 @@ def run_lockstep(
             rows[:], obs[:] = [rows[r] for r in keep], [obs[r] for r in keep]
             if attack is not None:
                 attack.keep_rows(keep)
-                oracle.keep_rows(keep)
 
 
 def left_road(env: gym.Env, terminated: bool, crashed: bool) -> bool:

@@ -1,0 +1,80 @@
+"""The Python API: `zodrive.evaluate`, `zodrive.attack` and `zodrive.AttackWrapper` on a model
+trained in the same session (CartPole: fast, and a scenario with no FASTER action)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import DQN
+
+import zodrive
+from zodrive.errors import ZodriveError
+
+
+@pytest.fixture(scope="module")
+def model() -> DQN:
+    torch.manual_seed(0)
+    return DQN("MlpPolicy", gym.make("CartPole-v1"), learning_starts=50, seed=0, device="cpu").learn(300)
+
+
+def own_loop(model: DQN, seeds: range) -> list[float]:
+    """What a user's own evaluation loop gives: deterministic actions from `model.predict`."""
+    env, returns = gym.make("CartPole-v1"), []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        done, total = False, 0.0
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(int(action))
+            total, done = total + reward, terminated or truncated
+        returns.append(total)
+    return returns
+
+
+def test_evaluate_an_in_memory_model_gives_the_users_own_numbers(model: DQN) -> None:
+    result = zodrive.evaluate(model, env_id="CartPole-v1", episodes=3, seed=7)
+    assert [r["return"] for r in result.episodes] == own_loop(model, range(7, 10))
+    assert result.summary["episodes"] == 3 and result.summary["attack"] is None
+    assert result.summary["mean_return"] == pytest.approx(np.mean(own_loop(model, range(7, 10))))
+    assert "dqn" in repr(result)
+
+
+def test_evaluate_under_attack_is_untargeted_where_there_is_no_faster(model: DQN, tmp_path) -> None:
+    result = zodrive.evaluate(model, env_id="CartPole-v1", attack="random-search", eps=0.05, steps=5,
+                              episodes=2, seed=7, envs=2)
+    assert result.summary["attack"] == "random-search" and result.summary["target"] == "none"
+    assert result.summary["queries_per_step"] > 0 and result.summary["max_linf"] <= 0.05 + 1e-6
+    ax = result.plot(tmp_path / "returns.png")
+    assert (tmp_path / "returns.png").stat().st_size > 0 and len(ax.patches) >= 2
+
+
+def test_attack_a_batch_stays_in_the_ball(model: DQN) -> None:
+    obs = np.random.default_rng(0).uniform(-0.05, 0.05, size=(4, 4)).astype(np.float32)
+    result = zodrive.attack(model, obs, env_id="CartPole-v1", attack="random-search", eps=0.05, steps=10)
+    assert result.x_adv.shape == obs.shape
+    assert np.abs(result.x_adv - obs).max() <= 0.05 + 1e-6
+    assert (result.queries > 0).all()
+
+
+def test_the_wrapper_reads_the_environment(model: DQN) -> None:
+    env = zodrive.AttackWrapper(gym.make("CartPole-v1"), model, attack="random-search", eps=0.05, steps=5)
+    obs, info = env.reset(seed=3)
+    for _ in range(5):
+        assert np.abs(obs - info["clean_obs"]).max() <= 0.05 + 1e-6
+        obs, _, terminated, truncated, info = env.step(int(model.predict(obs, deterministic=True)[0]))
+        assert info["attack"]["queries"] > 0
+        if terminated or truncated:
+            break
+
+
+def test_the_api_refuses_in_one_line(model: DQN) -> None:
+    with pytest.raises(ZodriveError, match="say where the policy drives"):
+        zodrive.evaluate(model)
+    with pytest.raises(ZodriveError, match="without an attack"):
+        zodrive.evaluate(model, env_id="CartPole-v1", eps=0.05)
+    with pytest.raises(ZodriveError, match="in memory"):
+        zodrive.evaluate(model, env_id="CartPole-v1", out="somewhere")
+    with pytest.raises(ZodriveError, match="cannot read a policy"):
+        zodrive.evaluate(42, env_id="CartPole-v1")
