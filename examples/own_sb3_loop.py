@@ -11,9 +11,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3 import DQN
 
-from zodrive.policies.victims import sb3_victim
-from zodrive.attacks import AttackSpec
-from zodrive.system import AttackWrapper
+import zodrive
 
 
 def main(train_steps: int = 20_000, episodes: int = 5) -> dict[str, float]:
@@ -21,13 +19,12 @@ def main(train_steps: int = 20_000, episodes: int = 5) -> dict[str, float]:
     steps whose decision flipped and the queries spent."""
     model = DQN("MlpPolicy", gym.make("CartPole-v1"), learning_starts=1000, exploration_fraction=0.2,
                 seed=0).learn(train_steps)
-    victim = sb3_victim(model)  # observations in, Q-values out: all the attacker gets
-    spec = AttackSpec(attack="random-search", eps=0.1, target="none", frozen=())  # untargeted, L-inf 0.1
-    attack, objective, oracle = spec.build(victim, features=("x", "v", "theta", "omega"),
-                                           bounds=(-np.inf, np.inf), n_actions=2)
+    # the attacker queries the model (observations in, Q-values out) and nothing else; the wrapper reads
+    # the threat model from the env: CartPole has no FASTER, so the attack is untargeted; L-inf 0.1
+    attacked = zodrive.AttackWrapper(gym.make("CartPole-v1"), model, attack="random-search", eps=0.1)
+    oracle = attacked.oracle
     returns = {}
-    for name, env in (("clean", gym.make("CartPole-v1")),
-                      ("attacked", AttackWrapper(gym.make("CartPole-v1"), attack, objective, oracle))):
+    for name, env in (("clean", gym.make("CartPole-v1")), ("attacked", attacked)):
         totals = []
         flips = []
         for seed in range(episodes):

@@ -20,8 +20,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from zodrive.drivers.baselines import is_baseline
-from zodrive.policies.factory import is_factory, split_factory
+from zodrive.policies.policy import resolve
 from zodrive.policies.resolve import check_policy
 from zodrive.system import make_policy_env
 from zodrive.attacks.base import ENGINE_VERSION
@@ -60,13 +59,7 @@ class EvalJob:
         the first seed."""
         from zodrive.runinfo import sha256
 
-        if is_baseline(self.model):
-            model = self.model
-        elif is_factory(self.model):  # the file's code; whatever else it reads is the user's to pin
-            file, name = split_factory(self.model)
-            model = f"sha256:{sha256(file)}:{name}"
-        else:
-            model = "sha256:" + sha256(Path(self.model))
+        model = resolve(self.model).key()
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
         if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
@@ -94,12 +87,11 @@ _WORKER: dict[str, Any] = {}
 def lockstep_blocker(job: EvalJob) -> str | None:
     """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
     policy that reads nothing but the observation and keeps no state between steps."""
-    from zodrive.drivers.baselines import get_baseline
     from zodrive.defense import keeps_state
 
     if job.defense is not None and keeps_state(job.defense):
         return f"the {job.defense} defense keeps its own state for one episode"
-    if is_baseline(job.model) and get_baseline(job.model).reads == "simulator":
+    if resolve(job.model).reads_simulator:
         return f"{job.model} reads its own simulator"
     return None
 

@@ -14,8 +14,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from zodrive.drivers.baselines import get_baseline, is_baseline
-from zodrive.policies.resolve import check_policy, has_gradients, policy_label, policy_ref, resolve_preset
+from zodrive.drivers.baselines import get_baseline
+from zodrive.policies.policy import resolve
+from zodrive.policies.resolve import check_policy, resolve_preset
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
@@ -48,10 +49,10 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     for model in models:
         model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
         check_policy(model, model_preset)
-        ref, name = policy_ref(model), policy_label(model)
-        reads = get_baseline(model).reads if is_baseline(model) else "observation"
+        policy = resolve(model)
+        ref, name, gradients = policy.ref, policy.label, policy.gradients
+        reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
         reads_obs = reads == "observation"
-        gradients = has_gradients(model)
         usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
         for defense in defenses if reads_obs else [None]:
             if defense is not None:

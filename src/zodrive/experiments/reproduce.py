@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.policies.loading import model_file
-from zodrive.policies.resolve import policy_ref
+from zodrive.policies.policy import resolve
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.config import models_dir
 from zodrive.envs import load_preset
@@ -97,10 +97,10 @@ def cells(models: dict[str, Path], spec: AttackSpec) -> list[tuple[str, str, str
     table = []
     for algo in ("dqn", "ddpg"):
         table += [
-            (algo, "initial", policy_ref(models[algo]), None),
-            (algo, "under_attack", policy_ref(models[algo]), spec),
-            (algo, "adversarial", policy_ref(models[f"{algo}-adv"]), spec),
-            (algo, "after", policy_ref(models[f"{algo}-adv"]), None),
+            (algo, "initial", resolve(models[algo]).ref, None),
+            (algo, "under_attack", resolve(models[algo]).ref, spec),
+            (algo, "adversarial", resolve(models[f"{algo}-adv"]).ref, spec),
+            (algo, "after", resolve(models[f"{algo}-adv"]).ref, None),
         ]
         table += [(algo, baseline.replace(":", "-"), baseline, None) for baseline in BASELINE_ROWS[algo]]
     return table

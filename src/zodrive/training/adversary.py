@@ -212,7 +212,7 @@ def attack_train(
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from zodrive.policies.resolve import is_sb3_zip, policy_ref
+    from zodrive.policies.policy import resolve
     from zodrive.system import load_policy
     from zodrive.runinfo import sha256
     from zodrive.training.recipes import check_run_folder
@@ -236,7 +236,7 @@ def attack_train(
         raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
         raise ZodriveError(f"eps must be > 0, not {eps}")
-    if not is_sb3_zip(model):
+    if resolve(model).kind != "model":
         raise ZodriveError("attack-train attacks a model file (SB3 zip or model folder): an adversary is tied "
                            "to the file it was trained against by its SHA-256")
     if defense is not None:
@@ -255,7 +255,7 @@ def attack_train(
         objective = AttackSpec(eps=float(eps), target=target).objective(
             victim.kind, context["n_actions"], context.get("action_names"), context.get("action_bounds"))
         check(pretrain, victim.kind, objective)
-    file = Path(policy_ref(model))
+    file = Path(resolve(model).ref)
     ppo = dict(PPO_DEFAULTS)
     ppo["n_steps"] = min(ppo["n_steps"], max(steps, 8))  # a tiny run (tests) still completes its rollouts
     ppo["batch_size"] = min(ppo["batch_size"], ppo["n_steps"])

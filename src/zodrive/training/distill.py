@@ -60,7 +60,8 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
     returns the zip's path. With `dagger` (rounds >= 0) the student is trained by `dagger_distill`
     instead (this path is unchanged without it). `eps` None: plain cloning (`kappa` must be 0)."""
-    from zodrive.drivers.baselines import check_baseline_fits, get_baseline, is_baseline
+    from zodrive.drivers.baselines import check_baseline_fits, get_baseline
+    from zodrive.policies.policy import resolve
     from zodrive.policies.loading import load_network, model_file
     from zodrive.policies.resolve import load_victim
     from zodrive.policies.victims import network_victim
@@ -78,7 +79,7 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
         raise ZodriveError("--method distill on a DDPG/TD3 model clones a --teacher with --dagger ROUNDS "
                            "(e.g. --teacher baseline:idm-mobil --dagger 4 --kappa 0)")
     readers = ("observation", "simulator") if dagger is not None else ("observation",)
-    if teacher is not None and not (is_baseline(teacher) and get_baseline(teacher).reads in readers):
+    if teacher is not None and not (resolve(teacher).kind == "baseline" and get_baseline(teacher).reads in readers):
         raise ZodriveError(f"--teacher must be an observation-reading baseline (baseline:rules, baseline:robust-rules@EPS)"
                            f"{' or, with --dagger, baseline:idm-mobil or baseline:planner' if dagger is not None else ''}, "
                            f"not {teacher!r}")

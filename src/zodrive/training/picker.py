@@ -120,7 +120,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     import torch
 
     from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, Picker, network, objective_target
-    from zodrive.policies.resolve import is_sb3_zip, policy_ref
+    from zodrive.policies.policy import resolve
     from zodrive.system import load_policy
     from zodrive.runinfo import sha256
     from zodrive.training.recipes import check_run_folder
@@ -135,7 +135,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
                            "stay below 50000, apart from tuning and evaluation seeds")
     if not (isinstance(eps, float) and np.isfinite(eps) and eps > 0):
         raise ZodriveError(f"eps must be > 0, not {eps}")
-    if not is_sb3_zip(model):
+    if resolve(model).kind != "model":
         raise ZodriveError("picker-train attacks a model file (SB3 zip or model folder): a picker is tied to the "
                            "file it was fitted against by its SHA-256")
     check_run_folder(out, resume=False, force=force, resumable=False)
@@ -201,7 +201,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     tmp = out / f".{WEIGHTS_FILE}.tmp"
     torch.save(net.state_dict(), tmp)
     tmp.replace(out / WEIGHTS_FILE)
-    meta = {"format": FORMAT, "victim": str(model), "victim_sha256": sha256(Path(policy_ref(model))),
+    meta = {"format": FORMAT, "victim": str(model), "victim_sha256": sha256(Path(resolve(model).ref)),
             "preset": preset, "eps": eps, "norm": threat.norm, "frozen": list(threat.frozen),
             **objective_target(objective), "obs_shape": list(shape), "width": fit.width,
             "candidates": fit.candidates, "switch": float(fit.switch)}
