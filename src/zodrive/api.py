@@ -139,9 +139,10 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     attack_dict = spec.to_dict() if spec is not None else None
     if not resolved.in_memory:
         job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model)
-        summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress)
-        records = _records(Path(out)) if out is not None else summary.pop("_records", None)
-        return Result(summary, records if records is not None else [])
+        records: list[dict[str, Any]] = []
+        summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress,
+                                 records=records)
+        return Result(summary, records)
     if out is not None:
         raise ZodriveError(f"{resolved.label} lives in memory: a run folder is keyed on a model's content; "
                        "save the model and pass its path to write and resume a run folder")
@@ -168,13 +169,6 @@ def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defe
         return [run_episode(env, victim, episode=i, seed=seed + i, max_return=max_return) for i in range(episodes)]
     finally:
         env.close()
-
-
-def _records(out: Path) -> list[dict[str, Any]]:
-    import json
-
-    lines = (out / "episodes.jsonl").read_text().splitlines()
-    return sorted((json.loads(line) for line in lines if line.strip()), key=lambda r: r["episode"])
 
 
 def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any] | None = None,

@@ -117,6 +117,34 @@ def gym_preset(env_id: str, overrides: list[str] | None = None, obs_bounds: tupl
     return config
 
 
+def preset_for_env(env_id: str, env_kwargs: dict[str, Any] | None = None,
+                   overrides: list[str] | None = None) -> dict[str, Any]:
+    """The scenario a model trained on `env_id` with `env_kwargs` drives: the shipped preset of that
+    highway-env id (zodrive's exact observer, same config) with the model's `config` merged in, or
+    a preset of the gymnasium id itself."""
+    from zodrive.config import deep_merge
+
+    kwargs = dict(env_kwargs or {})
+    matches = [name for name in preset_names()
+               if load_config(name, "presets").get("env_id", ENV_ID).removeprefix("zodrive/") == env_id]
+    if not matches:
+        config = gym_preset(env_id, overrides)
+        if kwargs:
+            key = "highway" if "highway" in config else "env_kwargs"
+            config[key] = deep_merge(config[key], kwargs.get("config", kwargs) if key == "highway" else kwargs)
+            validate_preset(config, env_id)
+        return config
+    config = load_preset(sorted(matches, key=len)[0], overrides)
+    extra = set(kwargs) - {"config"}
+    if extra:
+        raise ZodriveError(f"env_kwargs {sorted(extra)} of a model trained on {env_id}: zodrive passes highway-env "
+                           "only its `config`; run it with --env-id and --env-set")
+    if kwargs.get("config"):
+        config["highway"] = deep_merge(config.get("highway") or {}, kwargs["config"])
+        validate_preset(config, env_id)
+    return config
+
+
 def validate_preset(config: dict[str, Any], name: str) -> None:
     """Catch config mistakes up front, before highway-env turns them into tracebacks."""
     check_keys(config, PRESET_KEYS, f"preset {name!r}")

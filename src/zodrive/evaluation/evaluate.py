@@ -247,9 +247,11 @@ def evaluate(
     workers: int = 1,
     envs: int = DEFAULT_ENVS,
     progress: bool = True,
+    records: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Run `episodes` episodes (resuming from `out` if it holds part of this run) over
-    `workers` processes, `envs` side by side in each; summarize."""
+    `workers` processes, `envs` side by side in each; summarize. The episode records are
+    appended to `records` in episode order, when a list is given."""
     if not isinstance(episodes, int) or episodes < 1:
         raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
     if workers < 1:
@@ -277,6 +279,8 @@ def evaluate(
     if out is not None and not todo and (out / "summary.json").is_file():
         summary = json.loads((out / "summary.json").read_text())
         if summary.get("episodes") == episodes:  # finished before: its summary stands (step records may be gone)
+            if records is not None:
+                records.extend(done[i] for i in range(episodes))
             return summary
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
@@ -291,8 +295,10 @@ def evaluate(
             bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
     if bar is not None:
         bar.close()
-    records = [done[i] for i in range(episodes)]
-    summary = summarize(records, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    ordered = [done[i] for i in range(episodes)]
+    if records is not None:
+        records.extend(ordered)
+    summary = summarize(ordered, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
     if out is not None:
         write_json(out / "summary.json", summary)
     return summary

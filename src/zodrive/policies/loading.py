@@ -20,16 +20,18 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.policies.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
 from zodrive.errors import ZodriveError
+from zodrive.policies.folders import model_zip
 
 ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
 """The algorithms zodrive trains, by recipe name (`algo:`); other SB3 classes load by their class name."""
 
 
 def model_file(path: str | Path) -> Path:
-    """`path` itself, or `path/model.zip` for a model folder."""
+    """`path` itself, or the model in a model folder (`model.zip`, or the one zip of an rl-zoo3
+    or Hugging Face folder; several are named, never guessed between)."""
     path = Path(path)
     if path.is_dir():
-        path = path / "model.zip"
+        path = model_zip(path)
     if not path.is_file():
         raise ZodriveError(f"model file not found: {path}")
     return path

@@ -23,8 +23,10 @@ from zodrive.envs import Scenario, scenario
 from zodrive.errors import ZodriveError
 from zodrive.policies import resolve as text
 from zodrive.policies.factory import build, is_factory, split_factory
+from zodrive.policies.folders import trained_with
 from zodrive.policies.loading import load_network
 from zodrive.policies.onnx_policy import is_onnx
+from zodrive.policies.normalize import normalized_victim
 from zodrive.policies.victims import network_victim, object_victim, sb3_victim
 from zodrive.runinfo import sha256
 
@@ -63,7 +65,9 @@ class Policy:
         if self.in_memory:
             raise ZodriveError(f"{self.label} lives in memory: it has no content to key a run folder on "
                                "(save it and pass the file to resume runs)")
-        return "sha256:" + sha256(Path(self.ref))
+        key = "sha256:" + sha256(Path(self.ref))
+        norm = trained_with(Path(self.ref)).normalization  # the statistics decide what the policy sees
+        return key if norm is None else f"{key}+vecnormalize:sha256:{sha256(norm)}"
 
     def action_kind(self) -> str:
         """`discrete` or `continuous`: the kind of scenario it drives by default."""
@@ -106,6 +110,8 @@ class Policy:
         elif self.kind == "model":
             network = load_network(self.ref)  # the safe loader: nothing unpickled
             victim = network_victim(network.net, network.kind, network.obs_shape)
+            norm = text.normalization(self.ref)
+            victim = victim if norm is None else normalized_victim(victim, norm)
         else:
             raise ZodriveError(f"{self.label} is a {self.kind}: give it a zodrive preset (zodrive.evaluate), "
                                "not an environment of your own")

@@ -9,6 +9,7 @@ its (optionally attacked) environment.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,10 @@ from zodrive.policies.factory import is_factory
 from zodrive.attacks.victim import Victim
 from zodrive.envs import action_kind, n_actions, observation_shape
 from zodrive.errors import ZodriveError
+from zodrive.policies.folders import TrainedWith, trained_with
+from zodrive.policies.normalize import ObsNormalization, normalized_victim, read_normalization
+
+log = logging.getLogger("zodrive")
 
 
 def policy_kind(model: str) -> str:
@@ -74,9 +79,10 @@ def policy_label(model: str) -> str:
 
 def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
                    obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
-    """Where `model` drives: `preset`, `env_id` (any gymnasium id), or the paper's preset of its
-    action kind (discrete / continuous)."""
-    from zodrive.envs import gym_preset, load_preset
+    """Where `model` drives: `preset`, `env_id` (any gymnasium id), where the model's folder says
+    it was trained (rl-zoo3 / Hugging Face files, `<env id>.zip`), or else the paper's preset of
+    its action kind (discrete / continuous), said in a warning: a default is never silent."""
+    from zodrive.envs import gym_preset, load_preset, preset_for_env
 
     if env_id is not None:
         if preset is not None:
@@ -84,7 +90,30 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
         return gym_preset(env_id, env_set, obs_bounds)
     if obs_bounds is not None:
         raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
-    return load_preset(preset or policy_kind(model), env_set)
+    if preset is not None:
+        return load_preset(preset, env_set)
+    said = None if bl.is_baseline(model) or is_factory(model) or _is_onnx(model) else _trained_with(model)
+    if said is not None and said.env_id is not None:
+        found = preset_for_env(said.env_id, said.env_kwargs, env_set)
+        log.warning("scenario: %s, where %s says the model was trained", found["name"], ", ".join(said.said_by))
+        return found
+    default = load_preset(policy_kind(model), env_set)
+    if not bl.is_baseline(model):
+        log.warning("scenario: %s, a default (%s does not say where it was trained): pass --preset or --env-id",
+                    default["name"], model)
+    return default
+
+
+def _is_onnx(model: str) -> bool:
+    from zodrive.policies.onnx_policy import is_onnx
+
+    return is_onnx(model)
+
+
+def _trained_with(model: str) -> TrainedWith:
+    from zodrive.policies.loading import model_file
+
+    return trained_with(model_file(model))
 
 
 def is_sb3_zip(model: str) -> bool:
@@ -148,6 +177,17 @@ def load_victim(model: str, preset: dict[str, Any], *, trust: bool = False) -> V
     if is_onnx(model):
         return onnx_victim(Path(model), preset)
     if trust:
-        return sb3_victim(load_model(model, preset, trust=True))
-    network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
-    return network_victim(network.net, kind, network.obs_shape)
+        victim = sb3_victim(load_model(model, preset, trust=True))
+    else:
+        network = load_network(model, preset)  # rebuilt from plain data: nothing in the file is unpickled
+        victim = network_victim(network.net, kind, network.obs_shape)
+    norm = normalization(model)
+    return victim if norm is None else normalized_victim(victim, norm)
+
+
+def normalization(model: str | Path) -> ObsNormalization | None:
+    """The VecNormalize statistics a model file was trained with (None: none beside it)."""
+    from zodrive.policies.loading import model_file
+
+    found = trained_with(model_file(model)).normalization
+    return read_normalization(found) if found is not None else None

@@ -1,0 +1,110 @@
+"""What a model's folder says about how it was trained: plain SB3 (`model.zip`), rl-zoo3
+(`<env id>.zip`, `<env id>/args.yml`, `config.yml`, `env_kwargs.yml`, `vecnormalize.pkl`) and
+Hugging Face model repos (`<algo>-<env id>.zip`, `args.yml`, `env_kwargs.yml`, `vec_normalize.pkl`).
+
+Read as data only: rl-zoo3 writes its YAML with `!!python/object/apply:collections.OrderedDict`,
+which this reader takes as a list of pairs; every other Python tag is refused.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from zodrive.errors import ZodriveError
+from zodrive.policies.normalize import find_normalization
+
+ZOO_FILES = ("args.yml", "env_kwargs.yml", "config.yml")
+
+
+class _ZooLoader(yaml.SafeLoader):
+    """YAML as rl-zoo3 writes it: ordered mappings as lists of pairs, nothing else from Python."""
+
+
+def _ordered(loader: yaml.SafeLoader, node: yaml.Node) -> dict[str, Any]:
+    pairs = loader.construct_sequence(node, deep=True)
+    items = pairs[0] if len(pairs) == 1 and isinstance(pairs[0], list) else pairs
+    try:
+        return {str(k): v for k, v in items}
+    except (TypeError, ValueError):
+        raise yaml.constructor.ConstructorError(None, None, "an OrderedDict that is not a list of pairs",
+                                                node.start_mark) from None
+
+
+_ZooLoader.add_constructor("tag:yaml.org,2002:python/object/apply:collections.OrderedDict", _ordered)
+
+
+def read_zoo_yaml(path: Path) -> Any:
+    """One of rl-zoo3's YAML files, as data; a one-line error naming the file otherwise."""
+    try:
+        return yaml.load(path.read_text(encoding="utf-8"), Loader=_ZooLoader)  # noqa: S506 - a safe loader
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ZodriveError(f"{path} is not YAML zodrive reads as data: {str(exc).splitlines()[0]}") from None
+
+
+def model_zip(folder: Path) -> Path:
+    """The model file in `folder`: `model.zip`, or the one zip there (rl-zoo3's `<env id>.zip`,
+    Hugging Face's `<algo>-<env id>.zip`); several zips are named, never guessed between."""
+    if (folder / "model.zip").is_file():
+        return folder / "model.zip"
+    zips = sorted(p for p in folder.glob("*.zip") if p.is_file())
+    if len(zips) == 1:
+        return zips[0]
+    if not zips:
+        raise ZodriveError(f"model file not found: {folder} holds no .zip")
+    raise ZodriveError(f"{folder} holds {len(zips)} models ({', '.join(p.name for p in zips)}): "
+                       "name the one you mean")
+
+
+@dataclass(frozen=True)
+class TrainedWith:
+    """Where a model says it was trained, and by which files."""
+
+    env_id: str | None = None
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    normalization: Path | None = None
+    said_by: tuple[str, ...] = ()
+
+
+def trained_with(model: Path) -> TrainedWith:
+    """What the files beside the model file `model` say: the env id (rl-zoo3 / Hugging Face
+    `args.yml`, or the zip's name `<algo>-<env id>.zip` when that is a registered environment),
+    `env_kwargs` and the VecNormalize statistics."""
+    folder = model.parent
+    said: list[str] = []
+    env_id, env_kwargs = None, {}
+    for base in (folder / model.stem, folder):  # rl-zoo3 keeps its files in `<env id>/` beside `<env id>.zip`
+        args_file, kwargs_file = base / "args.yml", base / "env_kwargs.yml"
+        if args_file.is_file() and env_id is None:
+            args = read_zoo_yaml(args_file)
+            if isinstance(args, dict) and isinstance(args.get("env"), str):
+                env_id = args["env"]
+                said.append(str(args_file))
+        if kwargs_file.is_file() and not env_kwargs:
+            kwargs = read_zoo_yaml(kwargs_file)
+            if kwargs not in (None, {}):
+                if not isinstance(kwargs, dict):
+                    raise ZodriveError(f"{kwargs_file} is not a mapping of keyword arguments")
+                env_kwargs = kwargs
+                said.append(str(kwargs_file))
+    if env_id is None:
+        env_id = _env_id_from_name(model.stem)
+        if env_id is not None:
+            said.append(str(model))
+    norm = find_normalization(folder)
+    return TrainedWith(env_id, env_kwargs, norm, tuple(said))
+
+
+def _env_id_from_name(stem: str) -> str | None:
+    import gymnasium as gym
+
+    import highway_env  # noqa: F401  (registers highway-env's ids)
+
+    for candidate in (stem, re.sub(r"^[a-z0-9]+-", "", stem)):  # `<env id>` (rl-zoo3) or `<algo>-<env id>` (HF)
+        if re.fullmatch(r"[\w/-]+-v\d+", candidate) and candidate in gym.registry:
+            return candidate
+    return None

@@ -1,0 +1,106 @@
+"""Models trained inside VecNormalize, rl-zoo3 and Hugging Face folders: zodrive's episodes equal
+the user's own loop with the statistics applied, the scenario comes from the folder, and a
+normalization file that would run code is refused without running it."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import shutil
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+import zodrive
+from zodrive.errors import ZodriveError
+from zodrive.policies.normalize import read_normalization
+from zodrive.policies.resolve import resolve_preset
+
+ENV = "CartPole-v1"
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> tuple[Path, PPO, VecNormalize]:
+    """A PPO trained inside VecNormalize (statistics far from 0/1: the scale matters), saved as SB3 does."""
+    folder = tmp_path_factory.mktemp("vecnorm")
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(ENV)]), norm_reward=True, clip_obs=5.0)
+    model = PPO("MlpPolicy", venv, n_steps=256, batch_size=64, n_epochs=2, seed=0, device="cpu").learn(512)
+    venv.obs_rms.mean = venv.obs_rms.mean + np.array([0.3, 0.5, -0.02, 0.4])  # make a forgotten normalization show
+    venv.obs_rms.var = venv.obs_rms.var * np.array([4.0, 0.2, 9.0, 0.5])
+    model.save(folder / "model")
+    venv.save(str(folder / "vecnormalize.pkl"))
+    return folder, model, venv
+
+
+def own_loop(model: PPO, venv: VecNormalize, seeds: range) -> list[float]:
+    env, returns = gym.make(ENV), []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        done, total = False, 0.0
+        while not done:
+            action, _ = model.predict(venv.normalize_obs(obs), deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(int(action))
+            total, done = total + float(reward), terminated or truncated
+        returns.append(total)
+    return returns
+
+
+def test_a_vecnormalize_model_gives_the_users_numbers(trained) -> None:
+    folder, model, venv = trained
+    result = zodrive.evaluate(str(folder), env_id=ENV, episodes=4, seed=3)
+    expected = own_loop(model, venv, range(3, 7))
+    assert [r["return"] for r in result.episodes] == expected
+    raw = zodrive.evaluate(model, env_id=ENV, episodes=4, seed=3)  # the same network without the statistics
+    assert [r["return"] for r in raw.episodes] != expected  # so the test can fail
+
+
+def test_the_run_key_covers_the_statistics(trained, tmp_path: Path) -> None:
+    folder, _, _ = trained
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    before = zodrive.resolve(str(copy)).key()
+    assert "vecnormalize:sha256:" in before
+    (copy / "vecnormalize.pkl").unlink()
+    assert zodrive.resolve(str(copy)).key() != before
+
+
+def test_rl_zoo3_and_hugging_face_folders(trained, tmp_path: Path) -> None:
+    folder, model, venv = trained
+    zoo = tmp_path / "zoo" / "CartPole-v1_1"
+    (zoo / ENV).mkdir(parents=True)
+    shutil.copy(folder / "model.zip", zoo / f"{ENV}.zip")
+    shutil.copy(folder / "vecnormalize.pkl", zoo / ENV / "vecnormalize.pkl")
+    (zoo / ENV / "args.yml").write_text("!!python/object/apply:collections.OrderedDict\n- - - algo\n    - ppo\n"
+                                         f"  - - env\n    - {ENV}\n")
+    (zoo / ENV / "env_kwargs.yml").write_text("{}\n")
+    hub = tmp_path / "hub"
+    hub.mkdir()
+    shutil.copy(folder / "model.zip", hub / f"ppo-{ENV}.zip")
+    shutil.copy(folder / "vecnormalize.pkl", hub / "vec_normalize.pkl")
+    expected = own_loop(model, venv, range(3, 5))
+    for where in (zoo, hub):
+        assert resolve_preset(str(where), None)["env_id"] == ENV  # the scenario comes from the folder
+        result = zodrive.evaluate(str(where), resolve_preset(str(where), None), episodes=2, seed=3)
+        assert [r["return"] for r in result.episodes] == expected
+    shutil.copy(folder / "model.zip", hub / "best_model.zip")
+    with pytest.raises(ZodriveError, match="holds 2 models .*best_model.zip, ppo-CartPole-v1.zip"):
+        zodrive.resolve(str(hub))
+
+
+class _Payload:
+    def __reduce__(self):
+        return (os.mkdir, (str(Path(os.environ["ZODRIVE_MARKER"])),))
+
+
+def test_a_crafted_normalization_file_runs_nothing(tmp_path: Path, monkeypatch) -> None:
+    marker = tmp_path / "ran"
+    monkeypatch.setenv("ZODRIVE_MARKER", str(marker))
+    bad = tmp_path / "vecnormalize.pkl"
+    bad.write_bytes(pickle.dumps({"obs_rms": _Payload()}))
+    with pytest.raises(ZodriveError, match="without running code: posix.mkdir|without running code: os.mkdir"):
+        read_normalization(bad)
+    assert not marker.exists()
