@@ -9,6 +9,7 @@ validated value.
 from __future__ import annotations
 
 import difflib
+import reprlib
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -35,6 +36,11 @@ def one_line(error: ValidationError, context: str, fields: set[str], prefix: str
                         ("Input should be greater than", "must be >"),
                         ("Input should be less than or equal to", "must be <="), ("Input should be less than", "must be <")):
         text = text.replace(words, sign)
+    if first["type"] == "finite_number":
+        return f"{context}: {where} must be a finite number, not {value!r}"
+    if first["type"] == "too_short":
+        least = first.get("ctx", {}).get("min_length", 1)
+        return f"{context}: {where} must hold at least {least} item{'' if least == 1 else 's'}, not {value!r}"
     if first["type"] in ("bool_type", "int_type", "float_type", "string_type", "literal_error", "list_type",
                          "dict_type"):
         return f"{context}: {where} must be {_expected(first)}, not {value!r}"
@@ -46,8 +52,12 @@ class _short:  # noqa: N801 - a repr cut to one readable line
         self.value = value
 
     def __repr__(self) -> str:
-        text = repr(self.value)
+        text = _REPR.repr(self.value)  # bounded: a huge value is never formatted whole
         return text if len(text) <= 60 else text[:57] + "..."
+
+
+_REPR = reprlib.Repr()
+_REPR.maxstring, _REPR.maxother, _REPR.maxlevel = 80, 80, 3
 
 
 def _expected(error: dict[str, Any]) -> str:

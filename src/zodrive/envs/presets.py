@@ -20,7 +20,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from zodrive.config import available, check_keys, config_root, load_config
+from zodrive.config import available, check_keys, config_root, load_config, read_text
 from zodrive.errors import ZodriveError
 
 ENV_ID = "zodrive/highway-v0"
@@ -334,7 +334,7 @@ def preset_summary(name: str) -> str:
     """The first sentence of a shipped preset file's leading comment: what it is, in one line."""
     path = config_root() / "presets" / f"{name}.yaml"
     lines = []
-    for line in path.read_text().splitlines():
+    for line in read_text(path, "preset file").splitlines():
         if not line.startswith("#"):
             break
         lines.append(line.lstrip("# ").strip())

@@ -1,15 +1,19 @@
 """A preset's `highway:` mapping, typed from the scenario's own default config (a key whose
 default is an integer takes integers, and so on), with the ranges that keep highway-env from
-silently doing nonsense (a negative duration, a zero frequency)."""
+silently doing nonsense (a negative or infinite duration, a zero frequency, an empty feature
+list, a feature range it divides by zero with)."""
 
 from __future__ import annotations
 
-from typing import Any, Literal, Optional, Union
+import math
+from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError, create_model
 
 from zodrive.errors import ZodriveError
 from zodrive.validation import Number, one_line
+
+Finite = Annotated[Number, Field(allow_inf_nan=False)]  # highway-env multiplies and divides by these
 
 
 RANGES: dict[str, dict[str, float]] = {  # keys highway-env accepts nonsense for
@@ -19,8 +23,8 @@ RANGES: dict[str, dict[str, float]] = {  # keys highway-env accepts nonsense for
     "scaling": {"gt": 0}, "initial_vehicle_count": {"ge": 0}, "spawn_probability": {"ge": 0, "le": 1},
 }
 OBSERVATION_FIELDS: dict[str, Any] = {
-    "type": (Optional[str], None), "vehicles_count": (StrictInt, Field(None, ge=1)), "features": (list[str], None),
-    "features_range": (Optional[dict[str, list[float]]], None), "absolute": (StrictBool, None),
+    "type": (Optional[str], None), "vehicles_count": (StrictInt, Field(None, ge=1)),
+    "features": (list[str], Field(None, min_length=1)), "features_range": (Optional[dict[str, list[Finite]]], None), "absolute": (StrictBool, None),
     "normalize": (StrictBool, None), "clip": (StrictBool, None), "see_behind": (StrictBool, None),
     "observe_intentions": (StrictBool, None), "order": (Literal["sorted", "shuffled"], None),
     "flatten": (StrictBool, None), "include_obstacles": (StrictBool, None),
@@ -37,9 +41,9 @@ def _field_type(key: str, default: Any) -> Any:
     if isinstance(default, bool):
         return StrictBool
     if isinstance(default, int):
-        return StrictInt if key in INTEGER_KEYS else Number
+        return StrictInt if key in INTEGER_KEYS else Finite
     if isinstance(default, float):
-        return Number
+        return Finite
     if isinstance(default, str):
         return Union[str, None]
     if isinstance(default, (list, tuple)):
@@ -76,3 +80,27 @@ def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: 
             _OBSERVATION.model_validate(observation)
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, context, set(OBSERVATION_FIELDS), "highway.observation.")) from None
+        features = observation.get("features") or []
+        twice = sorted({f for f in features if features.count(f) > 1})
+        if twice:
+            raise ZodriveError(f"{context}: highway.observation.features names {twice[0]!r} twice")
+        for name, bounds in (observation.get("features_range") or {}).items():
+            _check_range(bounds, f"highway.observation.features_range.{name}", context, strict=True)
+    if "reward_speed_range" in config:
+        _check_range(config["reward_speed_range"], "highway.reward_speed_range", context, strict=True)
+    action = config.get("action")
+    if isinstance(action, dict):
+        for key in ("acceleration_range", "steering_range", "speed_range"):
+            if key in action:
+                _check_range(action[key], f"highway.action.{key}", context, strict=False)
+
+
+def _check_range(value: Any, where: str, context: str, strict: bool) -> None:
+    """[low, high]: two finite numbers, low < high (`strict`: highway-env divides by high - low)
+    or low <= high."""
+    numbers = isinstance(value, list) and len(value) == 2 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not numbers or (value[0] >= value[1] if strict else value[0] > value[1]):
+        shape = "low < high" if strict else "low <= high"
+        raise ZodriveError(f"{context}: {where} must be [low, high], two finite numbers with {shape}, "
+                           f"not {str(value)[:60]}")
