@@ -78,3 +78,45 @@ def test_the_api_refuses_in_one_line(model: DQN) -> None:
         zodrive.evaluate(model, env_id="CartPole-v1", out="somewhere")
     with pytest.raises(ZodriveError, match="cannot read a policy"):
         zodrive.evaluate(42, env_id="CartPole-v1")
+
+
+class Logger:
+    """A numpy victim that logs every row it receives."""
+
+    def __init__(self) -> None:
+        self.rows = 0
+        self.weights = np.random.default_rng(0).normal(size=(4, 2)).astype(np.float32)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self.rows += len(obs)
+        return obs.reshape(len(obs), -1) @ self.weights
+
+
+@pytest.mark.parametrize("attack", ["random-search", "zo-signsgd"])
+def test_the_victim_sees_exactly_the_rows_reported(attack: str) -> None:
+    seen, reported, returns = [], [], []
+    for envs in (1, 4):
+        victim = Logger()
+        result = zodrive.evaluate(victim, env_id="CartPole-v1", attack=attack, eps=0.05, steps=4, episodes=4,
+                                  seed=11, envs=envs)
+        rows = result.summary["victim_rows"]
+        seen.append(victim.rows)
+        reported.append(rows["attack_queries"] + rows["decisions"])
+        returns.append([r["return"] for r in result.episodes])
+    assert seen == reported and seen[0] == seen[1] and returns[0] == returns[1]
+
+
+def test_a_policy_file_sees_only_what_is_reported(tmp_path) -> None:
+    log = tmp_path / "rows.txt"
+    (tmp_path / "victim.py").write_text(
+        "import numpy as np\n"
+        "def make():\n"
+        "    w = np.random.default_rng(0).normal(size=(4, 2)).astype(np.float32)\n"
+        "    def policy(obs):\n"
+        f"        with open({str(log)!r}, 'a') as f: f.write(f'{{len(obs)}}\\n')\n"
+        "        return obs.reshape(len(obs), -1) @ w\n"
+        "    return policy\n")
+    result = zodrive.evaluate(f"{tmp_path / 'victim.py'}:make", env_id="CartPole-v1", attack="random-search",
+                              eps=0.05, steps=4, episodes=3, seed=11, envs=3)
+    rows = result.summary["victim_rows"]
+    assert sum(map(int, log.read_text().split())) == rows["attack_queries"] + rows["decisions"]

@@ -128,8 +128,13 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return obs, self._info(info)
 
     def step(self, action: Any):  # type: ignore[override]
-        obs, reward, terminated, truncated, info = super().step(action)
-        return obs, reward, terminated, truncated, self._info(info)
+        """Step; the observation an episode ends on is passed on clean and not attacked: no one
+        acts on it, so querying the victim about it would spend queries no step is charged."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if terminated or truncated:
+            self.clean_obs, self.last, self.last_stats, self.last_wall_time = obs, None, {}, 0.0
+            return obs, reward, terminated, truncated, self._info(info)
+        return self.observation(obs), reward, terminated, truncated, self._info(info)
 
     def _info(self, info: dict[str, Any]) -> dict[str, Any]:
         info = dict(info)

@@ -32,7 +32,8 @@ class QueryOracle:
     the last bits differently from a batch of 4 or more), so the first call that mixes rows
     measures, once, from which batch size the victim's outputs stop depending on it
     (`stable_batch`, on random inputs that are not observations and whose outputs reach no
-    attack; counted apart, in `calibration_queries`); a row whose share of a call is smaller is sent on its own, as a one-row run
+    attack, sent to zodrive's own copy of the network, `Victim.calibrate`, never to a user's
+    callable; counted apart, in `calibration_queries`); a row whose share of a call is smaller is sent on its own, as a one-row run
     would send it. That is what makes N episodes in lockstep equal N one-episode runs.
     """
 
@@ -166,8 +167,10 @@ class QueryOracle:
         go on their own and the rest together."""
         if len(owners) == 0 or owners.min() == owners.max():
             return [np.arange(len(owners))]
+        if self.stable_batch is None and self.victim.calibrate is None:
+            self.stable_batch = NEVER_MIX  # not our network: no calls of our own, each row alone
         if self.stable_batch is None:
-            self.stable_batch, self.calibration_queries = stable_batch(self.victim.query, self.victim.obs_shape)
+            self.stable_batch, self.calibration_queries = stable_batch(self.victim.calibrate, self.victim.obs_shape)
         share = np.bincount(owners)[owners]
         alone = share < self.stable_batch
         if not alone.any():
@@ -178,6 +181,8 @@ class QueryOracle:
         return calls
 
 
+NEVER_MIX = 1 << 62
+"""`stable_batch` of a victim zodrive may not call for itself: rows go alone whenever they differ."""
 PROBE_SIZES = (*range(1, 17), 24, 32, 48, 64, 128, 256, 512, 1024, 2048)
 
 

@@ -31,6 +31,11 @@ class Victim:
     """White-box access (torch forward with gradients); only the FGSM/PGD baselines use it."""
     reads: Literal["observation", "nothing", "simulator"] = "observation"
     """What the decisions depend on: built-in baselines read nothing or the simulator."""
+    calibrate: QueryFn | None = None
+    """A copy of the network that zodrive built itself (from a model file), for the harness's own
+    calls (which batch sizes give a row the same outputs). None: the harness never calls the
+    victim for itself, and rows are never mixed in one call (a user's callable, ONNX session or
+    remote victim sees only attack queries and the policy's own decisions)."""
 
     def actions(self, outputs: np.ndarray) -> np.ndarray:
         """The action(s) the victim takes given its outputs."""

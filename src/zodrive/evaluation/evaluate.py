@@ -31,7 +31,7 @@ from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
-from zodrive.runinfo import command_line, to_json, versions, write_json
+from zodrive.runinfo import LOCK_FILE, command_line, read_json, read_jsonl, run_lock, to_json, versions, write_json
 from zodrive.seeds import EVAL_SEED
 from zodrive.system import build_attacker
 
@@ -167,14 +167,13 @@ def _max_return(preset: dict[str, Any]) -> float | None:
 
 
 def _read_jsonl(path: Path) -> list[dict[str, Any]]:
-    if not path.exists():
-        return []
-    rows = []
-    for line in path.read_text().splitlines():
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            break  # a line cut by an interruption: everything after it is redone
+    """A run's records; a line cut by an interruption ends them (everything after it is redone),
+    a record that is not one of an episode is a one-line error naming the file."""
+    rows = read_jsonl(path, "run record", needs=("episode",), cut_ok=True)
+    for number, row in enumerate(rows, start=1):
+        if not isinstance(row["episode"], int) or isinstance(row["episode"], bool) or row["episode"] < 0:
+            raise ZodriveError(f"run record {path} is damaged: record {number} has episode {row['episode']!r}, "
+                               "not an episode index")
     return rows
 
 
@@ -239,6 +238,10 @@ def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict
         check_picker(attack["adversary"], model_file=model, preset=preset, defense=defense)
 
 
+RUN_FILES = ("eval_key.json", "episodes.jsonl", "steps.jsonl", "summary.json")
+"""What an evaluation writes into its folder: all that `force` clears (nothing else is touched)."""
+
+
 def evaluate(
     job: EvalJob,
     episodes: int,
@@ -247,11 +250,15 @@ def evaluate(
     workers: int = 1,
     envs: int = DEFAULT_ENVS,
     progress: bool = True,
-    records: list[dict[str, Any]] | None = None,
+    force: bool = False,
 ) -> dict[str, Any]:
     """Run `episodes` episodes (resuming from `out` if it holds part of this run) over
-    `workers` processes, `envs` side by side in each; summarize. The episode records are
-    appended to `records` in episode order, when a list is given."""
+    `workers` processes, `envs` side by side in each; summarize.
+
+    `out` is written only if it is empty, new, or holds this evaluation; a folder with files
+    zodrive's evaluation did not write, another evaluation, or more episodes than asked is
+    refused unless `force`, which clears the old run's files (`RUN_FILES`) and nothing else.
+    The folder is locked while the run writes: a second run into it is refused at once."""
     if not isinstance(episodes, int) or episodes < 1:
         raise ZodriveError(f"episodes must be a positive integer, not {episodes}")
     if workers < 1:
@@ -260,28 +267,62 @@ def evaluate(
         raise ZodriveError(f"envs must be >= 1, not {envs}")
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
     check_trained_folder(job.attack, job.model, job.preset, job.defense)
-    done: dict[int, dict[str, Any]] = {}
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        key_path = out / "eval_key.json"
-        if key_path.exists():
-            check_same_evaluation(json.loads(key_path.read_text()), json.loads(json.dumps(job.key())), out)
-            done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl")}
-            if len(done) > episodes:
-                raise ZodriveError(f"{out} already holds {plural(len(done), 'episode')}; ask for at least {len(done)} "
-                                   "(or use another --out): zodrive never drops recorded episodes")
-            _rewrite_consistent(out, done)
-        else:
-            for name in ("episodes.jsonl", "steps.jsonl"):
-                (out / name).unlink(missing_ok=True)
-            write_json(key_path, job.key())
+    if out is None:
+        return _run(job, episodes, None, {}, workers, envs, progress)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ZodriveError(f"--out {out} is a file, not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    with run_lock(out, "this evaluation"):
+        done = _claim(job, episodes, out, force)
+        if not [i for i in range(episodes) if i not in done] and (out / "summary.json").is_file():
+            summary = read_json(out / "summary.json", "summary", needs=("episodes",))
+            if summary["episodes"] == episodes:  # finished before: its summary stands (step records may be gone)
+                return summary
+        return _run(job, episodes, out, done, workers, envs, progress)
+
+
+def _claim(job: EvalJob, episodes: int, out: Path, force: bool) -> dict[int, dict[str, Any]]:
+    """Make `out` this evaluation's folder; the episodes it already holds of it."""
+    key_path = out / "eval_key.json"
+    wanted = json.loads(json.dumps(job.key()))
+    if key_path.exists():
+        on_disk = read_json(key_path, "evaluation key", needs=("model",))
+        if not same_evaluation(on_disk, wanted):
+            if not force:
+                check_same_evaluation(on_disk, wanted, out)
+            return _fresh(job, out)
+        done = {r["episode"]: r for r in _read_jsonl(out / "episodes.jsonl")}
+        held = len(done)
+        if (out / "summary.json").is_file():  # a folder may keep its summary without its episodes (models/*/eval)
+            summary = read_json(out / "summary.json", "summary", needs=("episodes",))
+            held = max(held, summary["episodes"] if isinstance(summary["episodes"], int) else 0)
+        if held > episodes:
+            if not force:
+                raise ZodriveError(f"{out} already holds {plural(held, 'episode')} of this evaluation; ask for at "
+                                   f"least {held}, use --force to replace them, or choose another --out")
+            return _fresh(job, out)
+        _rewrite_consistent(out, done)
+        return done
+    foreign = sorted(p.name for p in out.iterdir() if p.name != LOCK_FILE)
+    if foreign and not force:
+        listed = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        raise ZodriveError(f"{out} holds files no zodrive evaluation wrote ({listed}); use --force to write "
+                           "into it (its own files are kept), or choose another --out")
+    return _fresh(job, out)
+
+
+def _fresh(job: EvalJob, out: Path) -> dict[int, dict[str, Any]]:
+    """Clear what an earlier run left (`RUN_FILES`), then record this evaluation's key."""
+    for name in RUN_FILES:
+        (out / name).unlink(missing_ok=True)
+    write_json(out / "eval_key.json", job.key())
+    return {}
+
+
+def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str, Any]], workers: int,
+         envs: int, progress: bool) -> dict[str, Any]:
     todo = [i for i in range(episodes) if i not in done]
-    if out is not None and not todo and (out / "summary.json").is_file():
-        summary = json.loads((out / "summary.json").read_text())
-        if summary.get("episodes") == episodes:  # finished before: its summary stands (step records may be gone)
-            if records is not None:
-                records.extend(done[i] for i in range(episodes))
-            return summary
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
     bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
@@ -295,10 +336,8 @@ def evaluate(
             bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
     if bar is not None:
         bar.close()
-    ordered = [done[i] for i in range(episodes)]
-    if records is not None:
-        records.extend(ordered)
-    summary = summarize(ordered, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    records = [done[i] for i in range(episodes)]
+    summary = summarize(records, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
     if out is not None:
         write_json(out / "summary.json", summary)
     return summary
@@ -335,7 +374,7 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     names = [what.get(k, k) for k in differs]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
     raise ZodriveError(f"{out} holds a different evaluation ({listed} "
-                       f"{'differs' if len(names) == 1 else 'differ'}); choose another --out")
+                       f"{'differs' if len(names) == 1 else 'differ'}); use --force to replace it, or choose another --out")
 
 
 def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
@@ -412,6 +451,10 @@ def summarize(
             # the share of all attacked steps on which the victim took the target
             target_base_rate=None if learned or blind else 1.0 - applicable / steps_total if steps_total else float("nan"),
             queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
+            # every row the victim received: the attack's queries and the policy's own decisions
+            # (one a step); the harness sends it none (it calibrates on its own copy of a network)
+            victim_rows={"attack_queries": int(sum(r["queries"] for r in records)),
+                         "decisions": int(sum(r["length"] for r in records))},
             max_linf=float(max(r["max_linf"] for r in records)),
             attack_config=job.attack,
         )

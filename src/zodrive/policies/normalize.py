@@ -140,7 +140,8 @@ def normalized_victim(victim: Victim, norm: ObsNormalization) -> Victim:
     if norm.mean.shape != tuple(victim.obs_shape):
         raise ZodriveError(f"{norm.source} normalizes observations of shape {norm.mean.shape}; the policy reads "
                            f"{tuple(victim.obs_shape)}")
-    differentiable = victim.differentiable
+    differentiable, calibrate = victim.differentiable, victim.calibrate
     return Victim(query=lambda obs: victim.query(norm(np.asarray(obs, dtype=np.float64))), kind=victim.kind,
                   obs_shape=victim.obs_shape,
-                  differentiable=None if differentiable is None else (lambda obs: differentiable(norm.torch(obs))))
+                  differentiable=None if differentiable is None else (lambda obs: differentiable(norm.torch(obs))),
+                  calibrate=None if calibrate is None else (lambda obs: calibrate(norm(np.asarray(obs, dtype=np.float64)))))

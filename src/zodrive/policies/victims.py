@@ -32,7 +32,8 @@ def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"]
     def forward(obs: torch.Tensor) -> torch.Tensor:
         return net(obs.reshape(-1, flat).float())
 
-    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward)
+    # zodrive built this network from a file: the harness may call it for itself (calibration)
+    return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward, calibrate=query)
 
 
 def module_victim(module: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
@@ -121,23 +122,29 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
 
 
 def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> Victim:
-    """The victim of a torch module or a numpy callable on `preset`'s scenario, its outputs
-    checked on one batch of two zero observations (a harness call, not an attack query);
-    `where` is a preset or the `Scenario` of an environment."""
+    """The victim of a torch module or a numpy callable on the scenario of `where` (a preset or
+    an environment's `Scenario`). Its outputs are checked on every call, the first included: the
+    harness sends the user's code no rows of its own."""
     env = where if isinstance(where, Scenario) else scenario(where)
     if isinstance(policy, torch.nn.Module):
-        victim = module_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+        inner = module_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
     elif callable(policy):
-        victim = callable_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+        inner = callable_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
     else:
         raise ZodriveError(f"{label} is a {type(policy).__name__}, not a torch module or a callable")
-    try:
-        out = victim.query(np.zeros((2, *env.obs_shape), dtype=np.float32))
-    except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
-        raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
-                           f"(2, {', '.join(map(str, env.obs_shape))}): {type(exc).__name__}: {exc}") from exc
-    if out.shape != (2, env.n_actions):
-        raise ZodriveError(f"{label} returns outputs of shape {out.shape[1:]} per observation; preset "
-                           f"{env.name!r} needs {env.n_actions} "
-                           f"({'scores' if env.kind == 'discrete' else 'action dims'})")
-    return victim
+
+    def query(obs: np.ndarray) -> np.ndarray:
+        try:
+            out = inner.query(obs)
+        except ZodriveError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
+            raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
+                               f"{tuple(np.shape(obs))}: {type(exc).__name__}: {exc}") from exc
+        if out.shape != (len(obs), env.n_actions):
+            raise ZodriveError(f"{label} returns outputs of shape {out.shape[1:]} per observation; "
+                               f"{env.name!r} needs {env.n_actions} "
+                               f"({'scores' if env.kind == 'discrete' else 'action dims'})")
+        return out
+
+    return Victim(query=query, kind=inner.kind, obs_shape=inner.obs_shape, differentiable=inner.differentiable)
