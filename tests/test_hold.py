@@ -322,7 +322,7 @@ def test_check_below_never_spends_more_than_one_query_per_step_on_average_even_w
 
 @pytest.mark.parametrize(("options", "message"), [
     ({"check_below": 0.9}, "use vertex-check:DIR"),  # no picker to rate with
-    ({"check_below": 1.5}, r"must be in \[0, 1\]"),
+    ({"check_below": 1.5}, "check_below must be <= 1"),
 ])
 def test_check_below_needs_a_picker_and_a_rating(options: dict, message: str) -> None:
     with pytest.raises(ZodriveError, match=message):

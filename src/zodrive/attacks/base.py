@@ -34,16 +34,12 @@ import torch
 
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.schema import AttackOptions
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
-DEFAULT_MU = 0.005         # smoothing radius of finite differences [normalized units]
-DEFAULT_STEP_SIZE = 0.02   # per-iteration step; chosen by measurement (benchmarks/tune_attack.py)
-
-ON_FAILURE = ("best", "clean")
-"""What a step that did not reach the goal feeds the policy: the best point found (the
-paper's Algorithm 1 feeds its last iterate) or the clean observation (an attacker who
-never feeds a perturbation that failed, since it may well help the victim)."""
+DEFAULTS = AttackOptions()
+"""The schema's defaults, which an attack built directly (not from an `AttackSpec`) shares."""
 
 ENGINE_VERSION = 2
 """Bumped whenever the driver's behaviour changes what an attack returns (results on disk
@@ -96,42 +92,24 @@ class Attack(abc.ABC):
         self,
         threat: ThreatModel,
         *,
-        steps: int = 100,
-        n_directions: int = 20,
-        mu: float = DEFAULT_MU,
-        step_size: float = DEFAULT_STEP_SIZE,
-        l2_weight: float = 0.0,
-        early_stop: bool = True,
-        patience: int | None = None,
-        warm_start: bool = False,
-        on_failure: str = "best",
-        restarts: int = 0,
-        timing: float | None = None,
-        max_change: float | None = None,
-        seed: int = 0,
+        steps: int = DEFAULTS.steps,
+        n_directions: int = DEFAULTS.n_directions,
+        mu: float = DEFAULTS.mu,
+        step_size: float = DEFAULTS.step_size,
+        l2_weight: float = DEFAULTS.l2_weight,
+        early_stop: bool = DEFAULTS.early_stop,
+        patience: int | None = DEFAULTS.patience,
+        warm_start: bool = DEFAULTS.warm_start,
+        on_failure: str = DEFAULTS.on_failure,
+        restarts: int = DEFAULTS.restarts,
+        timing: float | None = DEFAULTS.timing,
+        max_change: float | None = DEFAULTS.max_change,
+        seed: int = DEFAULTS.seed,
     ) -> None:
-        if not isinstance(steps, (int, np.integer)) or steps < 1:
-            raise ZodriveError(f"steps (T) must be an integer >= 1, not {steps}")
-        if not isinstance(n_directions, (int, np.integer)) or n_directions < 1:
-            raise ZodriveError(f"n_directions (q) must be an integer >= 1, not {n_directions}")
-        if not mu > 0:
-            raise ZodriveError(f"mu must be > 0, not {mu}")
-        if not step_size > 0:
-            raise ZodriveError(f"step_size must be > 0, not {step_size}")
-        if not l2_weight >= 0:
-            raise ZodriveError(f"l2_weight must be >= 0, not {l2_weight}")
-        if patience is not None and (not isinstance(patience, (int, np.integer)) or patience < 1):
-            raise ZodriveError(f"patience must be an integer >= 1 or none, not {patience}")
-        if not isinstance(restarts, (int, np.integer)) or restarts < 0:
-            raise ZodriveError(f"restarts must be an integer >= 0, not {restarts}")
-        if timing is not None and not 0.0 <= timing < 1.0:
-            raise ZodriveError(f"timing (a preference threshold in [0, 1)) must be in [0, 1) or none, not {timing}")
-        if max_change is not None and not (np.isfinite(max_change) and max_change > 0):
-            raise ZodriveError(f"max_change must be > 0 or none, not {max_change}")
+        """Types and ranges are the schema's (`zodrive.attacks.schema`), checked where an
+        `AttackSpec` is made; here only what needs the threat model."""
         if max_change is not None and threat.norm != "linf":
             raise ZodriveError("max_change bounds the L-inf change of the perturbation between steps: use norm linf")
-        if on_failure not in ON_FAILURE:
-            raise ZodriveError(f"on_failure must be one of {', '.join(ON_FAILURE)}, not {on_failure!r}")
         self.threat = threat
         self.steps = int(steps)
         self.n_directions = int(n_directions)
@@ -456,10 +434,12 @@ def needs_fixed_target(name: str) -> str:
             "fixed target (auto is the paper's; an action, or not:ACTION; not none or worst)")
 
 
-# the search options and their defaults, read from `Attack` itself (mu and step_size are read by
-# the searches that use them only, so they are not checked)
-SEARCH_DEFAULTS = {name: p.default for name, p in inspect.signature(Attack.__init__).parameters.items()
-                   if p.kind is p.KEYWORD_ONLY and name not in ("mu", "step_size")}
+ENGINE_OPTIONS = tuple(name for name, p in inspect.signature(Attack.__init__).parameters.items()
+                       if p.kind is p.KEYWORD_ONLY)
+"""The schema's options every attack takes (`AttackSpec` passes them to `make_attack`)."""
+# the search options and their defaults (mu and step_size are read by the searches that use them
+# only, so they are not checked)
+SEARCH_DEFAULTS = {name: getattr(DEFAULTS, name) for name in ENGINE_OPTIONS if name not in ("mu", "step_size")}
 
 
 def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.ndarray:

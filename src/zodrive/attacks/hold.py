@@ -238,12 +238,9 @@ class VertexCheck(VertexHold):
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, check_below: float | None = None,
                  **kwargs: Any) -> None:
         super().__init__(threat, adversary=adversary, **kwargs)
-        if check_below is not None:
-            if isinstance(check_below, bool) or not isinstance(check_below, (int, float)) or not 0 <= check_below <= 1:
-                raise ZodriveError(f"check_below (a picker's rating) must be in [0, 1], not {check_below!r}")
-            if self.picker is None:
-                raise ZodriveError("check_below reads a picker's rating: use vertex-check:DIR (a picker from "
-                                   "`zodrive picker-train`)")
+        if check_below is not None and self.picker is None:  # its range is the schema's
+            raise ZodriveError("check_below reads a picker's rating: use vertex-check:DIR (a picker from "
+                               "`zodrive picker-train`)")
         self.check_below = None if check_below is None else float(check_below)
         self._bank: np.ndarray | None = None  # per row: queries earned (one per step) and not yet spent
 

@@ -1,57 +1,118 @@
-"""The attack's options: their types and ranges (`AttackSpec.from_mapping` validates through it)."""
+"""THE attack schema: every option of an attack, written once, with its type, range, default and
+a one-line description.
+
+`AttackSpec` (`zodrive.attacks.spec`) is this model with its behaviour (build, check, objective,
+threat); YAML attack configs, `--attack-set KEY=VALUE` and Python keywords are validated by it;
+the command line's attack flags (`zodrive.cli.attack`) are generated from it: flag name from the
+field name (`n_directions` -> `--n-directions`, or the field's `flag`), help from the description,
+the default shown, the value parsed by the field's type and checked by the field's range.
+
+This module imports pydantic and nothing heavy (no torch): `zodrive --help` reads it.
+"""
 
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, Literal, Optional, Union
 
-from pydantic import Field, StrictBool, StrictInt, ValidationError, field_validator
+from pydantic import ConfigDict, Field, StrictBool, StrictInt, field_validator
 
-from zodrive.errors import ZodriveError
-from zodrive.validation import Strict, one_line
+from zodrive.validation import Strict
+
+DEFAULT_MU = 0.005         # smoothing radius of finite differences [normalized units]
+DEFAULT_STEP_SIZE = 0.02   # per-iteration step; chosen by measurement (studies/tune-attack/tune_attack.py)
+DEFAULT_FROZEN = ("presence",)
+
+
+def option(default: Any, description: str, *, flag: str | None = None, off: str | None = None,
+           clear: str | None = None, metavar: str | None = None, **bounds: float) -> Any:
+    """A field of the schema. `bounds` are pydantic's `gt`, `ge`, `lt`, `le`; the rest say how the
+    command line shows it: `flag` when it is not `--NAME` (`--attack` sets `attack` and, as
+    `NAME:DIR`, `adversary`); `off` the help of a boolean's `--no-NAME`; `clear` the help of a
+    `--no-NAME` that sets an optional option back to none; `metavar` the value's name in --help."""
+    cli = {k: v for k, v in (("flag", flag), ("off", off), ("clear", clear), ("metavar", metavar)) if v is not None}
+    return Field(default, description=description, json_schema_extra=cli or None, **bounds)
 
 
 class AttackOptions(Strict):
-    """The options of an attack (`AttackSpec`): types and ranges."""
+    """Everything that defines an attack run: types, ranges, defaults and what each option means."""
 
-    attack: str = "zo-signsgd"
-    eps: float = Field(0.2, gt=0)
-    norm: Literal["linf", "l2"] = "linf"
-    mode: Literal["budgeted", "paper"] = "budgeted"
-    frozen: tuple[str, ...] = ("presence",)
-    steps: StrictInt = Field(100, ge=1)
-    n_directions: StrictInt = Field(20, ge=1)
-    mu: float = Field(0.005, gt=0)
-    step_size: float = Field(0.02, gt=0)
-    l2_weight: float = Field(0.0, ge=0)
-    target: Union[str, StrictInt, list[float]] = "auto"
-    loss: Literal["margin", "paper"] = "margin"
-    weight: float = Field(1.0, gt=0)
-    kappa: float = Field(0.01, ge=0)
-    tol: float = Field(0.2, gt=0)
-    early_stop: StrictBool = True
-    patience: Optional[StrictInt] = Field(None, ge=1)
-    warm_start: StrictBool = False
-    on_failure: Literal["best", "clean"] = "best"
-    restarts: StrictInt = Field(0, ge=0)
-    timing: Optional[float] = Field(None, ge=0, le=1)
-    episode_query_budget: Optional[StrictInt] = Field(None, ge=1)
-    max_change: Optional[float] = Field(None, gt=0)
-    access: Literal["score", "decision"] = "score"
-    query_budget: Optional[StrictInt] = Field(None, ge=1)
-    seed: StrictInt = Field(0, ge=0)
-    adversary: Optional[str] = None
-    check_below: Optional[float] = Field(None, ge=0, le=1)
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+    attack: str = option(
+        "zo-signsgd", "the attack: a registry name; on the command line also an attack config (name or YAML), "
+        "learned:DIR (an adversary trained by attack-train), vertex-hold:DIR or vertex-check:DIR (a picker fitted by "
+        "picker-train)", flag="--attack", metavar="NAME")
+    eps: float = option(0.2, "budget radius of the perturbation [normalized units]", gt=0)
+    norm: Literal["linf", "l2"] = option("linf", "the norm of the budget ball")
+    mode: Literal["budgeted", "paper"] = option(
+        "budgeted", "budgeted: projected onto the eps-ball; paper: unconstrained as published (eps only scales the "
+        "reported distortion)")
+    frozen: tuple[str, ...] = option(DEFAULT_FROZEN, "features the attacker may not touch (none given: every "
+                                     "feature may change)", metavar="FEATURE")
+    steps: StrictInt = option(100, "T, iterations per environment step", ge=1, metavar="T")
+    n_directions: StrictInt = option(20, "q, random directions per iteration", ge=1, metavar="Q")
+    mu: float = option(DEFAULT_MU, "smoothing radius of the finite differences", gt=0)
+    step_size: float = option(DEFAULT_STEP_SIZE, "delta, the per-iteration step", gt=0, metavar="DELTA")
+    l2_weight: float = option(0.0, "weight of L2 = ||x' - x||^2 in the objective", ge=0, metavar="W")
+    target: Union[str, StrictInt, tuple[float, ...]] = option(
+        "auto", "FASTER, an action index, '1,0.5', auto (the paper's: FASTER / [1, 0.5]), none (untargeted), worst, "
+        "not:ACTION (discrete: any action but that one, e.g. not:SLOWER) or ACTION,not:ACTION (the action, else at "
+        "least not the other: FASTER,not:SLOWER)")
+    loss: Literal["margin", "paper"] = option(
+        "margin", "the objective of a targeted attack on a discrete policy: margin (C&W) or paper (the literal Eq. 5)")
+    weight: float = option(1.0, "the paper's constant a in front of L1", gt=0, metavar="A")
+    kappa: float = option(0.01, "margin confidence (discrete)", ge=0)
+    tol: float = option(0.2, "success tolerance on continuous actions", gt=0)
+    early_stop: StrictBool = option(True, "stop a step's iterations once the goal is met",
+                                    off="run all T iterations of every step")
+    patience: Optional[StrictInt] = option(
+        None, "give up a step after N iterations without progress", ge=1, metavar="N",
+        clear="run every step until its goal is met or T iterations are spent")
+    warm_start: StrictBool = option(False, "start each step's search from the previous step's perturbation",
+                                    off="start each step's search at the clean observation")
+    on_failure: Literal["best", "clean"] = option(
+        "best", "what a step that missed the goal feeds the policy: best (the point found; the paper's Algorithm 1 "
+        "feeds its last iterate) or clean (never a perturbation that failed, which may well help the victim)")
+    restarts: StrictInt = option(0, "further runs from random points of the budget set (e.g. PGD)", ge=0,
+                                metavar="N")
+    timing: Optional[float] = option(
+        None, "strategically timed attack: only steps where the policy's action preference (in [0, 1)) is at least "
+        "this (discrete)", ge=0, lt=1, metavar="P")
+    episode_query_budget: Optional[StrictInt] = option(None, "max queries per episode; none: no cap", ge=1, metavar="N")
+    max_change: Optional[float] = option(
+        None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
+        metavar="D")
+    access: Literal["score", "decision"] = option(
+        "score", "what the attacker's queries return: score (Q-values / action) or decision (the action only)")
+    query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1,
+                                                metavar="N")
+    seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
+    adversary: Optional[str] = option(
+        None, "the trained folder of learned / vertex-hold / vertex-check (on the command line: --attack NAME:DIR)",
+        flag="--attack")
+    check_below: Optional[float] = option(
+        None, "vertex-check:DIR: a held vertex the picker rates at least this (0-1) is fed without a check; the saved "
+        "queries pay for checks of fresh vertices (at most 1 query per step on average)", ge=0, le=1,
+        metavar="R")
 
     @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "timing", "max_change",
                      "check_below", mode="before")
     @classmethod
     def _finite_number(cls, value: Any) -> Any:
-        if isinstance(value, bool) or (value is not None and not isinstance(value, (int, float))):
+        if isinstance(value, bool) or (value is not None and not isinstance(value, numbers.Real)):
             raise ValueError(f"must be a number, not {value!r}")
         if value is not None and not math.isfinite(value):
             raise ValueError(f"must be a finite number, not {value}")
         return float(value) if value is not None else None
+
+    @field_validator("steps", "n_directions", "patience", "restarts", "episode_query_budget", "query_budget", "seed",
+                     mode="before")
+    @classmethod
+    def _integer(cls, value: Any) -> Any:
+        """A numpy integer is an integer (text, booleans and floats are not)."""
+        return int(value) if isinstance(value, numbers.Integral) and not isinstance(value, bool) else value
 
     @field_validator("frozen", mode="before")
     @classmethod
@@ -65,20 +126,36 @@ class AttackOptions(Strict):
     @field_validator("target", mode="before")
     @classmethod
     def _target(cls, value: Any) -> Any:
-        if isinstance(value, tuple):
-            value = list(value)
-        if isinstance(value, list) and not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            raise ValueError(f"a continuous target is a list of numbers, not {value!r}")
-        if isinstance(value, list):
-            return [float(v) for v in value]
+        if isinstance(value, (list, tuple)):
+            if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in value):
+                raise ValueError(f"a continuous target is a list of numbers, not {list(value)!r}")
+            return tuple(float(v) for v in value)
         if isinstance(value, bool) or value is None:
             raise ValueError(f"must be auto, none, worst, an action name or index, or a list, not {value!r}")
-        return value
+        return int(value) if isinstance(value, numbers.Integral) else value
 
 
-def validate_attack(data: dict[str, Any], context: str = "attack config") -> dict[str, Any]:
-    """The validated attack options (unknown keys, wrong types and ranges are one-line errors)."""
-    try:
-        return AttackOptions.model_validate(data).model_dump()
-    except ValidationError as exc:
-        raise ZodriveError(one_line(exc, context, set(AttackOptions.model_fields))) from None
+SIGNS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+
+
+def bounds_of(name: str) -> dict[str, float]:
+    """The range of a field: its `gt`, `ge`, `lt`, `le` bounds."""
+    found: dict[str, float] = {}
+    for rule in AttackOptions.model_fields[name].metadata:
+        for key in ("gt", "ge", "lt", "le"):
+            if getattr(rule, key, None) is not None:
+                found[key] = getattr(rule, key)
+    return found
+
+
+def range_text(name: str) -> str:
+    """A field's range in words: `>= 1`, `> 0`, `in [0, 1)`."""
+    rules = bounds_of(name)
+    low = next(((k, v) for k, v in rules.items() if k in ("gt", "ge")), None)
+    high = next(((k, v) for k, v in rules.items() if k in ("lt", "le")), None)
+    if low and high:
+        return f"in {'(' if low[0] == 'gt' else '['}{low[1]:g}, {high[1]:g}{')' if high[0] == 'lt' else ']'}"
+    if low or high:
+        key, value = low or high  # type: ignore[misc]
+        return f"{SIGNS[key]} {value:g}"
+    return ""

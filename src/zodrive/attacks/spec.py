@@ -1,20 +1,22 @@
-"""An attack as configured: one dataclass read from config files and CLI flags."""
+"""An attack as configured: THE attack schema (`zodrive.attacks.schema`) with its behaviour."""
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-from dataclasses import dataclass
 from typing import Any, Sequence
 
+from pydantic import ValidationError
+
 from zodrive.attacks.victim import Victim, decision_only
-from zodrive.attacks.base import DEFAULT_MU, DEFAULT_STEP_SIZE, Attack, needs_fixed_target
+from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
+from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
+from zodrive.validation import one_line
 
 log = logging.getLogger(__name__)
 
@@ -22,54 +24,32 @@ LEARNED = "learned"
 FOLDER_ATTACKS = (LEARNED, *PICKER_ATTACKS)
 """The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, a picker."""
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
-DEFAULT_FROZEN = ("presence",)
+FIELDS = set(AttackOptions.model_fields)
 
 
-@dataclass
-class AttackSpec:
-    """Everything that defines an attack run; field names are the CLI flags."""
+class AttackSpec(AttackOptions):
+    """Everything that defines an attack run: the schema's options, typed and range-checked when
+    the spec is made (`AttackSpec(eps=0)` is a one-line `ZodriveError`) and immutable after;
+    `with_overrides` makes a changed copy."""
 
-    attack: str = "zo-signsgd"            # registry name
-    eps: float = 0.2                      # [normalized units] budget radius
-    norm: str = "linf"                    # linf | l2
-    mode: str = "budgeted"                # budgeted (projected) | paper (unconstrained)
-    frozen: tuple[str, ...] = DEFAULT_FROZEN  # features the attacker may not touch
-    steps: int = 100                      # T, iterations per environment step
-    n_directions: int = 20                # q, random directions per iteration
-    mu: float = DEFAULT_MU                # smoothing radius of the finite differences
-    step_size: float = DEFAULT_STEP_SIZE  # delta, per-iteration step
-    l2_weight: float = 0.0                # weight of L2 = ||x' - x||^2 in the objective
-    target: Any = "auto"                  # auto (paper: FASTER / [1, 0.5]) | action | none
-    loss: str = "margin"                  # DQN L1: margin (C&W) | paper (literal Eq. 5)
-    weight: float = 1.0                   # the paper's constant a in front of L1
-    kappa: float = 0.01                   # margin confidence (discrete)
-    tol: float = 0.2                      # success tolerance on continuous actions
-    early_stop: bool = True               # stop a step's iterations once the goal is met
-    patience: int | None = None           # give up a step after this many iterations without progress
-    warm_start: bool = False              # start each step from the previous step's perturbation
-    on_failure: str = "best"              # what a failed step feeds: best (point found) | clean
-    restarts: int = 0                     # further runs from random points of the budget set
-    timing: float | None = None           # strategically timed: attack only where preference >= this (discrete)
-    episode_query_budget: int | None = None  # max queries per episode (None: no cap)
-    max_change: float | None = None       # defense-aware: max L-inf change of the perturbation between steps
-    access: str = "score"                 # what a query returns: score (Q-values / action) | decision (action only)
-    query_budget: int | None = None       # max queries per environment step (None: no cap)
-    seed: int = 0                         # the attack's random stream
-    adversary: str | None = None          # learned:DIR / vertex-hold:DIR: the trained adversary / picker folder
-    check_below: float | None = None      # vertex-check:DIR: a held vertex rated >= this is fed unasked (saved queries pay checks)
+    def __init__(self, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise ZodriveError(one_line(exc, "attack options", FIELDS)) from None
+        _known(self.attack)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
-        """A spec from a mapping (YAML, overrides, a record), typed and range-checked by
-        `zodrive.attacks.schema` (a boolean must be a boolean, a number a number)."""
-        from zodrive.attacks.schema import validate_attack
-
-        values = validate_attack({k: v for k, v in data.items() if k not in ("name", "description")}, context)
-        if values["attack"] not in ATTACKS and values["attack"] != LEARNED:
-            raise ZodriveError(f"unknown attack {values['attack']!r} (known: {', '.join(KNOWN)})")
-        if isinstance(values["target"], list):
-            values["target"] = tuple(values["target"])
-        return cls(**values)
+        """A spec from a mapping (YAML, overrides, a record), typed and range-checked by the schema
+        (a boolean must be a boolean, a number a number); `name` and `description` are a config
+        file's words about itself."""
+        try:
+            spec = cls.model_validate({k: v for k, v in data.items() if k not in ("name", "description")})
+        except ValidationError as exc:
+            raise ZodriveError(one_line(exc, context, FIELDS)) from None
+        _known(spec.attack)
+        return spec
 
     def with_overrides(self, clear: Sequence[str] = (), **changes: Any) -> "AttackSpec":
         """The spec with `changes` (None: unchanged) and the options in `clear` set to None,
@@ -78,10 +58,12 @@ class AttackSpec:
         return AttackSpec.from_mapping(data, "attack options")
 
     def to_dict(self) -> dict[str, Any]:
-        data = dataclasses.asdict(self)
+        """The options as plain data, in the schema's order (lists for `frozen` and a continuous
+        `target`): what run folders record and are keyed on."""
+        data = self.model_dump()
         data["frozen"] = list(self.frozen)
-        if isinstance(data["target"], tuple):
-            data["target"] = list(data["target"])
+        if isinstance(self.target, tuple):
+            data["target"] = list(self.target)
         return data
 
     def resolved_target(self, kind: str, action_names: tuple[str, ...] | None = None) -> Any:
@@ -114,20 +96,15 @@ class AttackSpec:
         return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,  # type: ignore[arg-type]
                            features=features, low=float(bounds[0]), high=float(bounds[1]))
 
-    def _make(self, threat: ThreatModel, steps: int, load_network: Any = None) -> Attack:
-        return make_attack(self.attack, threat, steps=steps, n_directions=self.n_directions, mu=self.mu,
-                           step_size=self.step_size, l2_weight=self.l2_weight, early_stop=self.early_stop,
-                           patience=self.patience, warm_start=self.warm_start, on_failure=self.on_failure,
-                           restarts=self.restarts, timing=self.timing, max_change=self.max_change,
-                           seed=self.seed, **{k: v for k, v in (("adversary", self.adversary),
-                                                                 ("check_below", self.check_below),
-                                                                 ("load_network", load_network)) if v is not None})
+    def _make(self, threat: ThreatModel, load_network: Any = None) -> Attack:
+        return make_attack(self.attack, threat, **{name: getattr(self, name) for name in ENGINE_OPTIONS},
+                           **{k: v for k, v in (("adversary", self.adversary), ("check_below", self.check_below),
+                                                ("load_network", load_network)) if v is not None})
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
         self._check_unread()
-        self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=()),  # type: ignore[arg-type]
-                                       self.steps))
+        self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=())))  # type: ignore[arg-type]
 
     def _check_unread(self) -> None:
         """An objective option the attack never reads is an error, and so is a goal defined by the
@@ -165,8 +142,6 @@ class AttackSpec:
         (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
         name) and `action_bounds` the continuous action box (targets inside it); `load_network`
         reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader)."""
-        if self.access not in ("score", "decision"):
-            raise ZodriveError(f"access must be score or decision, not {self.access!r}")
         if self.access == "decision":
             if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
                 raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
@@ -177,7 +152,7 @@ class AttackSpec:
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
                         "only the box clips the perturbation", self.eps, threat.low, threat.high)
-        attack = self._make(threat, self.steps, load_network)
+        attack = self._make(threat, load_network)
         if self.attack == LEARNED:
             attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)
@@ -188,6 +163,11 @@ class AttackSpec:
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
         return attack, objective, QueryOracle(victim, self.query_budget, self.episode_query_budget)
+
+
+def _known(attack: str) -> None:
+    if attack not in ATTACKS and attack != LEARNED:
+        raise ZodriveError(f"unknown attack {attack!r} (known: {', '.join(KNOWN)})")
 
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
