@@ -126,3 +126,154 @@ def test_a_huge_value_is_never_formatted_whole() -> None:
     huger = "[" + ", ".join(["[1, 2, 3]"] * 3000) + "]"  # over the cap, and no alias in it
     message = _refusal(load_preset, "discrete", [f"highway.observation.features={huger}"])
     assert len(message) < 300 and message.endswith(f"is refused: it holds more than {MAX_YAML_NODES:,} values")
+
+
+# --- run folders: damaged records, the output rule, the lock ---------------------------------
+
+@pytest.fixture(scope="module")
+def idle_job():
+    """A clean evaluation of a constant driver (no network; its one episode crashes in 43 steps)."""
+    from zodrive.envs import load_preset
+    from zodrive.evaluation.evaluate import EvalJob
+
+    return EvalJob(model="baseline:idle", preset=load_preset("discrete"))
+
+
+def _keyed(folder: Path, job, **files: str | bytes) -> Path:
+    """`folder` holding `job`'s key and the given files (name with dots as `__`)."""
+    from zodrive.runinfo import write_json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    write_json(folder / "eval_key.json", job.key())
+    for name, data in files.items():
+        _write(folder / name.replace("__", "."), data)
+    return folder
+
+
+@pytest.mark.parametrize("files, message", [
+    ({"eval_key__json": "{not json"}, "evaluation key {out}/eval_key.json is damaged, not JSON"),
+    ({"eval_key__json": b"\xff\xfe{}"}, "evaluation key {out}/eval_key.json is not UTF-8 text"),
+    ({"episodes__jsonl": '{"return": 1.0}\n'}, "run record {out}/episodes.jsonl is damaged: line 1 has no 'episode'"),
+    ({"episodes__jsonl": '[1, 2]\n'}, "line 1 holds list, not a JSON object"),
+    ({"episodes__jsonl": '{"episode": "zero"}\n'}, "has episode 'zero', not an episode index"),
+    ({"summary__json": '{"episodes": 10, "mean_ret'}, "summary {out}/summary.json is damaged, not JSON"),
+])
+def test_a_damaged_run_folder_is_one_line_naming_the_file(tmp_path: Path, idle_job, files, message) -> None:
+    from zodrive.evaluation.evaluate import evaluate
+
+    out = _keyed(tmp_path / "run", idle_job, **files)
+    assert message.format(out=out) in _refusal(evaluate, idle_job, 1, out)
+
+
+def test_a_folder_zodrive_did_not_write_is_never_written_into(tmp_path: Path, idle_job) -> None:
+    from zodrive.evaluation.evaluate import evaluate
+
+    out = tmp_path / "mine"
+    out.mkdir()
+    mine = {"notes.txt": "my notes\n", "grid.json": "{}\n", "episodes.jsonl": '{"episode": 0, "mine": true}\n'}
+    for name, text in mine.items():
+        _write(out / name, text)
+    message = _refusal(evaluate, idle_job, 1, out)
+    assert message == (f"{out} holds files no zodrive evaluation wrote (episodes.jsonl, grid.json, notes.txt); "
+                       "use --force to write into it (its own files are kept), or choose another --out")
+    assert {p.name: p.read_text() for p in out.iterdir()} == mine
+    evaluate(idle_job, 1, out, progress=False, force=True)  # force: the user's own files stay
+    assert (out / "notes.txt").read_text() == "my notes\n" and (out / "grid.json").read_text() == "{}\n"
+    assert "mine" not in (out / "episodes.jsonl").read_text() and (out / "summary.json").is_file()
+    assert not (out / ".lock").exists()
+
+
+def test_a_longer_run_of_the_same_evaluation_is_kept(tmp_path: Path, idle_job) -> None:
+    """A copy of a committed models/*/eval folder (key and a 100-episode summary, no episodes)."""
+    from zodrive.evaluation.evaluate import evaluate
+
+    out = _keyed(tmp_path / "eval", idle_job, summary__json='{"episodes": 100, "mean_return": 1.0}\n')
+    before = (out / "summary.json").read_text()
+    message = _refusal(evaluate, idle_job, 1, out)
+    assert message == (f"{out} already holds 100 episodes of this evaluation and zodrive never drops recorded "
+                       "episodes: ask for at least 100, choose another --out, or use --force to replace them")
+    assert (out / "summary.json").read_text() == before
+
+
+def test_another_evaluation_is_refused_and_force_clears_its_run(tmp_path: Path, idle_job) -> None:
+    from dataclasses import replace
+
+    from zodrive.evaluation.evaluate import evaluate
+
+    out = _keyed(tmp_path / "eval", replace(idle_job, seed=5), summary__json='{"episodes": 100}\n',
+                 steps__jsonl='{"episode": 7}\n', notes__txt="kept\n")
+    assert "holds a different evaluation (the first seed differs); use --force" in _refusal(evaluate, idle_job, 1, out)
+    summary = evaluate(idle_job, 1, out, progress=False, force=True)
+    assert summary["episodes"] == 1 and summary["seed"] == idle_job.seed
+    assert (out / "notes.txt").read_text() == "kept\n" and '"episode": 7' not in (out / "steps.jsonl").read_text()
+
+
+def test_a_second_run_into_a_locked_folder_is_refused_at_once(tmp_path: Path, idle_job) -> None:
+    from zodrive.evaluation.evaluate import evaluate
+    from zodrive.runinfo import run_lock
+
+    out = tmp_path / "eval"
+    out.mkdir()
+    with run_lock(out):  # another run holds the folder
+        start = time.perf_counter()
+        message = _refusal(evaluate, idle_job, 1, out)
+        assert time.perf_counter() - start < 10
+    assert message.startswith(f"{out} is in use by another zodrive run")
+    assert sorted(p.name for p in out.iterdir()) == []  # nothing written, the lock file gone with its holder
+
+
+def test_the_lock_is_held_by_another_process_too(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from zodrive.runinfo import run_lock
+
+    code = ("import sys, time; from pathlib import Path; from zodrive.runinfo import run_lock\n"
+            "with run_lock(Path(sys.argv[1])):\n    print('held', flush=True); time.sleep(30)\n")
+    holder = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(ZodriveError, match="in use by another zodrive run"):
+            with run_lock(tmp_path):
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with run_lock(tmp_path):  # the lock died with its holder
+        pass
+
+
+def test_an_out_that_is_a_file_is_one_line(tmp_path: Path, idle_job) -> None:
+    from zodrive.evaluation.evaluate import evaluate
+
+    path = _write(tmp_path / "file", "x")
+    assert _refusal(evaluate, idle_job, 1, path) == f"--out {path} is a file, not a folder"
+
+
+def test_a_broken_run_json_under_card(tmp_path: Path) -> None:
+    from zodrive.experiments.card import write_card
+
+    _write(tmp_path / "run.json", '{"command": "zodrive train", "vers')
+    assert _refusal(write_card, tmp_path).startswith(f"run record {tmp_path}/run.json is damaged, not JSON")
+    _write(tmp_path / "run.json", '{"command": "zodrive train"}')
+    assert _refusal(write_card, tmp_path) == (f"run record {tmp_path}/run.json has no 'versions' "
+                                              "(damaged, or not a record zodrive wrote)")
+
+
+@pytest.mark.parametrize("text, message", [
+    (b'#{"t_start": 0}\nr,l,t\n1.5,10,0.1\n\xff,3,0\n', "monitor file {p} is not UTF-8 text (byte 0xff on line 4)"),
+    ('#{"t_start": 0}\nr,l,t\n1.5,10,0.1\nabc,3,0\n', "monitor file {p} is damaged: line 4 is not a row of numbers"),
+    ('#{"t_start": 0}\nx,y\n1,2\n', "monitor file {p} has no 'r' and 'l' columns"),
+])
+def test_a_damaged_monitor_file_is_one_line(tmp_path: Path, text, message) -> None:
+    from zodrive.experiments.curves import read_monitor
+
+    path = _write(tmp_path / "monitor.monitor.csv", text)
+    assert message.format(p=path) in _refusal(read_monitor, tmp_path)
+
+
+def test_a_good_monitor_file_reads() -> None:
+    from zodrive.experiments.curves import read_monitor
+
+    returns, lengths = read_monitor(Path(__file__).resolve().parents[1] / "models" / "ddpg-driver")
+    assert len(returns) == len(lengths) > 0

@@ -161,12 +161,13 @@ def load_yaml(text: str, what: str) -> Any:
         loader.dispose()
 
 
-def read_text(path: Path, what: str = "file") -> str:
-    """A UTF-8 text file's contents; a missing, oversized or undecodable file is one line naming it."""
+def read_text(path: Path, what: str = "file", max_bytes: int | None = MAX_CONFIG_BYTES) -> str:
+    """A UTF-8 text file's contents; a missing, oversized (`max_bytes`; None: any size) or
+    undecodable file is one line naming it."""
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_CONFIG_BYTES:
-            raise ZodriveError(f"{what} {path} is {path.stat().st_size:,} bytes (at most {MAX_CONFIG_BYTES:,})")
+        if max_bytes is not None and path.stat().st_size > max_bytes:
+            raise ZodriveError(f"{what} {path} is {path.stat().st_size:,} bytes (at most {max_bytes:,})")
         data = path.read_bytes()
     except FileNotFoundError:
         raise ZodriveError(f"{what} not found: {path}") from None

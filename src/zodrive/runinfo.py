@@ -1,7 +1,9 @@
-"""What every run folder records: resolved config, command, package versions, seed."""
+"""What every run folder records: resolved config, command, package versions, seed; and the
+readers that turn a damaged record into one line naming the file and what is wrong."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
@@ -12,9 +14,12 @@ import sys
 import tempfile
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import yaml
+
+from zodrive.config import read_text
+from zodrive.errors import ZodriveError
 
 PACKAGES = ("zodrive", "highway-env", "gymnasium", "stable-baselines3", "torch", "numpy")
 
@@ -101,3 +106,87 @@ def sha256(path: Path) -> str:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def read_json(path: Path, what: str = "run record", needs: tuple[str, ...] = ()) -> Any:
+    """A JSON record zodrive wrote (`summary.json`, `eval_key.json`, `run.json`, ...). A missing,
+    undecodable or cut file, or one without a key of `needs`, is one line naming it."""
+    text = read_text(path, what, max_bytes=None)
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ZodriveError(f"{what} {path} is damaged, not JSON ({exc}); remove it, or the folder, "
+                           "and run again") from None
+    if needs and not isinstance(data, dict):
+        raise ZodriveError(f"{what} {path} is damaged: it holds {type(data).__name__}, not a JSON object")
+    missing = [key for key in needs if key not in data]
+    if missing:
+        raise ZodriveError(f"{what} {path} has no {missing[0]!r} (damaged, or not a record zodrive wrote)")
+    return data
+
+
+def read_jsonl(path: Path, what: str = "run record", needs: tuple[str, ...] = (), cut_ok: bool = False
+               ) -> list[dict[str, Any]]:
+    """The rows of a JSON-lines record (`episodes.jsonl`, `steps.jsonl`), each a JSON object
+    with the keys `needs`. `cut_ok`: a line that is not JSON ends the rows (a run interrupted
+    mid-write; what follows is redone), otherwise it is an error. A missing file has no rows."""
+    if not Path(path).exists():
+        return []
+    rows = []
+    for number, line in enumerate(read_text(path, what, max_bytes=None).splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            if cut_ok:
+                break
+            raise ZodriveError(f"{what} {path} is damaged: line {number} is not JSON") from None
+        if not isinstance(row, dict):
+            raise ZodriveError(f"{what} {path} is damaged: line {number} holds {type(row).__name__}, not a JSON object")
+        missing = [key for key in needs if key not in row]
+        if missing:
+            raise ZodriveError(f"{what} {path} is damaged: line {number} has no {missing[0]!r}")
+        rows.append(row)
+    return rows
+
+
+LOCK_FILE = ".lock"
+"""In a run folder while a run writes into it (`run_lock`); never counted as the folder's content."""
+
+
+@contextlib.contextmanager
+def run_lock(folder: Path, what: str = "a run") -> Iterator[None]:
+    """Hold `folder`'s lock while the block runs: a second run into the same folder (another
+    process, here or on a shared POSIX file system) is refused at once, in one line, instead of
+    interleaving its records with this one's. The lock dies with the process (an interrupted
+    run leaves nothing to clean up); the lock file is removed when the block ends."""
+    import fcntl
+
+    path = Path(folder) / LOCK_FILE
+    for _ in range(10):
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise ZodriveError(f"{folder} is in use by another zodrive run (it holds {LOCK_FILE}, locked); "
+                               f"wait for it to end, or choose another folder for {what}") from None
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:  # not a lock file that the previous holder removed as we opened it
+            break
+        os.close(fd)
+    else:
+        raise ZodriveError(f"{folder}: could not take the lock {path}")
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+        os.close(fd)
+

@@ -250,10 +250,12 @@ def evaluate(
     workers: int = 1,
     envs: int = DEFAULT_ENVS,
     progress: bool = True,
+    records: list[dict[str, Any]] | None = None,
     force: bool = False,
 ) -> dict[str, Any]:
     """Run `episodes` episodes (resuming from `out` if it holds part of this run) over
-    `workers` processes, `envs` side by side in each; summarize.
+    `workers` processes, `envs` side by side in each; summarize. The episode records are
+    appended to `records` in episode order, when a list is given.
 
     `out` is written only if it is empty, new, or holds this evaluation; a folder with files
     zodrive's evaluation did not write, another evaluation, or more episodes than asked is
@@ -268,7 +270,7 @@ def evaluate(
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
     check_trained_folder(job.attack, job.model, job.preset, job.defense)
     if out is None:
-        return _run(job, episodes, None, {}, workers, envs, progress)
+        return _run(job, episodes, None, {}, workers, envs, progress, records)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ZodriveError(f"--out {out} is a file, not a folder")
@@ -278,8 +280,10 @@ def evaluate(
         if not [i for i in range(episodes) if i not in done] and (out / "summary.json").is_file():
             summary = read_json(out / "summary.json", "summary", needs=("episodes",))
             if summary["episodes"] == episodes:  # finished before: its summary stands (step records may be gone)
+                if records is not None:
+                    records.extend(done[i] for i in range(episodes))
                 return summary
-        return _run(job, episodes, out, done, workers, envs, progress)
+        return _run(job, episodes, out, done, workers, envs, progress, records)
 
 
 def _claim(job: EvalJob, episodes: int, out: Path, force: bool) -> dict[int, dict[str, Any]]:
@@ -299,8 +303,9 @@ def _claim(job: EvalJob, episodes: int, out: Path, force: bool) -> dict[int, dic
             held = max(held, summary["episodes"] if isinstance(summary["episodes"], int) else 0)
         if held > episodes:
             if not force:
-                raise ZodriveError(f"{out} already holds {plural(held, 'episode')} of this evaluation; ask for at "
-                                   f"least {held}, use --force to replace them, or choose another --out")
+                raise ZodriveError(f"{out} already holds {plural(held, 'episode')} of this evaluation and zodrive never "
+                                   f"drops recorded episodes: ask for at least {held}, choose another --out, or use "
+                                   "--force to replace them")
             return _fresh(job, out)
         _rewrite_consistent(out, done)
         return done
@@ -321,12 +326,14 @@ def _fresh(job: EvalJob, out: Path) -> dict[int, dict[str, Any]]:
 
 
 def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str, Any]], workers: int,
-         envs: int, progress: bool) -> dict[str, Any]:
+         envs: int, progress: bool, records: list[dict[str, Any]] | None) -> dict[str, Any]:
     todo = [i for i in range(episodes) if i not in done]
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
-    bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
+    bar = None  # drawn with the first finished episode: a refusal while building comes first, alone
     for record, steps in run_episodes(job, todo, workers, envs):
+        if bar is None:
+            bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
         done[record["episode"]] = record
         if out is not None:
             _append_jsonl(out / "steps.jsonl", steps)
@@ -336,8 +343,10 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
             bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
     if bar is not None:
         bar.close()
-    records = [done[i] for i in range(episodes)]
-    summary = summarize(records, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    ordered = [done[i] for i in range(episodes)]
+    if records is not None:
+        records.extend(ordered)
+    summary = summarize(ordered, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
     if out is not None:
         write_json(out / "summary.json", summary)
     return summary

@@ -2,25 +2,34 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from zodrive.runinfo import sha256
+from zodrive.config import read_yaml
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import or_dash
-from zodrive.runinfo import write_atomic
+from zodrive.runinfo import read_json, read_jsonl, sha256, write_atomic
 
 PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
 PAPER_BUDGETS = {"dqn": 20_000, "ddpg": 120_000}
 
 
-def _load(path: Path) -> dict[str, Any]:
+RESULT = ("mean_return", "ci95", "episodes", "seed")  # what `_result_line` reads first
+
+
+def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A record of the folder; a missing or damaged one, or one without a key of `needs`, is one line naming it."""
     if not path.is_file():
         raise ZodriveError(f"{path} is missing (train and evaluate into the folder first)")
-    return yaml.safe_load(path.read_text()) if path.suffix == ".yaml" else json.loads(path.read_text())
+    if path.suffix == ".yaml":
+        data = read_yaml(path)
+        missing = [k for k in needs if k not in data]
+        if missing:
+            raise ZodriveError(f"run record {path} has no {missing[0]!r} (damaged, or not a record zodrive wrote)")
+        return data
+    return read_json(path, needs=needs)
 
 
 def _result_line(summary: dict[str, Any]) -> str:
@@ -39,7 +48,7 @@ def seed_table(folders: list[Path]) -> list[str]:
 
     rows = []
     for folder in folders:
-        train, summary = _load(folder / "train.json"), _load(folder / "eval" / "summary.json")
+        train, summary = _load(folder / "train.json", ("seed",)), _load(folder / "eval" / "summary.json", ("mean_return",))
         rows.append((train["seed"], folder, summary))
     lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
              "|---|---|---|---|---|---|---|"]
@@ -60,14 +69,12 @@ def seed_table(folders: list[Path]) -> list[str]:
 
 def _iqm_line(folders: list[Path]) -> str:
     """rliable's IQM over seeds x episodes, from each seed's per-episode returns."""
-    import json
-
     from zodrive.evaluation.stats import iqm_over_seeds
 
     per_seed = []
     for folder in folders:
-        lines = (folder / "eval" / "episodes.jsonl").read_text().splitlines()
-        episodes = sorted((json.loads(line) for line in lines if line.strip()), key=lambda e: e["seed"])
+        rows = read_jsonl(folder / "eval" / "episodes.jsonl", needs=("seed", "return"))
+        episodes = sorted(rows, key=lambda e: e["seed"])
         per_seed.append([e["return"] for e in episodes])
     if len({len(r) for r in per_seed}) != 1:
         return "- IQM: not computed (the seeds were evaluated on different numbers of episodes)"
@@ -84,7 +91,7 @@ def _selection_lines(folder: Path) -> list[str]:
         return []
     from zodrive.experiments.select import selection_markdown
 
-    choice = _load(folder / "selected.json")
+    choice = _load(folder / "selected.json", ("selected", "criterion"))
     return ["", f"`model.zip` is the checkpoint at step {choice['selected']['steps']:,}, picked by `zodrive select` "
             f"({choice['criterion']}; never the evaluation seeds):", "", selection_markdown(choice)]
 
@@ -97,7 +104,7 @@ def _attacked_lines(folders: list[Path]) -> list[str]:
     """One line per attacked evaluation: the attack, its eps and what the policy scored."""
     lines = []
     for folder in folders:
-        s = _load(folder / "summary.json")
+        s = _load(folder / "summary.json", RESULT)
         config = s.get("attack_config") or {}
         options = ", ".join(f"{k} {config[k]}" for k in ("max_change", "target") if config.get(k) not in (None, "auto"))
         lines.append(f"- under **{s.get('attack')}** (ε {s.get('eps')}"
@@ -114,9 +121,10 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
     summary.json (default `folder/eval`); `attacked`: evaluation folders of the model under
     attack, listed with their attack and eps."""
-    run, train = _load(folder / "run.json"), _load(folder / "train.json")
-    config = _load(folder / "config.yaml")
-    summary = _load((evaluation or folder / "eval") / "summary.json")
+    run = _load(folder / "run.json", ("command", "versions"))
+    train = _load(folder / "train.json", ("algo", "seed", "total_timesteps"))
+    config = _load(folder / "config.yaml", ("preset",))
+    summary = _load((evaluation or folder / "eval") / "summary.json", (*RESULT, "command"))
     algo = train["algo"]
     robust = train.get("kind") in ROBUST_KINDS
     recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "method", "steps", "warmup")
@@ -132,7 +140,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         "```",
         run["command"],
         *run.get("continued_by", []),
-        *([_load(folder / "selected.json")["command"]] if (folder / "selected.json").is_file() else []),
+        *([_load(folder / "selected.json", ("command",))["command"]] if (folder / "selected.json").is_file() else []),
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
         + (f" --eval {evaluation}" if evaluation else "")
@@ -176,7 +184,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
                   else f"{train['total_timesteps']:,} steps; the paper's budget is {PAPER_BUDGETS.get(algo, 0):,}")
         lines += ["", f"Changed from stable-baselines3's defaults ({budget}): {changed}."]
     if baseline is not None:
-        base = _load(baseline / "summary.json")
+        base = _load(baseline / "summary.json", RESULT)
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
                       f"{_result_line(base)}."]
     if seeds:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from zodrive.config import read_text
 from zodrive.errors import ZodriveError
 
 
@@ -21,10 +22,24 @@ def read_monitor(run: Path) -> tuple[np.ndarray, np.ndarray]:
     path = run / "monitor.monitor.csv"
     if not path.is_file():
         raise ZodriveError(f"{path} not found (is {run} a training run folder?)")
-    with path.open() as handle:
-        next(handle, None)  # SB3's JSON header line
-        rows = list(csv.DictReader(handle))
-    return np.array([float(r["r"]) for r in rows]), np.array([int(r["l"]) for r in rows])
+    return read_monitor_csv(path)
+
+
+def read_monitor_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """SB3's Monitor file (a JSON header line, then `r,l,t` rows): (returns, lengths). A file
+    that is not UTF-8, lacks the columns or holds a row that is not numbers is one line naming it."""
+    lines = read_text(path, "monitor file", max_bytes=None).splitlines()
+    rows = list(csv.DictReader(lines[1:]))  # the first line is SB3's JSON header
+    if rows and not {"r", "l"} <= set(rows[0]):
+        raise ZodriveError(f"monitor file {path} has no 'r' and 'l' columns (not SB3's Monitor file?)")
+    returns, lengths = [], []
+    for number, row in enumerate(rows, start=3):
+        try:
+            returns.append(float(row["r"]))
+            lengths.append(int(row["l"]))
+        except (TypeError, ValueError):
+            raise ZodriveError(f"monitor file {path} is damaged: line {number} is not a row of numbers") from None
+    return np.array(returns, dtype=float), np.array(lengths, dtype=int)
 
 
 def binned(run: Path, bin_steps: int) -> list[dict[str, Any]]:

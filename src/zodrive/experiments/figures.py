@@ -67,12 +67,9 @@ def plot_loss(traces: dict[str, dict[str, Any]], path: Path) -> None:
 
 def plot_training_rewards(monitor_csv: Path, path: Path, title: str) -> dict[str, float]:
     """Figs. 4/5: reward per episode during adversarial training, with a moving average."""
-    import csv
+    from zodrive.experiments.curves import read_monitor_csv
 
-    with monitor_csv.open() as handle:
-        next(handle)  # SB3's JSON header line
-        rows = list(csv.DictReader(handle))
-    rewards = np.array([float(r["r"]) for r in rows])
+    rewards, _ = read_monitor_csv(monitor_csv)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.4))
     ax.plot(np.arange(1, len(rewards) + 1), rewards, ".-", alpha=0.5, label="episode reward")

@@ -6,21 +6,20 @@ import base64
 import csv
 import html
 import io
-import json
 from pathlib import Path
 from typing import Any
 
 from zodrive.drivers.baselines import get_baseline
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
-from zodrive.runinfo import write_atomic, write_json
+from zodrive.runinfo import read_jsonl, write_atomic, write_json
 
 MAX_RETURN = 450.0
 
 
 def _returns(out: Path, algo: str, row: str) -> list[float]:
     path = out / "cells" / f"{algo}-{row}" / "episodes.jsonl"
-    rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+    rows = read_jsonl(path, needs=("episode", "return"))
     return [r["return"] for r in sorted(rows, key=lambda r: r["episode"])]
 
 

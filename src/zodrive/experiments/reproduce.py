@@ -28,7 +28,7 @@ from zodrive.errors import ZodriveError
 from zodrive.experiments.cells import Cell, run_cells
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob, same_evaluation
 from zodrive.experiments.paper import ADV_STEPS
-from zodrive.runinfo import write_atomic, write_json
+from zodrive.runinfo import read_json, write_atomic, write_json
 
 log = logging.getLogger(__name__)
 
@@ -130,10 +130,11 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
         job = EvalJob(model=model, preset=load_preset(PRESET_OF[algo]),
                       attack=attack.to_dict() if attack else None, seed=seed)
         summary_path = folder / "summary.json"
-        if summary_path.is_file() and json.loads(summary_path.read_text()).get("episodes") == episodes \
-                and (folder / "eval_key.json").is_file() \
-                and same_evaluation(json.loads((folder / "eval_key.json").read_text()), json.loads(json.dumps(job.key()))):
-            summaries[algo][row] = json.loads(summary_path.read_text())
+        summary = read_json(summary_path, "summary", needs=("episodes",)) if summary_path.is_file() else None
+        if summary is not None and summary["episodes"] == episodes and (folder / "eval_key.json").is_file() \
+                and same_evaluation(read_json(folder / "eval_key.json", "evaluation key", needs=("model",)),
+                                    json.loads(json.dumps(job.key()))):
+            summaries[algo][row] = summary
             continue
         todo.append((algo, row, Cell(job, episodes, folder)))
         if progress:
@@ -184,7 +185,7 @@ def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
 
 def _load_timings(out: Path) -> dict[str, float]:
     path = out / "timings.json"
-    return json.loads(path.read_text()) if path.is_file() else {}
+    return read_json(path, "timings") if path.is_file() else {}
 
 
 def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick: bool) -> dict[str, Any]:
@@ -193,7 +194,7 @@ def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick:
 
     fig = out / "figures"
     info_path = fig / "figures.json"
-    info: dict[str, Any] = json.loads(info_path.read_text()) if info_path.is_file() else {}
+    info: dict[str, Any] = read_json(info_path, "figure record") if info_path.is_file() else {}
     if not (fig / "fig2_loss.png").is_file():
         trace_spec = spec.with_overrides(early_stop=False, l2_weight=0.1, warm_start=False, patience=None)
         traces = {algo.upper(): loss_trace(str(models[algo]), load_preset(PRESET_OF[algo]), trace_spec,

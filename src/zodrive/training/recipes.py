@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import json
 import logging
 import shutil
 import time
@@ -24,7 +23,7 @@ from zodrive.config import check_keys, load_config, read_yaml
 from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
 from zodrive.policies.loading import ALGOS
-from zodrive.runinfo import command_line, write_atomic, write_json, write_run_info
+from zodrive.runinfo import command_line, read_json, write_atomic, write_json, write_run_info
 
 log = logging.getLogger(__name__)
 
@@ -299,7 +298,7 @@ def train(
                            "(only --steps may change, to train it longer)")
     seed = int(recipe.get("seed", 0) if seed is None else seed)
     if previous is not None:
-        seed = int(json.loads((out / "run.json").read_text())["seed"])
+        seed = int(read_json(out / "run.json", needs=("seed",))["seed"])
     algo = recipe["algo"]
     preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
     if action_kind(preset) != KIND_OF_ALGO[algo]:
@@ -337,7 +336,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if previous is None:
         write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
     else:  # the run folder keeps the command that started it and lists those that continued it
-        run = json.loads((out / "run.json").read_text())
+        run = read_json(out / "run.json", needs=("command",))
         run["continued_by"] = [*run.get("continued_by", []), command_line()]
         write_json(out / "run.json", run)
         write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
