@@ -277,3 +277,60 @@ def test_a_good_monitor_file_reads() -> None:
 
     returns, lengths = read_monitor(Path(__file__).resolve().parents[1] / "models" / "ddpg-driver")
     assert len(returns) == len(lengths) > 0
+
+
+# --- cells keyed on exact numbers and on content ------------------------------------------------
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_cell_names_are_exact_and_committed_cells_keep_theirs() -> None:
+    import json
+    import re
+
+    from zodrive.experiments.cells import number_name
+
+    assert number_name(0.1) == "0.1" and number_name(0.1000001) == "0.1000001" and number_name(1e-05) == "1e-05"
+    checked = 0
+    for key in REPO.glob("results/**/cells/*/eval_key.json"):
+        eps = (json.loads(key.read_text()).get("attack") or {}).get("eps")
+        named = re.search(r"-eps([0-9.e+-]+?)(?:-qb\d+)?$", key.parent.name)
+        if eps is not None and named and _number(named.group(1)) == eps:
+            assert number_name(eps) == named.group(1), key.parent
+            checked += 1
+    assert checked > 100
+
+
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None  # a study's own naming (eps0.2-100)
+
+
+def test_two_models_named_model_zip_get_two_names() -> None:
+    from zodrive.experiments.cells import policy_names
+
+    assert policy_names(["dqn", "ddpg", "baseline:idle"], ["sha256:a", "sha256:b", "baseline:idle"]) == \
+        ["dqn", "ddpg", "baseline:idle"]  # no clash: the names committed grids hold
+    names = policy_names(["model", "model", "model"], ["sha256:a", "sha256:b", "sha256:a"])
+    assert names[0] == names[2] != names[1] and all(n.startswith("model-") for n in names)
+
+
+def test_compare_puts_close_eps_and_same_named_models_in_their_own_cells(tmp_path: Path, monkeypatch) -> None:
+    import shutil
+
+    from zodrive.experiments import compare as grid
+
+    first, second = tmp_path / "a" / "model.zip", tmp_path / "b" / "model.zip"
+    for path, source in ((first, "dqn-close"), (second, "dqn-driver")):
+        path.parent.mkdir()
+        shutil.copy(REPO / "models" / source / "model.zip", path)
+    seen: list = []
+    monkeypatch.setattr(grid, "run_cells", lambda cells, **_: seen.extend(cells))
+    grid.compare([str(first), str(second)], ["random-search"], [0.1, 0.1000001], 1, tmp_path / "out",
+                 preset="discrete", progress=False)
+    folders = [cell.folder.name for cell in seen]
+    assert len(set(folders)) == len(folders) == 6, folders
+    assert sum(name.endswith("-eps0.1000001") for name in folders) == 2
+

@@ -8,6 +8,7 @@ only decides where cells run; what scales is the number of cells, not the steps 
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -18,15 +19,34 @@ from zodrive.evaluation.evaluate import DEFAULT_ENVS, EvalJob, evaluate
 BACKENDS = ("local", "ray")
 
 
+def number_name(value: float) -> str:
+    """A number in a cell folder's name: the short form (`0.05`, `1e-05`) where it names the
+    value exactly, which every committed cell's does, else the float's shortest exact repr
+    (`0.1000001`): two different numbers never share a cell."""
+    short = f"{value:g}"
+    return short if float(short) == float(value) else repr(float(value))
+
+
+def policy_names(labels: list[str], keys: list[str]) -> list[str]:
+    """Each policy's name in cell folders and tables: its label, and where two different
+    policies share one (two files named model.zip) a short digest of its content key after it."""
+    names = []
+    for label, key in zip(labels, keys):
+        clash = any(other == label and other_key != key for other, other_key in zip(labels, keys))
+        names.append(f"{label}-{hashlib.sha256(key.encode()).hexdigest()[:8]}" if clash else label)
+    return names
+
+
 @dataclass
 class Cell:
     job: EvalJob
     episodes: int
     folder: Path
+    force: bool = False  # replace another evaluation in `folder` (evaluate's output rule)
 
 
 def _run_one(cell: Cell, envs: int) -> dict[str, Any]:
-    return evaluate(cell.job, cell.episodes, cell.folder, workers=1, envs=envs, progress=False)
+    return evaluate(cell.job, cell.episodes, cell.folder, workers=1, envs=envs, progress=False, force=cell.force)
 
 
 def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, progress: bool = True,
@@ -47,7 +67,8 @@ def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, pr
 
 def _local(cells: list[Cell], workers: int, progress: bool, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
     for i, cell in enumerate(cells):  # one cell at a time, its episodes over `workers` processes
-        yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, envs=envs, progress=progress)
+        yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, envs=envs, progress=progress,
+                          force=cell.force)
 
 
 def _ray(cells: list[Cell], workers: int, address: str | None, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:

@@ -1,6 +1,7 @@
 """`zodrive compare`: every attack (and a range of eps) on every model, one table.
 
-Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/;
+Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/
+(eps exact: `cells.number_name`; two models of one name told apart by their content: `cells.policy_names`);
 the table is rebuilt from their summaries, so an interrupted comparison resumes. With several
 eps, `robustness.md` gives each model (and defense) its strongest attack per eps: a defense is
 judged by the attack that hurts it most, not by the one that flatters it.
@@ -21,7 +22,7 @@ from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import or_dash
-from zodrive.experiments.cells import Cell, run_cells
+from zodrive.experiments.cells import Cell, number_name, policy_names, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
 
@@ -46,11 +47,12 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                 load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget).check()
     grid: list[dict[str, Any]] = []
     cells: list[Cell] = []
-    for model in models:
+    policies = [resolve(model) for model in models]
+    names = policy_names([p.label for p in policies], [p.key() for p in policies])
+    for model, policy, name in zip(models, policies, names):
         model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
         check_policy(model, model_preset)
-        policy = resolve(model)
-        ref, name, gradients = policy.ref, policy.label, policy.gradients
+        ref, gradients = policy.ref, policy.gradients
         reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
         reads_obs = reads == "observation"
         usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
@@ -63,13 +65,13 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
-                                              + f"-{attack}" + ("" if eps is None else f"-eps{eps:g}")
+                                              + f"-{attack}" + ("" if eps is None else f"-eps{number_name(eps)}")
                                               + ("" if budget is None else f"-qb{budget}"))
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
                                   defense=defense)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack), "eps": eps, "query_budget": budget})
-                    cells.append(Cell(job, episodes, folder))
+                    cells.append(Cell(job, episodes, folder, force=force))
     if claim:  # `zodrive compare` owns its folder; `reproduce` composes several grids in one
         _claim(out, grid, force)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
