@@ -149,7 +149,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({or_dash(r['target_base_rate'], '{:.1%}')})"
         budget = f"{or_dash(r.get('query_budget'), '{:d}')} | " if budgets else ""
-        lines.append(f"| {_system(r)} | {r['attack']} | {or_dash(r['eps'], '{:g}')} | {budget}{r['mean_return']:.1f} "
+        lines.append(f"| {_system(r)} | {r['attack']} | {'–' if r['eps'] is None else number_name(r['eps'])} | {budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
                      f"{or_dash(r.get('offroad_rate'), '{:.0%}')} | {or_dash(r.get('mean_speed'), '{:.1f}')} | "
                      f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
@@ -197,7 +197,7 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
     do not read the observation have one value, whatever the eps."""
     table = strongest(rows)
     eps_values = sorted({e for cells in table.values() for e in cells if e > 0})
-    lines = ["| Policy | Clean | " + " | ".join(f"ε {e:g}" for e in eps_values) + " |",
+    lines = ["| Policy | Clean | " + " | ".join(f"ε {number_name(e)}" for e in eps_values) + " |",
              "|---|---|" + "---|" * len(eps_values)]
     for system, cells in table.items():
         clean = cells[0.0]
