@@ -10,7 +10,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: floors from the bottom; rooms on one floor may not import each other
 FLOORS: list[tuple[str, ...]] = [
-    ("errors", "seeds", "compute", "runinfo", "config", "validation"),  # the base: may import each other
+    ("errors", "seeds", "compute", "runinfo", "config", "validation", "signing"),  # the base: may import each other
     ("attacks", "envs"),
     ("drivers",),
     ("policies", "defense"),

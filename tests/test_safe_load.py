@@ -91,12 +91,37 @@ def test_shipped_models_match_their_sums() -> None:
 
 
 def test_full_loading_needs_trust(tmp_path: Path) -> None:
-    copy = tmp_path / "model.zip"
-    copy.write_bytes(model_file(ROOT / "models" / "dqn").read_bytes())
+    import gymnasium as gym
+    from stable_baselines3 import DQN
+
+    other = tmp_path / "model.zip"
+    DQN("MlpPolicy", gym.make("CartPole-v1"), device="cpu").save(other)  # not a shipped model
     with pytest.raises(Exception, match="--trust-model"):
-        load_model(copy)
-    assert load_model(copy, trust=True) is not None
-    assert load_model(ROOT / "models" / "dqn") is not None  # shipped and its SHA-256 matches
+        load_model(other)
+    assert load_model(other, trust=True) is not None
+    assert load_model(ROOT / "models" / "dqn") is not None  # shipped: its SHA-256 is in the package's list
+
+
+def test_the_packages_trusted_list_is_the_shipped_one() -> None:
+    from zodrive.policies.loading import TRUSTED_SUMS
+
+    assert TRUSTED_SUMS.read_text() == (ROOT / "models" / "SHA256SUMS").read_text()
+
+
+def test_a_crafted_sums_file_trusts_nothing(tmp_path: Path, monkeypatch) -> None:
+    """A stranger's checkout that lists its own zip in models/SHA256SUMS gets it unpickled by nothing."""
+    models = tmp_path / "models"
+    (models / "evil").mkdir(parents=True)
+    crafted, marker = _crafted(tmp_path, ROOT / "models" / "dqn" / "model.zip", in_data=True, in_weights=False)
+    target = models / "evil" / "model.zip"
+    target.write_bytes(crafted.read_bytes())
+    (models / "SHA256SUMS").write_text(f"{sha256(target)}  evil/model.zip\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("ZODRIVE_MODELS", str(models))
+    with pytest.raises(Exception, match="--trust-model"):
+        load_model(target)
+    code = main(["adv-train", str(target), "--steps", "10", "--out", str(tmp_path / "run"), "--no-progress"])
+    assert code == 2 and not marker.exists()
 
 
 def test_a_model_is_loaded_once_per_process_until_the_file_changes(tmp_path: Path) -> None:

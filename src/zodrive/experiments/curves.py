@@ -17,6 +17,16 @@ from zodrive.config import read_text
 from zodrive.errors import ZodriveError
 
 
+def headless_pyplot():
+    """matplotlib's pyplot on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def read_monitor(run: Path) -> tuple[np.ndarray, np.ndarray]:
     """(episode returns, episode lengths) of a run folder, in training order."""
     path = run / "monitor.monitor.csv"
@@ -77,9 +87,7 @@ def curves_markdown(runs: list[Path], bin_steps: int) -> str:
 
 
 def plot_curves(runs: list[Path], bin_steps: int, path: Path) -> None:
-    from zodrive.experiments.figures import _plt
-
-    plt = _plt()
+    plt = headless_pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.8))
     for run, label in zip(runs, labels(runs)):
         rows = binned(run, bin_steps)

@@ -12,17 +12,9 @@ from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import make_env
 from zodrive.evaluation.rollout import clean_states
 
+from zodrive.experiments.curves import headless_pyplot, read_monitor_csv
 from zodrive.seeds import TUNING_SEED  # states come from seeds outside the evaluation range
 from zodrive.system import build_attacker
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: int = TUNING_SEED,
@@ -46,7 +38,7 @@ def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: in
 
 def plot_loss(traces: dict[str, dict[str, Any]], path: Path) -> None:
     """Fig. 2: L1 (attack loss) and L2 (distortion) per iteration, one panel per agent."""
-    plt = _plt()
+    plt = headless_pyplot()
     fig, axes = plt.subplots(1, len(traces), figsize=(5 * len(traces), 3.4))
     for ax, (name, trace) in zip(np.atleast_1d(axes), traces.items()):
         if not trace.get("found"):
@@ -67,10 +59,9 @@ def plot_loss(traces: dict[str, dict[str, Any]], path: Path) -> None:
 
 def plot_training_rewards(monitor_csv: Path, path: Path, title: str) -> dict[str, float]:
     """Figs. 4/5: reward per episode during adversarial training, with a moving average."""
-    from zodrive.experiments.curves import read_monitor_csv
 
     rewards, _ = read_monitor_csv(monitor_csv)
-    plt = _plt()
+    plt = headless_pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.4))
     ax.plot(np.arange(1, len(rewards) + 1), rewards, ".-", alpha=0.5, label="episode reward")
     if len(rewards) >= 5:

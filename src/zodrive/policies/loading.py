@@ -3,7 +3,7 @@
 By default nothing in a model file is unpickled (see `safe_load`): the acting network is
 rebuilt from the zip's plain JSON and its weights. `load_model(..., trust=True)` uses SB3's
 full loader, which unpickles and can run code from the file: only for models you trust
-(the shipped ones are checked against `models/SHA256SUMS`), and only where an SB3 object is
+(the shipped ones are checked against the package's own copy of `models/SHA256SUMS`), and only where an SB3 object is
 needed (adversarial training continues training one).
 """
 
@@ -83,21 +83,15 @@ def _load_network(file: str, size: int, mtime_ns: int) -> tuple[dict[str, Any], 
     return describe(data, weights, Path(file)), network_from(data, weights, Path(file))
 
 
-def is_shipped(file: Path) -> bool:
-    """True if `file` is one of the repository's shipped models and its SHA-256 matches."""
-    from zodrive.config import models_dir
+TRUSTED_SUMS = Path(__file__).resolve().parents[1] / "data" / "SHA256SUMS"
+"""The shipped models' SHA-256, inside the installed package: the only list zodrive trusts to
+unpickle a model without --trust-model. A `SHA256SUMS` in a working directory or a `--models`
+folder is someone's claim, not the package's, and trusts nothing."""
 
-    models = models_dir()
-    try:
-        relative = file.resolve().relative_to(models.resolve())
-    except ValueError:
-        return False
-    expected = shipped_sums(models).get(str(relative))
-    if expected is None:
-        return False
-    if sha256(file) != expected:
-        raise ZodriveError(f"{file} does not match its SHA-256 in {models / 'SHA256SUMS'}: it was changed")
-    return True
+
+def is_shipped(file: Path) -> bool:
+    """True if `file`'s content is one of the shipped models (by the package's own SHA-256 list)."""
+    return sha256(file) in set(shipped_sums(TRUSTED_SUMS.parent).values())
 
 
 def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import json
 import logging
 import shutil
 import time
@@ -24,6 +25,7 @@ from zodrive.envs import action_kind, load_preset, make_env
 from zodrive.errors import ZodriveError
 from zodrive.policies.loading import ALGOS
 from zodrive.runinfo import command_line, read_json, write_atomic, write_json, write_run_info
+from zodrive.signing import signature
 
 log = logging.getLogger(__name__)
 
@@ -250,6 +252,47 @@ def checkpoints(out: Path, algo: str) -> list[tuple[int, Path]]:
     return sorted(found)
 
 
+SIGNATURES = "SIGNATURES.json"
+"""Beside the checkpoints: each file's HMAC under this machine's zodrive key (`runinfo.signature`).
+A checkpoint is unpickled on --resume only if it verifies (this machine wrote it) or the user
+says --trust-model: a run folder from someone else runs no code."""
+
+
+class SignedCheckpoints(CheckpointCallback):
+    """SB3's checkpoints, each file signed as it is written."""
+
+    def _on_step(self) -> bool:
+        going = super()._on_step()
+        if self.n_calls % self.save_freq == 0:
+            sign_checkpoints(Path(self.save_path))
+        return going
+
+
+def sign_checkpoints(folder: Path) -> None:
+    """Sign every checkpoint file in `folder` that has no signature yet."""
+    path = folder / SIGNATURES
+    signed = json.loads(path.read_text()) if path.is_file() else {}
+    for file in sorted(folder.glob("*_steps.*")):
+        if file.suffix in (".zip", ".pkl") and file.name not in signed:
+            signed[file.name] = signature(file)
+    write_json(path, signed)
+
+
+def check_signed(files: list[Path], trust: bool) -> None:
+    """Refuse to unpickle checkpoint `files` that this machine did not write, unless `trust`."""
+    if trust:
+        return
+    path = files[0].parent / SIGNATURES
+    try:
+        signed = json.loads(path.read_text()) if path.is_file() else {}
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        signed = {}
+    for file in files:
+        if not isinstance(signed, dict) or signed.get(file.name) != signature(file):
+            raise ZodriveError(f"{file} was not written by zodrive on this machine: resuming unpickles it, which can "
+                               "run code from the file; pass --trust-model if the run folder is yours")
+
+
 def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
     """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
     found = checkpoints(out, algo)
@@ -282,6 +325,7 @@ def train(
     tensorboard: bool = False,
     resume: bool = False,
     force: bool = False,
+    trust: bool = False,
 ) -> Path:
     """Train per `recipe` into run folder `out`; returns the saved model path.
 
@@ -307,7 +351,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     try:
         return _train(recipe, out, seed, preset, resume=resume, previous=previous, progress_bar=progress_bar,
-                      tensorboard=tensorboard)
+                      tensorboard=tensorboard, trust=trust)
     except (ZodriveError, TypeError, ValueError, AssertionError) as exc:  # a recipe option (guide, init) or SB3
         if fresh:
             shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
@@ -330,7 +374,7 @@ def check_n_step_buffer(model: Any, recipe: dict[str, Any]) -> None:
 
 
 def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
-           previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool) -> Path:
+           previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool, trust: bool = False) -> Path:
     algo = recipe["algo"]
     checkpoint = latest_checkpoint(out, algo) if resume else None
     if previous is None:
@@ -359,11 +403,12 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         done = 0
     else:
         path, done = checkpoint
+        buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
+        check_signed([path, *([buffer] if buffer.is_file() else [])], trust)
         with warnings.catch_warnings():  # SB3 says n_steps is ignored, wrongly on a load: `check_n_step_buffer`
             warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
-            model = algorithm_class(recipe).load(path, env=env, device="cpu")  # our own checkpoint, written by this run
+            model = algorithm_class(recipe).load(path, env=env, device="cpu")  # signed by this machine, or trusted
         check_n_step_buffer(model, recipe)
-        buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
         if buffer.is_file():
             model.load_replay_buffer(buffer)
         log.warning("resuming %s from step %d (%s)", out, done, path.name)
@@ -376,7 +421,8 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if initial and every:  # the calibrated start is a checkpoint too: the curve's first point, a candidate
         (out / "checkpoints").mkdir(exist_ok=True)
         model.save(out / "checkpoints" / f"{algo}_0_steps.zip")
-    callback = CheckpointCallback(every, str(out / "checkpoints"), name_prefix=algo,
+        sign_checkpoints(out / "checkpoints")
+    callback = SignedCheckpoints(every, str(out / "checkpoints"), name_prefix=algo,
                                   save_replay_buffer=True) if every else None
     start = time.perf_counter()
     total = int(recipe["total_timesteps"])
