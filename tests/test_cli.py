@@ -142,7 +142,7 @@ def test_bad_arguments(args: list[str], message: str, capsys, monkeypatch) -> No
 
 @pytest.mark.parametrize(
     "flags,message",
-    [(["--eps", "0"], "eps"), (["--steps", "0"], "steps"), (["--n-directions", "0"], "n_directions"),
+    [(["--eps", "0"], "eps"), (["--steps", "0"], "steps"), (["--n-directions", "0"], "--n-directions"),
      (["--attack", "nope"], "unknown attack"), (["--target", "WARP"], "unknown target")],
 )
 def test_bad_attack_flags(tiny_dqn: Path, flags: list[str], message: str, capsys) -> None:

@@ -57,7 +57,7 @@ def _error(capsys, args: list[str]) -> str:
      "--kappa: expected a finite number >= 0"),
     (["train", "--algo", "dqn", "--out", "{tmp}/t", "--set", "hyperparameters.batch_size=-4"],
      "batch_size must be an integer >= 1"),
-    (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "eps must be a finite number"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "--eps: expected a finite number > 0, got inf"),
     # words
     (["export", str(ROOT / "README.md"), "--out", "{tmp}/m.onnx"], "not a stable-baselines3 model"),
     # plain cloning has no radius (issue 22)

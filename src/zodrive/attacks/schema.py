@@ -49,8 +49,8 @@ class AttackOptions(Strict):
     mode: Literal["budgeted", "paper"] = option(
         "budgeted", "budgeted: projected onto the eps-ball; paper: unconstrained as published (eps only scales the "
         "reported distortion)")
-    frozen: tuple[str, ...] = option(DEFAULT_FROZEN, "features the attacker may not touch (none given: every "
-                                     "feature may change)", metavar="FEATURE")
+    frozen: tuple[str, ...] = option(DEFAULT_FROZEN, "features the attacker may not touch (none: every feature may "
+                                     "change)", metavar="FEATURE")
     steps: StrictInt = option(100, "T, iterations per environment step", ge=1, metavar="T")
     n_directions: StrictInt = option(20, "q, random directions per iteration", ge=1, metavar="Q")
     mu: float = option(DEFAULT_MU, "smoothing radius of the finite differences", gt=0)

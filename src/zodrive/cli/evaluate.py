@@ -1,0 +1,232 @@
+"""Driving a policy, clean or attacked: `evaluate`, `render`, `demo`, `certify`.
+
+The commands import the evaluation (torch, highway-env) inside their functions: `zodrive --help`
+builds these parsers without loading it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from zodrive.cli.attack import add_attack_flags, attack_spec_from_args, option_type
+from zodrive.cli.common import (
+    MODEL_HELP, check_trust, defense_name, envs_flag, envs_of, positive_int, preset_of, progress_flag,
+    refuse_nonempty, scenario_flags, seed_number, workers_flag,
+)
+from zodrive.defense import DEFENSE_NAMES
+from zodrive.errors import ZodriveError
+
+SEED_HELP = "first evaluation seed (default: 100000, the evaluation seeds; tuning uses others)"
+
+
+def add_parsers(sub: Any) -> None:
+    ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
+    ev.add_argument("model", help=MODEL_HELP)
+    scenario_flags(ev)
+    ev.add_argument("--episodes", type=positive_int, default=100, help="episodes to run")
+    ev.add_argument("--seed", type=seed_number, default=None, help=SEED_HELP)
+    ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl); "
+                                             "a folder of the same evaluation resumes")
+    workers_flag(ev)
+    envs_flag(ev)
+    ev.add_argument("--defense", type=defense_name, metavar="|".join(DEFENSE_NAMES),
+                    help="kinematic: filter between the (attacked) sensor and the policy; shield[@EPS]: the "
+                         "pessimistic rules at budget EPS (default 0.02) veto unsafe actions; close-shield[@EPS]: the "
+                         "same with baseline:close-rules' shorter gap; attacks query the defended system")
+    add_attack_flags(ev)
+    progress_flag(ev)
+
+    render = sub.add_parser("render", help="render an episode (PNG + GIF), optionally attacked")
+    render.add_argument("model", help=MODEL_HELP)
+    scenario_flags(render)
+    render.add_argument("--seed", type=seed_number, default=None, help="first episode seed (default: 100000)")
+    render.add_argument("--out", type=Path, required=True, help="folder for episode.png, episode.gif, episode.json")
+    render.add_argument("--defense", type=defense_name, metavar="|".join(DEFENSE_NAMES),
+                        help="filter between the (attacked) sensor and the policy; 'perceived' is what passes it")
+    render.add_argument("--force", action="store_true", help="overwrite a render already in --out")
+    render.add_argument("--until-crash", type=positive_int, default=1, metavar="N",
+                        help="try up to N seeds until an episode ends in a collision")
+    add_attack_flags(render)
+
+    demo = sub.add_parser("demo", help="attack the shipped DQN driver for a few episodes and print the result")
+    demo.add_argument("--episodes", type=positive_int, default=3, help="episodes, clean and attacked")
+    demo.add_argument("--model", default=None, help="model folder or zip (default: the DQN driver shipped inside "
+                                                    "the package)")
+    demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
+
+    cert = sub.add_parser("certify", help="share of a model's clean states where no perturbation within eps can "
+                                          "change the action (interval bounds; reads the weights: white-box)")
+    cert.add_argument("model", help="SB3 / sb3-contrib zip or model folder (MLP policies)")
+    cert.add_argument("--eps", nargs="+", type=option_type("eps"), required=True, help="L-inf radii to certify")
+    scenario_flags(cert, trust=False)
+    cert.add_argument("--episodes", type=positive_int, default=5, help="clean episodes whose states are certified")
+    cert.add_argument("--seed", type=seed_number, default=None, help="first episode seed (default: 100000)")
+    cert.add_argument("--tol", type=option_type("tol"),
+                      help="continuous policies: a state counts as certified if no action dimension can move more "
+                           "(default: 0.2)")
+    cert.add_argument("--attack", nargs="+", default=[], metavar="NAME",
+                      help="also attack every one of those states on its own (untargeted) with these attacks: their "
+                           "success beside the certified share; the gap between them is unknown")
+    cert.add_argument("--out", type=Path, help="folder for certify.json")
+    cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
+
+
+def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> None:
+    """--loss chooses between the DQN objectives of a targeted attack; elsewhere it does nothing."""
+    if spec is None or getattr(args, "loss", None) is None:
+        return
+    from zodrive.envs import action_kind
+
+    if action_kind(preset) != "discrete":
+        raise ZodriveError("--loss chooses the objective of a targeted attack on a discrete policy; this policy "
+                           "acts continuously (its objective is the paper's Eq. 6)")
+    if str(spec.target).lower() in ("none", "untargeted", "worst"):
+        raise ZodriveError("--loss chooses the objective of a targeted attack on a discrete policy; "
+                           f"target {spec.target} has no such choice")
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary
+    from zodrive.policies.resolve import check_policy, load_victim, policy_ref
+    from zodrive.system import build_attacker
+
+    spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
+    preset = preset_of(args)
+    check_trust(args)
+    _check_loss(args, spec, preset)
+    check_policy(args.model, preset, attacked=spec is not None)
+    if spec is not None:  # validate the whole attack before any episode runs
+        build_attacker(spec, load_victim(args.model, preset, trust=args.trust_model), preset)
+    if args.defense is not None:
+        from zodrive.defense import make_defense
+
+        make_defense(args.defense, preset)  # the preset must be one the defense understands
+    job = EvalJob(
+        model=policy_ref(args.model), preset=preset,
+        attack=spec.to_dict() if spec else None,
+        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
+    )
+    summary = evaluate(job, args.episodes, args.out, workers=args.workers, envs=envs_of(args, job),
+                       progress=not args.no_progress)
+    print(format_summary(summary))
+    if args.out:
+        print(f"results: {args.out}/summary.json")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
+    from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
+    from zodrive.policies.resolve import policy_ref
+    from zodrive.runinfo import write_json
+    from zodrive.system import make_policy_env
+
+    spec = attack_spec_from_args(args)
+    refuse_nonempty(args.out, args.force, "a render")
+    preset = preset_of(args)
+    check_trust(args)
+    _check_loss(args, spec, preset)
+    if spec is not None:
+        from zodrive.evaluation.evaluate import check_trained_folder
+
+        check_trained_folder(spec.to_dict(), policy_ref(str(args.model)), preset, args.defense)
+    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense,
+                                  trust=args.trust_model)
+    first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
+    for seed in range(first, first + args.until_crash):
+        frames, info = record_episode(env, victim, seed)
+        if info["crashed"]:
+            break
+    if float(np.asarray(frames[0].image).max()) == 0:
+        raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
+    title = (f"{spec.attack} eps={spec.eps} | " if spec else "clean | ") + (f"+{args.defense} | " if args.defense else "")
+    save_png(frames, args.out / "episode.png", title=title)
+    save_gif(frames, args.out / "episode.gif", title=title)
+    mp4 = save_mp4(frames, args.out / "episode.mp4", title=title)
+    write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None, "defense": args.defense})
+    print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
+          f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
+          f" -> {args.out}/episode.png, episode.gif" + (", episode.mp4" if mp4 else " (MP4: pip install 'zodrive[video]')"))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from zodrive.attacks.spec import load_attack
+    from zodrive.config import demo_model
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
+    from zodrive.evaluation.report import format_summary, plural
+    from zodrive.policies.resolve import policy_label, policy_ref, resolve_preset
+
+    model = args.model or str(demo_model())
+    preset = resolve_preset(model, None, [])
+    ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
+    spec = load_attack("zo-signsgd")
+    results = {}
+    for label, attack in (("clean", None), ("attacked", spec)):
+        job = EvalJob(model=ref, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
+        print(f"== {label}: {plural(args.episodes, 'episode')} of {name}" + (f" under {spec.attack}" if attack else ""))
+        results[label] = evaluate(job, args.episodes, args.out / label, progress=True)
+        print(format_summary(results[label]))
+    drop = 1 - results["attacked"]["mean_return"] / results["clean"]["mean_return"]
+    print(f"== the black-box attack (L-inf eps={spec.eps}) cut the mean return by {drop:.0%} "
+          f"({results['clean']['mean_return']:.1f} -> {results['attacked']['mean_return']:.1f}); "
+          f"results in {args.out}/")
+    print("   target=auto: the paper's target action (FASTER for a DQN, [1, 0.5] for a DDPG).")
+    print("   base rate: how often the clean policy already takes the target; success counts only the other steps.")
+    print("   queries/step: observations the attacker sent to the policy per decision (black-box cost).")
+    return 0
+
+
+def cmd_certify(args: argparse.Namespace) -> int:
+    from zodrive.attacks.registry import ATTACKS
+    from zodrive.attacks.spec import load_attack
+    from zodrive.evaluation.certify import certify_model
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
+    from zodrive.policies.loading import model_kind
+    from zodrive.policies.resolve import is_sb3_zip
+    from zodrive.runinfo import command_line, write_json
+
+    model = str(args.model)
+    if not is_sb3_zip(model):
+        raise ZodriveError("certify bounds an SB3 zip's rebuilt network; baselines, ONNX files and Python "
+                           "policies have no network zodrive can read")
+    if args.out is not None:
+        refuse_nonempty(args.out / "certify.json", args.force, "certificates")
+    preset = preset_of(args)
+    if args.tol is not None and model_kind(model) == "discrete":
+        raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
+    tol = 0.2 if args.tol is None else args.tol
+    for name in args.attack:
+        spec = load_attack(name)  # an unknown attack is an error before any episode runs
+        if spec.attack not in ATTACKS or not ATTACKS[spec.attack].search:
+            raise ZodriveError(f"certify attacks every state on its own, untargeted, beside its certificate: "
+                               f"{spec.attack} is no per-state search (use random-search, zo-signsgd, pgd, ...)")
+    result = certify_model(model, preset, args.eps, episodes=args.episodes,
+                           seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
+                           attacks=tuple(args.attack))
+    what = ("the action cannot change" if result["kind"] == "discrete"
+            else f"no action dimension can move more than {tol}")
+    print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
+          f"certified = {what} (CROWN or interval bounds: sound, not complete)")
+    for row in result["rows"]:
+        print(f"  eps {row['eps']:<8g} certified {row['certified_share']:.1%}")
+        for side in row.get("attacks", []):
+            label = " (white-box)" if side["white_box"] else ""
+            print(f"    {side['attack']}{label}: success {side['success_share']:.1%}, unknown "
+                  f"{side['unknown_share']:.1%}, {side['queries_per_state']:.0f} queries/state"
+                  + (f", {side['contradictions']} CONTRADICTIONS" if side["contradictions"] else ""))
+        if len(row.get("attacks", [])) > 1:
+            print(f"    any of them: success {row['any_attack']['success_share']:.1%}, "
+                  f"unknown {row['any_attack']['unknown_share']:.1%}")
+    if args.out is not None:
+        write_json(args.out / "certify.json", {**result, "command": command_line()})
+        print(f"results: {args.out}/certify.json")
+    return 0
+
+
+COMMANDS = {"evaluate": cmd_evaluate, "render": cmd_render, "demo": cmd_demo, "certify": cmd_certify}
