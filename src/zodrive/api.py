@@ -113,8 +113,8 @@ def _paper_target_fits(where: Scenario) -> bool:
 
 def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: str | AttackSpec | None = None, *,
              defense: str | None = None, episodes: int = 10, seed: int = EVAL_SEED, envs: int = 1,
-             env_id: str | None = None, out: str | Path | None = None, trust_model: bool = False,
-             progress: bool = False, **options: Any) -> Result:
+             env_id: str | None = None, out: str | Path | None = None, force: bool = False,
+             trust_model: bool = False, progress: bool = False, **options: Any) -> Result:
     """Drive `episodes` episodes from seeds `seed`, `seed + 1`, ..., clean or under `attack`.
 
     :param policy: a model path, `baseline:NAME`, `FILE.py:NAME`, an SB3 model, a torch module or a callable.
@@ -126,6 +126,7 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     :param envs: episodes driven side by side (their observations attacked in one call); same numbers.
     :param env_id: any gymnasium id instead of `scenario`.
     :param out: a run folder (resumable; policies on disk only).
+    :param force: replace another evaluation in `out` (only its own files).
     :param trust_model: read an SB3 zip with SB3's own loader (unpickles: only for files you trust).
     :param progress: show a progress bar.
     :param options: the attack's options (`eps=0.05`, `steps=50`, ...).
@@ -141,7 +142,7 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
         job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model)
         records: list[dict[str, Any]] = []
         summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress,
-                                 records=records)
+                                 records=records, force=force)
         return Result(summary, records)
     if out is not None:
         raise ZodriveError(f"{resolved.label} lives in memory: a run folder is keyed on a model's content; "

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from zodrive.cli import evaluate, experiments, info, train
+from zodrive.cli import bench, evaluate, experiments, info, train
 from zodrive.cli.attack import ATTACK_FLAGS, attack_spec_from_args
 from zodrive.cli.common import Parser, check_model_paths, check_out, check_plot
 from zodrive.config import MODELS_ENV
@@ -29,7 +29,7 @@ from zodrive.runinfo import set_command
 
 __all__ = ["ATTACK_FLAGS", "COMMANDS", "attack_spec_from_args", "build_parser", "main"]
 
-GROUPS = (evaluate, train, experiments, info)
+GROUPS = (evaluate, train, experiments, bench, info)
 COMMANDS = {name: command for group in GROUPS for name, command in group.COMMANDS.items()}
 
 INTERRUPTED = {

@@ -29,6 +29,8 @@ def add_parsers(sub: Any) -> None:
     ev.add_argument("--seed", type=seed_number, default=None, help=SEED_HELP)
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl); "
                                              "a folder of the same evaluation resumes")
+    ev.add_argument("--force", action="store_true",
+                    help="replace another evaluation in --out (only its own files; yours stay)")
     workers_flag(ev)
     envs_flag(ev)
     ev.add_argument("--defense", type=defense_name, metavar="|".join(DEFENSE_NAMES),
@@ -109,8 +111,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         attack=spec.to_dict() if spec else None,
         seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
     )
+    if args.force and args.out is None:
+        raise ZodriveError("--force replaces an evaluation in --out: give --out")
     summary = evaluate(job, args.episodes, args.out, workers=args.workers, envs=envs_of(args, job),
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, force=args.force)
     print(format_summary(summary))
     if args.out:
         print(f"results: {args.out}/summary.json")

@@ -263,18 +263,23 @@ class SignedCheckpoints(CheckpointCallback):
 
     def _on_step(self) -> bool:
         going = super()._on_step()
-        if self.n_calls % self.save_freq == 0:
-            sign_checkpoints(Path(self.save_path))
+        if self.n_calls % self.save_freq == 0:  # the files SB3 has just written for this step
+            steps = self.num_timesteps
+            sign_checkpoints(Path(self.save_path), [f"{self.name_prefix}_{steps}_steps.zip",
+                                                    f"{self.name_prefix}_replay_buffer_{steps}_steps.pkl"])
         return going
 
 
-def sign_checkpoints(folder: Path) -> None:
-    """Sign every checkpoint file in `folder` that has no signature yet."""
+def sign_checkpoints(folder: Path, names: list[str]) -> None:
+    """Sign the checkpoint files `names` in `folder`, just written by this process."""
     path = folder / SIGNATURES
-    signed = json.loads(path.read_text()) if path.is_file() else {}
-    for file in sorted(folder.glob("*_steps.*")):
-        if file.suffix in (".zip", ".pkl") and file.name not in signed:
-            signed[file.name] = signature(file)
+    try:
+        signed = json.loads(path.read_text()) if path.is_file() else {}
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        signed = {}
+    for name in names:
+        if (folder / name).is_file():
+            signed[name] = signature(folder / name)
     write_json(path, signed)
 
 
@@ -421,7 +426,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if initial and every:  # the calibrated start is a checkpoint too: the curve's first point, a candidate
         (out / "checkpoints").mkdir(exist_ok=True)
         model.save(out / "checkpoints" / f"{algo}_0_steps.zip")
-        sign_checkpoints(out / "checkpoints")
+        sign_checkpoints(out / "checkpoints", [f"{algo}_0_steps.zip"])
     callback = SignedCheckpoints(every, str(out / "checkpoints"), name_prefix=algo,
                                   save_replay_buffer=True) if every else None
     start = time.perf_counter()

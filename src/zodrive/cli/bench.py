@@ -1,0 +1,72 @@
+"""The yardstick: `bench` (one policy's row under a scenario's fixed protocol) and `leaderboard`
+(the tables and the plot, generated from every row)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from zodrive.cli.common import positive_int, progress_flag, workers_flag
+from zodrive.errors import ZodriveError
+
+BOARD = Path("results/bench")
+SCENARIOS = ("highway-fast", "merge", "roundabout", "intersection", "discrete")
+
+
+def add_parsers(sub: Any) -> None:
+    bench = sub.add_parser("bench", help="a policy's row under a scenario's fixed protocol (docs/bench.md)")
+    bench.add_argument("model", help="the policy: SB3 zip or folder, ONNX file, FILE.py:NAME or baseline:NAME")
+    bench.add_argument("--scenario", required=True, choices=SCENARIOS, help="the protocol's scenario")
+    bench.add_argument("--name", help="the row's name on the leaderboard (default: the model's label)")
+    bench.add_argument("--board", type=Path, default=BOARD,
+                       help="leaderboard folder: the row goes to BOARD/SCENARIO/NAME (default: results/bench)")
+    bench.add_argument("--episodes", type=positive_int, default=None,
+                       help="fewer episodes than the protocol's, for a quick look: the row is marked unofficial "
+                            "(default: the protocol's)")
+    bench.add_argument("--force", action="store_true", help="replace another bench in the row's folder")
+    workers_flag(bench)
+    progress_flag(bench)
+
+    board = sub.add_parser("leaderboard", help="the leaderboard's tables and plot, generated from the bench rows")
+    board.add_argument("--board", type=Path, default=BOARD, help="folder of bench rows (default: results/bench)")
+    board.add_argument("--out", type=Path, default=Path("docs/leaderboard.md"),
+                       help="the Markdown file to write (default: docs/leaderboard.md)")
+    board.add_argument("--plot", type=Path, default=None, help="also draw return against eps per scenario (PNG)")
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    import time
+
+    from zodrive.experiments.bench import bench, protocol, write_leaderboard
+    from zodrive.policies.policy import resolve
+
+    proto = protocol(args.scenario)
+    name = args.name or resolve(args.model).label
+    if not name or "/" in name or name.startswith("."):
+        raise ZodriveError(f"--name {name!r}: a row's name is one folder name")
+    out = args.board / args.scenario / name
+    start = time.perf_counter()
+    row = bench(args.model, proto, out, name=name, episodes=args.episodes, workers=args.workers,
+                progress=not args.no_progress, force=args.force)
+    clean, worst = row["clean"], row["attacked"][-1]
+    print(f"{row['policy']} on {row['protocol']}{'' if row['official'] else ' (unofficial: fewer episodes)'}: "
+          f"clean {clean['return']:.2f} ({100 * clean['collision_rate']:.0f}% collisions), at eps {worst['eps']:g} "
+          f"{worst['return']:.2f} ({100 * worst['collision_rate']:.0f}%), area "
+          f"{'n/a' if row['robustness_area'] is None else format(row['robustness_area'], '.2f')} "
+          f"[{time.perf_counter() - start:.0f} s]")
+    print(f"row: {out / 'row.json'}")
+    write_leaderboard(args.board, args.board / "leaderboard.md")
+    print(f"leaderboard: {args.board / 'leaderboard.md'} (zodrive leaderboard writes docs/leaderboard.md)")
+    return 0
+
+
+def cmd_leaderboard(args: argparse.Namespace) -> int:
+    from zodrive.experiments.bench import write_leaderboard
+
+    write_leaderboard(args.board, args.out, args.plot)
+    print(f"wrote {args.out}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+COMMANDS = {"bench": cmd_bench, "leaderboard": cmd_leaderboard}

@@ -1,0 +1,246 @@
+"""`zodrive bench`: one versioned protocol per scenario, one row per policy, one leaderboard.
+
+A protocol fixes what a row means: the scenario, the evaluation seeds and episodes, the ε grid
+(normalized units, also stated in metres and m/s), the black-box attack ensemble (every attack
+runs at every ε; the row keeps, per ε, the one that hurts the policy most) and white-box PGD as a
+separate, labelled column where the policy has gradients. Every cell is an ordinary resumable
+evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt from the cells.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zodrive.envs import load_preset, scenario
+from zodrive.errors import ZodriveError
+from zodrive.experiments.cells import number_name
+from zodrive.experiments.compare import compare
+from zodrive.policies.policy import resolve
+from zodrive.runinfo import read_jsonl, write_atomic, write_json
+from zodrive.seeds import EVAL_SEED
+
+VERSION = 1
+BLACK_BOX = ("random-search", "zo-signsgd")
+"""The ensemble: Square-style random search (the strongest per-step black-box attack on most of the
+committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
+WHITE_BOX = "pgd"
+BRAKE = "baseline:slower"
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """What a bench row of one scenario measures (fixed per version)."""
+
+    scenario: str
+    episodes: int
+    eps: tuple[float, ...]
+    seed: int = EVAL_SEED
+    version: int = VERSION
+    black_box: tuple[str, ...] = BLACK_BOX
+    white_box: str = WHITE_BOX
+
+    def name(self) -> str:
+        return f"{self.scenario}-v{self.version}"
+
+
+PROTOCOLS = {
+    "highway-fast": Protocol("highway-fast", 100, (0.01, 0.02, 0.05)),
+    "merge": Protocol("merge", 100, (0.01, 0.02, 0.05)),
+    "roundabout": Protocol("roundabout", 100, (0.01, 0.02, 0.05)),
+    "intersection": Protocol("intersection", 100, (0.01, 0.02, 0.05)),
+    "discrete": Protocol("discrete", 30, (0.02, 0.05, 0.2)),
+}
+
+
+def protocol(name: str) -> Protocol:
+    if name not in PROTOCOLS:
+        raise ZodriveError(f"no bench protocol for scenario {name!r} (protocols: {', '.join(PROTOCOLS)})")
+    return PROTOCOLS[name]
+
+
+def physical_eps(proto: Protocol) -> dict[str, dict[str, float]]:
+    """Each ε of the grid in the scenario's units: how far a normalized ε moves x, y (m) and vx, vy (m/s)."""
+    ranges = scenario(load_preset(proto.scenario)).feature_ranges
+    return {number_name(eps): {f: round(eps * (hi - lo) / 2, 3) for f, (lo, hi) in sorted(ranges.items())}
+            for eps in proto.eps}
+
+
+def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, episodes: int | None = None,
+          workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8) -> dict[str, Any]:
+    """Run the protocol's cells for `policy` (and the constant brake, the row every table is read
+    against) into `out`, and write its row (`row.json`). `episodes` overrides the protocol's count
+    for a quick look: such a row is marked unofficial."""
+    n = proto.episodes if episodes is None else episodes
+    resolved = resolve(policy)
+    attacks = [*proto.black_box, proto.white_box]
+    compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
+            preset=proto.scenario, force=force, envs=envs)
+    brake = out / "brake"
+    compare([BRAKE], [], [], n, brake, workers=workers, progress=progress, seed=proto.seed,
+            preset=proto.scenario, force=force, envs=envs)
+    row = bench_row(name or resolved.label, resolved.key(), proto, out, n)
+    write_json(out / "row.json", row)
+    return row
+
+
+def _cells(out: Path) -> list[dict[str, Any]]:
+    """The finished comparison in `out` (its `table.json`)."""
+    path = out / "table.json"
+    if not path.is_file():
+        raise ZodriveError(f"{out} holds no finished comparison (table.json): run the bench again to resume it")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ZodriveError(f"{path} is damaged (not JSON): run the bench again with --force") from None
+
+
+def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -> dict[str, Any]:
+    """The row of a finished bench folder: clean figures, the worst black-box attack per ε, PGD
+    apart, the robustness area, the ε where collisions pass the brake's, queries to a crash."""
+    cells = _cells(out)
+    clean = next(c for c in cells if c["attack"] == "none")
+    brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
+    per_eps: list[dict[str, Any]] = []
+    for eps in proto.eps:
+        attacked = [c for c in cells if c["eps"] == eps and c["attack"] in proto.black_box]
+        if not attacked:  # a policy no observation attack reaches (a constant or simulator-reading driver)
+            per_eps.append({"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
+                            "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None})
+            continue
+        worst = min(attacked, key=lambda c: c["mean_return"])
+        pgd = next((c for c in cells if c["eps"] == eps and _attack(c) == proto.white_box), None)
+        per_eps.append({
+            "eps": eps, "return": worst["mean_return"], "ci95": [worst["ci95_low"], worst["ci95_high"]],
+            "collision_rate": worst["collision_rate"], "attack": worst["attack"],
+            "queries_per_step": worst["queries_per_step"],
+            "queries_to_crash": _median_queries_to_crash(out, worst),
+            "pgd_return": pgd["mean_return"] if pgd else None,
+            "pgd_collision_rate": pgd["collision_rate"] if pgd else None,
+        })
+    returns = [clean["mean_return"], *(p["return"] for p in per_eps)]
+    grid = [0.0, *proto.eps]
+    area = float(np.trapezoid(returns, grid) / (grid[-1] * clean["mean_return"])) if clean["mean_return"] > 0 else None
+    passes = next((p["eps"] for p in per_eps if p["collision_rate"] > brake["collision_rate"]), None)
+    return {
+        "protocol": proto.name(), "official": episodes == proto.episodes, "policy": label, "key": key,
+        "scenario": proto.scenario, "episodes": episodes, "seeds": [proto.seed, proto.seed + episodes - 1],
+        "clean": {"return": clean["mean_return"], "ci95": [clean["ci95_low"], clean["ci95_high"]],
+                  "collision_rate": clean["collision_rate"], "speed": clean["mean_speed"],
+                  "offroad_rate": clean.get("offroad_rate")},
+        "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
+        "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
+        "eps_units": physical_eps(proto),
+    }
+
+
+def _attack(cell: dict[str, Any]) -> str:
+    return str(cell["attack"]).split(" ")[0]  # compare labels white-box attacks: "pgd (white-box)"
+
+
+def _median_queries_to_crash(out: Path, cell: dict[str, Any]) -> float | None:
+    """Median over the attacked episodes that crashed of the queries spent until the crash (an
+    episode ends at its crash, so that is the episode's count)."""
+    folder = out / "cells" / (cell["model"].replace(":", "-") + f"-{_attack(cell)}-eps{number_name(cell['eps'])}")
+    records = read_jsonl(folder / "episodes.jsonl", "episode record", needs=("episode",))
+    crashed = [r["queries"] for r in records if r.get("crashed")]
+    return float(np.median(crashed)) if crashed else None
+
+
+# ---------------------------------------------------------------- the leaderboard
+
+def read_rows(board: Path) -> list[dict[str, Any]]:
+    """Every `row.json` under `board` (one folder per scenario, one per policy)."""
+    rows = []
+    for path in sorted(board.glob("*/*/row.json")):
+        try:
+            rows.append(json.loads(path.read_text(encoding="utf-8")))
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
+    return rows
+
+
+def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
+    """One table per scenario, best robustness area first; generated from the rows, never typed."""
+    lines = ["# Leaderboard", "",
+             "Generated by `zodrive leaderboard` from the bench rows in `results/bench/` (never typed).",
+             "Each row: `zodrive bench POLICY --scenario S` under the protocol named in its table's title",
+             "([docs/bench.md](bench.md)). Return under attack is the worst black-box attack of the ensemble per ε;",
+             "PGD (white-box, needs gradients) is a separate column. Unofficial rows (fewer episodes) are marked *.", ""]
+    for scenario_name in sorted({r["scenario"] for r in rows}):
+        group = sorted((r for r in rows if r["scenario"] == scenario_name),
+                       key=lambda r: (-(r["robustness_area"] or 0.0), -r["clean"]["return"]))
+        proto = group[0]["protocol"]
+        eps = [p["eps"] for p in group[0]["attacked"]]
+        lines += [f"## {scenario_name} (protocol {proto})", "",
+                  "| Policy | Clean return (95% CI) | Collisions | Speed (m/s) | "
+                  + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
+                  + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
+                  "|---" * (8 + len(eps)) + "|"]
+        for r in group:
+            c = r["clean"]
+            cells = [f"{p['return']:.2f} / {100 * p['collision_rate']:.0f}%" for p in r["attacked"]]
+            last = r["attacked"][-1]
+            pgd = "–" if last["pgd_return"] is None else f"{last['pgd_return']:.2f}"
+            q = next((p["queries_to_crash"] for p in r["attacked"] if p["queries_to_crash"] is not None), None)
+            lines.append(f"| {r['policy']}{'' if r['official'] else '*'} | {c['return']:.2f} "
+                         f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {100 * c['collision_rate']:.0f}% | "
+                         f"{c['speed']:.1f} | " + " | ".join(cells) + f" | {pgd} | "
+                         f"{'–' if r['robustness_area'] is None else format(r['robustness_area'], '.2f')} | "
+                         f"{'–' if r['eps_collisions_pass_brake'] is None else format(r['eps_collisions_pass_brake'], 'g')} | "
+                         f"{'–' if q is None else format(q, '.0f')} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_leaderboard(board: Path, out: Path, plot: Path | None = None) -> str:
+    rows = read_rows(board)
+    if not rows:
+        raise ZodriveError(f"no bench rows under {board} (expected {board}/SCENARIO/POLICY/row.json)")
+    text = leaderboard_markdown(rows)
+    write_atomic(out, text)
+    if plot is not None:
+        plot_leaderboard(rows, plot)
+    return text
+
+
+def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
+    """Return against ε per scenario (worst black-box attack), one line per policy."""
+    from zodrive.experiments.curves import headless_pyplot
+
+    plt = headless_pyplot()
+    scenarios = sorted({r["scenario"] for r in rows})
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(4.2 * len(scenarios), 3.4), squeeze=False)
+    for ax, name in zip(axes[0], scenarios):
+        for r in sorted((r for r in rows if r["scenario"] == name), key=lambda r: r["policy"]):
+            eps = [0.0, *(p["eps"] for p in r["attacked"])]
+            ret = [r["clean"]["return"], *(p["return"] for p in r["attacked"])]
+            ax.plot(eps, ret, marker="o", lw=1.2, label=r["policy"])
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("ε (normalized)")
+        ax.set_ylabel("return")
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def protocol_table() -> str:
+    """The protocols as a Markdown table (docs/bench.md includes it)."""
+    lines = ["| Protocol | Episodes (seeds) | ε (normalized) | ε in the scenario's units | Black-box ensemble | White-box |",
+             "|---|---|---|---|---|---|"]
+    for proto in PROTOCOLS.values():
+        units = "; ".join(f"{e}: " + ", ".join(f"{f} {v:g}" for f, v in u.items())
+                          for e, u in physical_eps(proto).items())
+        lines.append(f"| {proto.name()} | {proto.episodes} ({proto.seed}–{proto.seed + proto.episodes - 1}) | "
+                     f"{', '.join(f'{e:g}' for e in proto.eps)} | {units} | {', '.join(proto.black_box)} | "
+                     f"{proto.white_box} |")
+    return "\n".join(lines)
+
+
+def as_dict(proto: Protocol) -> dict[str, Any]:
+    return asdict(proto)

@@ -1,0 +1,47 @@
+"""zodrive bench and the leaderboard: a row from a protocol's cells, resumable, generated tables."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from zodrive.cli import main
+from zodrive.experiments.bench import PROTOCOLS, leaderboard_markdown, physical_eps, read_rows
+
+MODEL = Path(__file__).resolve().parents[1] / "models" / "ppo-highway-fast"
+
+
+def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys) -> None:
+    board = tmp_path / "board"
+    args = ["bench", str(MODEL), "--scenario", "highway-fast", "--name", "ppo", "--episodes", "2",
+            "--board", str(board), "--no-progress"]
+    assert main(args) == 0
+    row = json.loads((board / "highway-fast" / "ppo" / "row.json").read_text())
+    assert row["protocol"] == "highway-fast-v1" and row["official"] is False and row["key"].startswith("sha256:")
+    table = json.loads((board / "highway-fast" / "ppo" / "table.json").read_text())
+    for cell in row["attacked"]:  # the row keeps the black-box attack that hurts most at each eps
+        attacked = [c["mean_return"] for c in table if c["eps"] == cell["eps"] and c["attack"] in
+                    PROTOCOLS["highway-fast"].black_box]
+        assert len(attacked) == 2 and cell["return"] == min(attacked)
+        assert cell["pgd_return"] is not None  # white-box apart, since the PPO has gradients
+    assert row["brake"]["collision_rate"] >= 0 and 0 < row["robustness_area"] <= 1.5
+    assert "ppo*" in (board / "leaderboard.md").read_text()
+    mtime = (board / "highway-fast" / "ppo" / "cells" / "ppo-highway-fast-none" / "episodes.jsonl").stat().st_mtime
+    assert main(args) == 0  # resumes: every cell is done, nothing runs again
+    assert (board / "highway-fast" / "ppo" / "cells" / "ppo-highway-fast-none" / "episodes.jsonl").stat().st_mtime == mtime
+    out = tmp_path / "leaderboard.md"
+    assert main(["leaderboard", "--board", str(board), "--out", str(out), "--plot", str(tmp_path / "b.png")]) == 0
+    assert out.read_text() == leaderboard_markdown(read_rows(board))
+    assert (tmp_path / "b.png").stat().st_size > 0
+
+
+def test_eps_is_stated_in_the_scenarios_units() -> None:
+    units = physical_eps(PROTOCOLS["highway-fast"])
+    assert units["0.05"]["x"] == 10.0 and units["0.05"]["vx"] == 4.0  # x normalized by +-200 m, vx by +-80 m/s
+
+
+def test_a_bench_refuses_in_one_line(tmp_path: Path, capsys) -> None:
+    assert main(["bench", "baseline:slower", "--scenario", "highway-fast", "--name", "../x", "--board",
+                 str(tmp_path)]) == 2
+    assert "one folder name" in capsys.readouterr().err
+    assert main(["leaderboard", "--board", str(tmp_path / "none"), "--out", str(tmp_path / "l.md")]) == 2
