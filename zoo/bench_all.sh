@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Select every finished zoo run's checkpoint on tuning seeds, then bench it and the baselines of its
+# scenario under the official protocol into results/bench (resumable: finished cells are kept).
+# Run: OMP_NUM_THREADS=1 nohup bash zoo/bench_all.sh > zoo/bench.log 2>&1 &
+set -euo pipefail
+cd "$(dirname "$0")/.."
+for scenario in highway-fast merge roundabout intersection; do
+  for run in models/zoo/$scenario-dqn/seed-*; do
+    [ -f "$run/model.zip" ] || [ -f "$run/final.zip" ] || continue
+    python zoo/choose_checkpoint.py "$run" --scenario "$scenario"
+    zodrive bench "$run" --scenario "$scenario" --name "dqn-$(basename "$run")" --no-progress
+  done
+  for baseline in slower idle faster rules idm-mobil; do
+    zodrive bench "baseline:$baseline" --scenario "$scenario" --name "baseline-$baseline" --no-progress \
+      || echo "baseline:$baseline does not drive $scenario"
+  done
+done
+zodrive leaderboard --plot docs/leaderboard.png
