@@ -353,7 +353,8 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
 
 
 def _mean_of(records: list[dict[str, Any]], key: str) -> float | None:
-    return float(np.mean([r[key] for r in records])) if all(key in r for r in records) else None
+    """The mean of `key` over records (None where a record lacks it: older records, or no road)."""
+    return float(np.mean([r[key] for r in records])) if all(r.get(key) is not None for r in records) else None
 
 
 def _with_later_defaults(key: dict[str, Any]) -> dict[str, Any]:
@@ -431,6 +432,8 @@ def summarize(
         # None where episodes were recorded before the metric existed (not 0: it was not measured)
         "lane_changes_per_episode": _mean_of(records, "lane_changes"),
         "mean_distance": _mean_of(records, "distance"),
+        "mean_path_length": _mean_of(records, "path_length"),
+        "on_road_share": _mean_of(records, "on_road_share"),
         "attack": None,
         "defense": job.defense,
     }

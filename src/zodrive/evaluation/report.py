@@ -16,10 +16,11 @@ def format_summary(summary: dict[str, Any]) -> str:
     ]
     if summary.get("mean_speed") is not None and summary["mean_speed"] == summary["mean_speed"]:  # a road
         lines.append(
-            f"collision rate: {summary['collision_rate']:.2%}  off-road: {summary.get('offroad_rate', 0):.2%}  "
+            f"collision rate: {summary['collision_rate']:.2%}  ended off-road: {summary.get('offroad_rate', 0):.2%}  "
+            f"on road: {or_dash(summary.get('on_road_share'), '{:.1%}')} of steps  "
             f"mean length: {summary['mean_length']:.1f}  mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
-            f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  distance: {or_dash(summary.get('mean_distance'), '{:.0f}')} m  "
-            f"right lane: {summary['right_lane_share']:.1%}")
+            f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  path: "
+            f"{or_dash(summary.get('mean_path_length'), '{:.0f}')} m  right lane: {summary['right_lane_share']:.1%}")
     else:  # not a highway-env road: no driving metrics
         lines.append(f"mean length: {summary['mean_length']:.1f} steps")
     if summary.get("defense"):
@@ -44,12 +45,24 @@ def format_summary(summary: dict[str, Any]) -> str:
                          f"{summary['queries_per_step']:.{2 if checked else 1}f} queries/step; max Linf "
                          f"{summary['max_linf']:.4f}")
         else:
+            untargeted = summary.get("target") in (None, "none")
+            rate = summary["attack_success_rate"]
+            if rate != rate:  # nan: no step was left to attack
+                what = ("n/a (no step left to attack: " + ("none" if untargeted else
+                        "the clean policy already took the target on every step") + ")")
+            elif untargeted:
+                what = f"{rate:.1%} of steps changed the policy's action"
+            else:
+                what = f"{rate:.1%} of steps where the clean policy did not already take the target"
             lines.append(
-                f"attack success: {summary['attack_success_rate']:.1%} of steps where the clean policy "
-                f"missed the target (base rate {summary['target_base_rate']:.1%}); "
+                f"attack success: {what} (base rate {_percent(summary['target_base_rate'])}); "
                 f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
             )
     return "\n".join(lines)
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None or value != value else f"{value:.1%}"
 
 
 def _picker(summary: dict[str, Any]) -> str:

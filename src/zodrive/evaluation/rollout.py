@@ -27,7 +27,9 @@ class EpisodeRecord:
     mean_speed: float          # [m/s]
     right_lane_share: float    # fraction of steps in the right-most lane
     lane_changes: int = 0      # lane boundaries the ego crossed
-    distance: float = 0.0      # [m] travelled along the road
+    distance: float = 0.0      # [m] x-displacement from the start (kept for old records; see path_length)
+    path_length: float | None = None   # [m] the length of the path the ego drove (sum of its step displacements)
+    on_road_share: float | None = None  # share of steps that ended with the ego on the road
     queries: int = 0           # attack queries over the episode
     attacked_steps: int = 0
     successes: int = 0         # steps where the attack met its goal (not already met)
@@ -87,6 +89,8 @@ class Episode:
         self.road = hasattr(env.unwrapped, "vehicle") and hasattr(env.unwrapped, "road")
         ego = env.unwrapped.vehicle if self.road else None  # read for the driving metrics only; the policy sees `obs`
         self.start_x, self.lane = (float(ego.position[0]), ego.lane_index[2]) if self.road else (0.0, None)
+        self.position = np.array(ego.position, dtype=float) if self.road else None
+        self.path, self.on_road = 0.0, 0
         self.lane_changes = self.length = self.right = 0
         self.total = 0.0
         self.speeds: list[float] = []
@@ -118,6 +122,10 @@ class Episode:
             ego = self.env.unwrapped.vehicle
             self.lane_changes += ego.lane_index[2] != self.lane
             self.lane = ego.lane_index[2]
+            position = np.array(ego.position, dtype=float)
+            self.path += float(np.linalg.norm(position - self.position))
+            self.position = position
+            self.on_road += bool(ego.on_road)
 
     def record(self, attacked: bool) -> EpisodeRecord:
         road, env = self.road, self.env
@@ -128,6 +136,8 @@ class Episode:
             mean_speed=float(np.nanmean(self.speeds)) if road and self.speeds else float("nan"),
             right_lane_share=self.right / max(self.length, 1), lane_changes=int(self.lane_changes),
             distance=float(env.unwrapped.vehicle.position[0]) - self.start_x if road else 0.0, queries=self.queries,
+            path_length=self.path if road else None,
+            on_road_share=self.on_road / max(self.length, 1) if road else None,
             attacked_steps=self.length if attacked else 0, successes=int(self.successes),
             applicable=int(self.applicable), max_linf=self.max_linf,
             action_counts=self.counts.tolist() if self.counts is not None else None,
