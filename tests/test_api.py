@@ -120,3 +120,28 @@ def test_a_policy_file_sees_only_what_is_reported(tmp_path) -> None:
                               eps=0.05, steps=4, episodes=3, seed=11, envs=3)
     rows = result.summary["victim_rows"]
     assert sum(map(int, log.read_text().split())) == rows["attack_queries"] + rows["decisions"]
+
+
+def test_a_callable_that_returns_actions_is_a_victim() -> None:
+    def act(obs: np.ndarray) -> np.ndarray:  # discrete actions, not scores
+        return (obs.reshape(len(obs), -1)[:, 2] > 0).astype(int)
+
+    result = zodrive.evaluate(act, env_id="CartPole-v1", episodes=2, seed=5)
+    env, returns = gym.make("CartPole-v1"), []
+    for seed in (5, 6):
+        obs, _ = env.reset(seed=seed)
+        done, total = False, 0.0
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(int(act(obs[None])[0]))
+            total, done = total + reward, terminated or truncated
+        returns.append(total)
+    assert [r["return"] for r in result.episodes] == returns
+    with pytest.raises(ZodriveError, match="not action indices 0..1"):
+        zodrive.evaluate(lambda obs: np.full(len(obs), 7), env_id="CartPole-v1", episodes=1)
+
+
+def test_export_says_what_it_exports(tmp_path) -> None:
+    from zodrive.cli import main
+
+    (tmp_path / "p.py").write_text("def make():\n    return lambda obs: obs\n")
+    assert main(["export", f"{tmp_path / 'p.py'}:make", "--out", str(tmp_path / "m.onnx")]) == 2

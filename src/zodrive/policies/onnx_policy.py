@@ -42,6 +42,11 @@ def export_onnx(model: str, out: Path) -> Path:
 
     if not str(out).endswith(SUFFIX):
         raise ZodriveError(f"--out must end in {SUFFIX}: {out}")
+    from zodrive.policies.factory import is_factory
+
+    if is_factory(model) or str(model).startswith("baseline:") or is_onnx(model):
+        raise ZodriveError(f"export writes an SB3 model's network as ONNX; {model} is not an SB3 zip or model folder "
+                           "(a policy in your own code: export it with torch.onnx.export)")
     file = model_file(model)
     info = inspect_model(file)  # a file that is no model is said so before any extra is asked for
     network = load_network(file)

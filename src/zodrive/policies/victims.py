@@ -121,6 +121,15 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
     return Victim(query=query, kind=kind, obs_shape=obs_shape, differentiable=forward)
 
 
+def _one_hot(actions: np.ndarray, n: int, label: str) -> np.ndarray:
+    """Discrete actions (B,) as scores: 1 for the action taken, 0 elsewhere."""
+    index = np.rint(actions)
+    if not (np.all(index == actions) and np.all((index >= 0) & (index < n))):
+        raise ZodriveError(f"{label} returns one value per observation, so its outputs are actions; these are not "
+                           f"action indices 0..{n - 1} ({actions[:3].tolist()} ...)")
+    return np.eye(n, dtype=np.float32)[index.astype(np.int64)]
+
+
 def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> Victim:
     """The victim of a torch module or a numpy callable on the scenario of `where` (a preset or
     an environment's `Scenario`). Its outputs are checked on every call, the first included: the
@@ -141,6 +150,8 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
         except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
             raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
                                f"{tuple(np.shape(obs))}: {type(exc).__name__}: {exc}") from exc
+        if env.kind == "discrete" and out.shape[1:] in ((), (1,)):  # actions, not scores: one-hot scores
+            out = _one_hot(out.reshape(len(obs)), env.n_actions, label)
         if out.shape != (len(obs), env.n_actions):
             raise ZodriveError(f"{label} returns outputs of shape {out.shape[1:]} per observation; "
                                f"{env.name!r} needs {env.n_actions} "
