@@ -104,3 +104,23 @@ def test_a_crafted_normalization_file_runs_nothing(tmp_path: Path, monkeypatch) 
     with pytest.raises(ZodriveError, match="without running code: posix.mkdir|without running code: os.mkdir"):
         read_normalization(bad)
     assert not marker.exists()
+
+
+def test_a_model_trained_on_another_observation_box_is_refused(tmp_path: Path) -> None:
+    import json
+    import zipfile
+
+    model = PPO("MlpPolicy", gym.make("Pendulum-v1"), n_steps=64, batch_size=32, device="cpu")
+    model.save(tmp_path / "pendulum")
+    assert zodrive.evaluate(str(tmp_path / "pendulum.zip"), env_id="Pendulum-v1", episodes=1).summary["episodes"] == 1
+    other = tmp_path / "other.zip"  # the same network, recorded as trained on a box of [-1, 1] everywhere
+    with zipfile.ZipFile(tmp_path / "pendulum.zip") as src, zipfile.ZipFile(other, "w") as dst:
+        for item in src.infolist():
+            raw = src.read(item.filename)
+            if item.filename == "data":
+                data = json.loads(raw)
+                data["observation_space"]["low"], data["observation_space"]["high"] = "[-1. -1. -1.]", "[1. 1. 1.]"
+                raw = json.dumps(data).encode()
+            dst.writestr(item, raw)
+    with pytest.raises(ZodriveError, match="box low is \\[-1.0, -1.0, -1.0\\]; preset 'Pendulum-v1' declares"):
+        zodrive.evaluate(str(other), env_id="Pendulum-v1", episodes=1)

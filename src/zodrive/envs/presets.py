@@ -50,6 +50,8 @@ class Scenario:
     relative: bool = False             # highway-env rows relative to the ego (not absolute positions)
     normalized: bool = False           # highway-env rows normalized by `feature_ranges`
     lanes: int | None = None           # lanes of a highway-env road
+    space_low: tuple[float, ...] = ()  # the observation space's declared box, flattened
+    space_high: tuple[float, ...] = ()
 
     def attack_context(self) -> dict[str, Any]:
         """What an attack needs to know about these observations and actions (`AttackSpec.build`)."""
@@ -247,7 +249,9 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
                     "lanes": core.config.get("lanes_count")}
     return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
                     n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
-                    max_return=_max_return(config, core), **observed)
+                    max_return=_max_return(config, core),
+                    space_low=tuple(map(float, np.asarray(space.low).ravel())),
+                    space_high=tuple(map(float, np.asarray(space.high).ravel())), **observed)
 
 
 def _max_return(config: dict[str, Any], core: Any) -> float | None:

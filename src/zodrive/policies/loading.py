@@ -15,6 +15,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from stable_baselines3 import DDPG, DQN, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 
@@ -55,6 +56,13 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
     if tuple(info["obs_shape"] or ()) != env.obs_shape:
         raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset "
                            f"{preset['name']!r} gives {env.obs_shape}")
+    for which, declared in (("low", env.space_low), ("high", env.space_high)):
+        recorded = info.get(f"obs_{which}")
+        if recorded is not None and declared and (len(recorded) != len(declared) or not np.all(
+                np.isclose(recorded, declared, rtol=1e-6, atol=0.0))):  # the zip writes float32 to 8 digits
+            raise ZodriveError(f"{path} was trained on observations whose box {which} is {_short(recorded)}; preset "
+                               f"{preset['name']!r} declares {_short(declared)}: not the scenario it was trained on "
+                               "(pass the one it was, with --preset or --env-id)")
     if info["n_actions"] != env.n_actions:
         raise ZodriveError(f"{path} has {info['n_actions']} actions; preset {preset['name']!r} has {env.n_actions}")
     if env.kind == "continuous" and info.get("action_low") is not None:
@@ -62,6 +70,11 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
                 or list(map(float, info["action_high"])) != list(env.action_high)):
             raise ZodriveError(f"{path} acts in [{info['action_low']}, {info['action_high']}]; preset "
                                f"{preset['name']!r} takes actions in [{list(env.action_low)}, {list(env.action_high)}]")
+
+
+def _short(values: Any) -> str:
+    values = [float(v) for v in values]
+    return str(values) if len(values) <= 6 else f"[{', '.join(map(str, values[:6]))}, ...]"
 
 
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:

@@ -187,8 +187,22 @@ def describe(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path)
         raise ZodriveError(f"{path}: a {FAMILIES[family]} policy with a discrete action space is not an SB3 model")
     if family in ("dqn", "qrdqn") and info["kind"] != "discrete":
         raise ZodriveError(f"{path}: a {FAMILIES[family]} policy with continuous actions is not an SB3 model")
+    observation = data.get("observation_space")
     return {"algo": family, "sb3_class": sb3_class_name(data, family),
-            "obs_shape": _space_shape(data.get("observation_space")), **info}
+            "obs_shape": _space_shape(observation), "obs_low": _bounds(observation, "low"),
+            "obs_high": _bounds(observation, "high"), **info}
+
+
+def _bounds(space: Any, which: str) -> list[float] | None:
+    """The observation space's `low` / `high` as written in the zip's readable repr (None where the
+    repr is abbreviated or absent: then only the shape is compared)."""
+    text = space.get(which) if isinstance(space, dict) else None
+    if not isinstance(text, str) or "..." in text:
+        return None
+    try:
+        return [float(v) for v in text.replace("[", " ").replace("]", " ").split()]
+    except ValueError:
+        return None
 
 
 def sb3_class_name(data: dict[str, Any], family: str) -> str:
