@@ -124,3 +124,14 @@ def test_a_model_trained_on_another_observation_box_is_refused(tmp_path: Path) -
             dst.writestr(item, raw)
     with pytest.raises(ZodriveError, match="box low is \\[-1.0, -1.0, -1.0\\]; preset 'Pendulum-v1' declares"):
         zodrive.evaluate(str(other), env_id="Pendulum-v1", episodes=1)
+
+
+def test_an_image_observation_with_tuple_settings_builds() -> None:
+    from zodrive.envs import gym_preset, scenario
+
+    preset = gym_preset("highway-fast-v0", ["highway.observation.type=GrayscaleObservation",
+                                            "highway.observation.observation_shape=[36,18]",
+                                            "highway.observation.stack_size=2",
+                                            "highway.observation.weights=[0.2989,0.587,0.114]"])
+    where = scenario(preset)
+    assert where.obs_shape == (2, 36, 18) and where.bounds == (0.0, 255.0)  # the image's declared box

@@ -28,7 +28,9 @@ ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highwa
 CONTINUOUS_NAMES = ("acceleration", "steering")
 
 PRESET_KEYS = {"env_id", "max_episode_steps", "highway", "name", "env_kwargs", "obs_bounds"}
-OBSERVATION_TYPES = ("Kinematics", "FastKinematics", "ExitObservation")
+OBSERVATION_TYPES = ("Kinematics", "FastKinematics", "ExitObservation", "OccupancyGrid", "GrayscaleObservation",
+                     "TimeToCollision", "LidarObservation")
+"""highway-env's observers whose observation is one Box (zodrive attacks Box observations)."""
 
 
 @dataclass(frozen=True)
@@ -179,7 +181,7 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
     obs = hw.get("observation", {})
     if "type" in obs and obs["type"] not in OBSERVATION_TYPES:
         raise ZodriveError(f"preset {name!r}: observation.type must be one of {', '.join(OBSERVATION_TYPES)} "
-                           f"(other observations: --env-id ID with --obs-bounds)")
+                           "(highway-env's observers with one Box observation)")
     action = hw.get("action", {}).get("type") if isinstance(hw.get("action"), dict) else None
     if action is not None and action not in ("DiscreteMetaAction", "ContinuousAction"):
         raise ZodriveError(f"preset {name!r}: action.type must be DiscreteMetaAction or ContinuousAction")
@@ -309,17 +311,29 @@ def scenario_of_env(env: gym.Env) -> Scenario:
     return _read_scenario({"name": name, "env_id": name}, env)
 
 
+def _shapes_as_tuples(value: Any, key: str = "") -> Any:
+    """YAML and --env-set give lists; highway-env wants a tuple where it takes a shape
+    (`observation_shape` of GrayscaleObservation, ...)."""
+    if isinstance(value, dict):
+        return {k: _shapes_as_tuples(v, k) for k, v in value.items()}
+    if isinstance(value, list) and key.endswith("_shape"):
+        return tuple(value)
+    return value
+
+
 def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     """Build the environment a preset describes, capped at `max_episode_steps` decisions."""
     register()
     if render_mode == "rgb_array" and os.environ.get("SDL_VIDEODRIVER") == "dummy":
         os.environ["SDL_VIDEODRIVER"] = "offscreen"  # "dummy" makes highway-env draw black frames
-    if render_mode is not None and not os.path.isdir(os.environ.get("XDG_RUNTIME_DIR", "")):
+    image = (config.get("highway") or {}).get("observation", {}).get("type") == "GrayscaleObservation"
+    if (render_mode is not None or image) and not os.path.isdir(os.environ.get("XDG_RUNTIME_DIR", "")):
         import tempfile  # SDL prints an error line to stderr without a runtime folder
 
         os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="zodrive-xdg-")
     env_id = config.get("env_id", ENV_ID)
-    kwargs = {"config": config["highway"]} if config.get("highway") is not None else dict(config.get("env_kwargs") or {})
+    kwargs = {"config": _shapes_as_tuples(config["highway"])} if config.get("highway") is not None \
+        else dict(config.get("env_kwargs") or {})
     try:
         env = gym.make(env_id, render_mode=render_mode, max_episode_steps=config.get("max_episode_steps"), **kwargs)
     except gym.error.Error as exc:
