@@ -33,7 +33,8 @@ def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Vi
         with torch.no_grad():
             return forward(torch.from_numpy(np.asarray(x, dtype=np.float32))).numpy()
 
-    return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward)
+    # a network the test built itself: the harness may calibrate on it (as on zodrive's own copy of a model)
+    return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward, calibrate=query)
 
 
 def observations(n: int, seed: int = 1) -> np.ndarray:
@@ -51,4 +52,4 @@ def counting_victim(calls: list[int]) -> Victim:
         calls.append(len(x))
         return base.query(x)
 
-    return Victim(query=counted, kind="discrete", obs_shape=(5, 5))
+    return Victim(query=counted, kind="discrete", obs_shape=(5, 5), calibrate=base.calibrate)  # calibration uncounted
