@@ -172,6 +172,9 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
     and, with `defense`, in the defense between the (attacked) sensor and the policy; the
     attacker then queries the defended system. `model` is anything `resolve` reads."""
     policy = resolve(model)
+    if defense is not None and policy.kind == "baseline" and bl.get_baseline(policy.ref).reads == "nothing":
+        raise ZodriveError(f"{policy.ref} takes one constant action whatever it observes: the {defense} defense "
+                           "between its sensor and it changes nothing (evaluate it without --defense)")
     if policy.reads_simulator:
         policy.check(preset, attacked=spec is not None)
         if defense is not None:

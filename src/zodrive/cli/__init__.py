@@ -16,7 +16,9 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Sequence
 
@@ -53,7 +55,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminated(signum: int, frame: object) -> None:
+    """SIGTERM (a scheduler, `kill`) ends a run as Ctrl-C does: what was written is kept and said."""
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminated)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     argv = list(sys.argv[1:] if argv is None else argv)
     set_command(argv)
@@ -71,6 +80,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if env_models and not Path(env_models).is_dir():
             raise ZodriveError(f"${MODELS_ENV}={env_models}: not a folder")
         check_model_paths(args)
+        if getattr(args, "address", None) and getattr(args, "backend", "local") != "ray":
+            raise ZodriveError("--address joins a Ray cluster: it needs --backend ray")
         return COMMANDS[args.command](args)
     except ZodriveError as exc:
         print(f"zodrive: error: {exc}", file=sys.stderr)

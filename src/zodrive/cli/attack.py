@@ -155,6 +155,9 @@ def attack_spec_from_args(args: argparse.Namespace) -> Any:
     """The AttackSpec named by --attack with the CLI's flags on top (None without --attack)."""
     from zodrive.attacks.spec import load_attack
 
+    if args.attack is not None and not args.attack.strip():
+        raise ZodriveError("--attack '' names no attack: give one (zodrive evaluate --help lists them), or drop "
+                           "--attack for a clean run")
     if not args.attack:
         given = [flag for flag, dest in ATTACK_FLAGS.items() if getattr(args, dest, None) is not None]
         if given:
