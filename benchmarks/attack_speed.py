@@ -27,8 +27,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from zodrive.policies.loading import load_model
-from zodrive.policies.victims import sb3_victim
+from zodrive.policies.policy import resolve
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import attack_context, load_preset, make_env
 from zodrive.evaluation.evaluate import DEFAULT_ENVS
@@ -65,7 +64,7 @@ def per_step(model: str, states: int, steps: int, q: int,
     max(envs) states attacked `n` at a time (rows of one call, as in lockstep) for each n; and
     the victim's forward passes alone for those queries in batches of n (q + 1) rows."""
     preset = load_preset("discrete")
-    victim = sb3_victim(load_model(model, preset))
+    victim = resolve(model).victim(preset)  # any victim the CLI takes, read safely
     xs = clean_states(make_env(preset), victim, SEED, max(states, *envs))
     spec = AttackSpec(steps=steps, n_directions=q, early_stop=False)
     attack, objective, oracle = spec.build(victim, **attack_context(preset))
@@ -115,7 +114,7 @@ def clean_episodes(model: str, episodes: int, max_steps: int, seed: int) -> tupl
     """The states of `episodes` clean episodes (by seed), the time of a clean step
     (environment step + the policy's decision) [s], and the victim."""
     preset = load_preset("discrete", [f"max_episode_steps={max_steps}"])
-    victim = sb3_victim(load_model(model, preset))
+    victim = resolve(model).victim(preset)  # any victim the CLI takes, read safely
     env = make_env(preset)
     recorded, step_time, count = {}, 0.0, 0
     for i in range(episodes):
@@ -151,7 +150,7 @@ def same_states(recorded: dict[int, np.ndarray], victim_of: Any, spec: AttackSpe
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default="models/dqn")
+    parser.add_argument("--model", default="models/dqn", help="any policy the CLI takes (a discrete preset one)")
     parser.add_argument("--states", type=int, default=5, help="environment steps timed per method")
     parser.add_argument("--steps", type=int, default=100, help="T")
     parser.add_argument("--n-directions", type=int, default=20, help="q")
