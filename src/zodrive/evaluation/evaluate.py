@@ -252,6 +252,7 @@ def evaluate(
     progress: bool = True,
     records: list[dict[str, Any]] | None = None,
     force: bool = False,
+    label: str | None = None,
 ) -> dict[str, Any]:
     """Run `episodes` episodes (resuming from `out` if it holds part of this run) over
     `workers` processes, `envs` side by side in each; summarize. The episode records are
@@ -270,7 +271,7 @@ def evaluate(
     check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
     check_trained_folder(job.attack, job.model, job.preset, job.defense)
     if out is None:
-        return _run(job, episodes, None, {}, workers, envs, progress, records)
+        return _run(job, episodes, None, {}, workers, envs, progress, records, label)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ZodriveError(f"--out {out} is a file, not a folder")
@@ -283,7 +284,7 @@ def evaluate(
                 if records is not None:
                     records.extend(done[i] for i in range(episodes))
                 return summary
-        return _run(job, episodes, out, done, workers, envs, progress, records)
+        return _run(job, episodes, out, done, workers, envs, progress, records, label)
 
 
 def _claim(job: EvalJob, episodes: int, out: Path, force: bool) -> dict[int, dict[str, Any]]:
@@ -326,14 +327,14 @@ def _fresh(job: EvalJob, out: Path) -> dict[int, dict[str, Any]]:
 
 
 def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str, Any]], workers: int,
-         envs: int, progress: bool, records: list[dict[str, Any]] | None) -> dict[str, Any]:
+         envs: int, progress: bool, records: list[dict[str, Any]] | None, label: str | None = None) -> dict[str, Any]:
     todo = [i for i in range(episodes) if i not in done]
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
     bar = None  # drawn with the first finished episode: a refusal while building comes first, alone
     for record, steps in run_episodes(job, todo, workers, envs):
         if bar is None:
-            bar = _progress(len(todo), progress, "attacked" if job.attack else "clean")
+            bar = _progress(len(todo), progress, label or ("attacked" if job.attack else "clean"))
         done[record["episode"]] = record
         if out is not None:
             _append_jsonl(out / "steps.jsonl", steps)

@@ -68,7 +68,7 @@ def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, pr
 def _local(cells: list[Cell], workers: int, progress: bool, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
     for i, cell in enumerate(cells):  # one cell at a time, its episodes over `workers` processes
         yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, envs=envs, progress=progress,
-                          force=cell.force)
+                          force=cell.force, label=f"cell {i + 1}/{len(cells)} {cell.folder.name}")
 
 
 def _ray(cells: list[Cell], workers: int, address: str | None, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
