@@ -13,14 +13,17 @@ import logging
 from pathlib import Path
 from typing import Any
 
-
-from zodrive.drivers import baselines as bl
-from zodrive.policies.factory import is_factory
 from zodrive.attacks.victim import Victim
-from zodrive.envs import action_kind, n_actions, observation_shape
+from zodrive.drivers import baselines as bl
+from zodrive.drivers.rules import rules_victim
+from zodrive.envs import action_kind, action_names, gym_preset, load_preset, n_actions, observation_shape, preset_for_env
 from zodrive.errors import ZodriveError
+from zodrive.policies.factory import factory_victim, is_factory, split_factory
 from zodrive.policies.folders import TrainedWith, trained_with
+from zodrive.policies.loading import check_fits, inspect_model, load_model, load_network, model_file, model_kind
 from zodrive.policies.normalize import ObsNormalization, normalized_victim, read_normalization
+from zodrive.policies.onnx_policy import is_onnx, onnx_metadata, onnx_victim
+from zodrive.policies.victims import network_victim, sb3_victim
 
 log = logging.getLogger("zodrive")
 
@@ -31,11 +34,9 @@ def policy_kind(model: str) -> str:
         return bl.get_baseline(model).kinds[0]
     if is_factory(model):
         raise ZodriveError(f"{model} is Python code: say where it drives with --preset or --env-id")
-    from zodrive.policies.onnx_policy import is_onnx, onnx_metadata
 
     if is_onnx(model):
         return onnx_metadata(Path(model))["kind"]
-    from zodrive.policies.loading import model_kind
 
     return model_kind(model)
 
@@ -45,7 +46,6 @@ def has_gradients(model: str) -> bool:
     factories; not baselines or ONNX)."""
     if bl.is_baseline(model):
         return False
-    from zodrive.policies.onnx_policy import is_onnx
 
     return not is_onnx(model)
 
@@ -56,11 +56,9 @@ def policy_ref(model: str) -> str:
     if bl.is_baseline(model):
         return f"{bl.PREFIX}{bl.get_baseline(model).name}"
     if is_factory(model):
-        from zodrive.policies.factory import split_factory
 
         file, name = split_factory(model)
         return f"{file}:{name}"
-    from zodrive.policies.loading import model_file
 
     return str(model_file(model))
 
@@ -82,7 +80,6 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
     """Where `model` drives: `preset`, `env_id` (any gymnasium id), where the model's folder says
     it was trained (rl-zoo3 / Hugging Face files, `<env id>.zip`), or else the paper's preset of
     its action kind (discrete / continuous), said in a warning: a default is never silent."""
-    from zodrive.envs import gym_preset, load_preset, preset_for_env
 
     if env_id is not None:
         if preset is not None:
@@ -105,21 +102,17 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
 
 
 def _is_onnx(model: str) -> bool:
-    from zodrive.policies.onnx_policy import is_onnx
 
     return is_onnx(model)
 
 
 def _trained_with(model: str) -> TrainedWith:
-    from zodrive.policies.loading import model_file
 
     return trained_with(model_file(model))
 
 
 def is_sb3_zip(model: str) -> bool:
     """Whether `model` names an SB3 zip or model folder (not a baseline, ONNX file or Python factory)."""
-    from zodrive.policies.onnx_policy import is_onnx
-
     return not (bl.is_baseline(model) or is_onnx(model) or is_factory(model))
 
 
@@ -140,8 +133,6 @@ def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) 
     if is_factory(model):
         load_victim(model, preset)  # builds the policy and checks its outputs against the scenario
         return
-    from zodrive.policies.loading import check_fits, inspect_model, model_file
-    from zodrive.policies.onnx_policy import is_onnx, onnx_metadata
 
     file = model_file(model)
     check_fits(onnx_metadata(file) if is_onnx(file) else inspect_model(file), preset, file)
@@ -159,19 +150,13 @@ def load_victim(model: str, preset: dict[str, Any], *, trust: bool = False) -> V
             raise ZodriveError(f"{bl.PREFIX}{baseline.name} reads the simulator; it needs its environment "
                                "(use make_policy_env)")
         if baseline.reads == "observation":
-            from zodrive.drivers.rules import rules_victim
 
             return rules_victim(preset, observation_shape(preset), n_actions(preset),
                                 baseline.name.partition("@")[0], baseline.eps or 0.0)  # NAME@EPS: the budget is eps
-        from zodrive.envs import action_names
 
         return bl.constant_victim(baseline, observation_shape(preset), n_actions(preset), action_names(preset))
-    from zodrive.policies.loading import load_model, load_network
-    from zodrive.policies.onnx_policy import is_onnx, onnx_victim
-    from zodrive.policies.victims import network_victim, sb3_victim
 
     if is_factory(model):
-        from zodrive.policies.factory import factory_victim
 
         return factory_victim(model, preset)
     if is_onnx(model):
@@ -187,7 +172,5 @@ def load_victim(model: str, preset: dict[str, Any], *, trust: bool = False) -> V
 
 def normalization(model: str | Path) -> ObsNormalization | None:
     """The VecNormalize statistics a model file was trained with (None: none beside it)."""
-    from zodrive.policies.loading import model_file
-
     found = trained_with(model_file(model)).normalization
     return read_normalization(found) if found is not None else None

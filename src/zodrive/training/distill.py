@@ -38,14 +38,23 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
+from zodrive.attacks.threat import ThreatModel, worst_in_ball
+from zodrive.attacks.victim import Victim
 from zodrive.compute import one_torch_thread
+from zodrive.drivers.baselines import check_baseline_fits, driver_victim, get_baseline, simulator_driver
+from zodrive.envs import action_names, attack_context, make_env, n_actions, observation_shape
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.rollout import act, clean_states, states_driven, to_action
+from zodrive.policies.loading import load_network, model_file
+from zodrive.policies.policy import resolve
+from zodrive.policies.resolve import load_victim
+from zodrive.policies.safe_load import PolicyNetwork
+from zodrive.policies.victims import network_victim
+from zodrive.runinfo import write_json, write_run_info
 
 if TYPE_CHECKING:
     import gymnasium as gym
 
-    from zodrive.policies.safe_load import PolicyNetwork
-    from zodrive.attacks.victim import Victim
 
 Augment = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 Criterion = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
@@ -60,15 +69,6 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     names an observation-reading baseline), write `out/model.zip` and `out/train.json`;
     returns the zip's path. With `dagger` (rounds >= 0) the student is trained by `dagger_distill`
     instead (this path is unchanged without it). `eps` None: plain cloning (`kappa` must be 0)."""
-    from zodrive.drivers.baselines import check_baseline_fits, get_baseline
-    from zodrive.policies.policy import resolve
-    from zodrive.policies.loading import load_network, model_file
-    from zodrive.policies.resolve import load_victim
-    from zodrive.policies.victims import network_victim
-    from zodrive.attacks.threat import worst_in_ball
-    from zodrive.envs import attack_context, make_env
-    from zodrive.evaluation.rollout import clean_states
-    from zodrive.runinfo import write_json, write_run_info
 
     if (out / "model.zip").exists() and not force:
         raise ZodriveError(f"{out} already holds a model; use --force to overwrite it")
@@ -139,7 +139,6 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
 def _threat(eps: float | None, features: Any) -> Any:
     """The threat model whose mask (frozen presence) the noise and the adversarial term use;
     without `eps` (plain cloning) only its mask is read."""
-    from zodrive.attacks.threat import ThreatModel
 
     return ThreatModel(features=features) if eps is None else ThreatModel(eps=eps, features=features)
 
@@ -265,7 +264,6 @@ def fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, *, epochs: int, 
     given; with `robust` (eps, kappa, pgd_steps, mask, low, high) the adversarial CE of
     `distill` is added (discrete labels only); `weight_decay` > 0: AdamW. Returns the mean loss per epoch (over the
     batches as augmented)."""
-    from zodrive.attacks.threat import worst_in_ball
 
     if criterion is not None and robust and robust["kappa"] > 0:
         raise ZodriveError("the adversarial term is implemented for discrete labels (cross-entropy) only")
@@ -358,7 +356,6 @@ def labelled_rollout(env: gym.Env, teacher: Victim, student: Victim, beta: float
     outputs at each of them. The teacher is asked exactly once per step, while its state is the
     one it labels: a simulator-reading teacher (`baseline:idm-mobil`) reads the simulator then,
     and its own memory (target lane, decision timer) follows the episode whoever drives."""
-    from zodrive.evaluation.rollout import act, states_driven, to_action
 
     labels = []
 
@@ -390,7 +387,6 @@ def dagger_rounds(env: gym.Env, teacher: Victim, student: torch.nn.Module, obs_s
     the aggregate, and `refit(student, x, y)` trains on the whole aggregate. `evaluate(student)`
     after each refit goes into the round's record. Returns the aggregate (flat states,
     targets) and the records."""
-    from zodrive.policies.victims import network_victim
 
     xs: list[torch.Tensor] = []
     ys: list[torch.Tensor] = []
@@ -416,10 +412,6 @@ def teacher_and_env(teacher: str | None, source: PolicyNetwork, preset: dict[str
     `IdmMobilDriver(replan=True)`) is bound to that very environment (it reads its vehicles);
     otherwise the observation-reading baseline, or the source network itself, beside a fresh
     environment."""
-    from zodrive.drivers.baselines import driver_victim, get_baseline, simulator_driver
-    from zodrive.policies.resolve import load_victim
-    from zodrive.policies.victims import network_victim
-    from zodrive.envs import make_env, n_actions, observation_shape
 
     if teacher is not None and get_baseline(teacher).reads == "simulator":
         env = make_env(preset)
@@ -465,10 +457,6 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     trained on: `steps // 2` the teacher drives into and `steps // 2` the current student drives
     into, on the seeds after the training ones. Writes `out/model.zip` (a plain SB3 zip of the
     source's algorithm) and `out/train.json`."""
-    from zodrive.policies.loading import load_network, model_file
-    from zodrive.policies.victims import network_victim
-    from zodrive.envs import action_names, attack_context
-    from zodrive.runinfo import write_json, write_run_info
 
     if rounds < 0 or steps < 2:
         raise ZodriveError(f"DAgger needs rounds >= 0 and steps >= 2, not {rounds} and {steps}")
