@@ -135,3 +135,18 @@ def test_an_image_observation_with_tuple_settings_builds() -> None:
                                             "highway.observation.weights=[0.2989,0.587,0.114]"])
     where = scenario(preset)
     assert where.obs_shape == (2, 36, 18) and where.bounds == (0.0, 255.0)  # the image's declared box
+
+
+def test_the_scenario_comes_from_the_folder_or_is_said_to_be_a_default(caplog, tmp_path: Path) -> None:
+    import logging
+
+    root = Path(__file__).resolve().parents[1] / "models"
+    with caplog.at_level(logging.INFO, logger="zodrive"):
+        assert resolve_preset(str(root / "dqn-driver"), None)["name"] == "discrete"  # its config.yaml
+        assert resolve_preset(str(root / "ppo-highway-fast"), None)["name"] == "highway-fast"  # its train.json
+    assert "a default" not in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="zodrive"):
+        shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
+        resolve_preset(str(tmp_path / "model.zip"), None)  # a bare zip says nothing: the default, said
+    assert "scenario: discrete, a default" in caplog.text

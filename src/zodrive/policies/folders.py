@@ -66,6 +66,7 @@ class TrainedWith:
 
     env_id: str | None = None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+    preset: str | None = None          # a zodrive run folder's preset, by name (its config.yaml)
     normalization: Path | None = None
     said_by: tuple[str, ...] = ()
 
@@ -76,7 +77,9 @@ def trained_with(model: Path) -> TrainedWith:
     `env_kwargs` and the VecNormalize statistics."""
     folder = model.parent
     said: list[str] = []
-    env_id, env_kwargs = None, {}
+    env_id, env_kwargs, preset = None, {}, _zodrive_preset(folder)
+    if preset is not None:
+        said.append(str(folder / "config.yaml"))
     for base in (folder / model.stem, folder):  # rl-zoo3 keeps its files in `<env id>/` beside `<env id>.zip`
         args_file, kwargs_file = base / "args.yml", base / "env_kwargs.yml"
         if args_file.is_file() and env_id is None:
@@ -91,12 +94,41 @@ def trained_with(model: Path) -> TrainedWith:
                     raise ZodriveError(f"{kwargs_file} is not a mapping of keyword arguments")
                 env_kwargs = kwargs
                 said.append(str(kwargs_file))
-    if env_id is None:
+    if env_id is None and preset is None:
+        env_id = _script_env_id(folder / "train.json")
+        if env_id is not None:
+            said.append(str(folder / "train.json"))
+    if env_id is None and preset is None:
         env_id = _env_id_from_name(model.stem)
         if env_id is not None:
             said.append(str(model))
     norm = find_normalization(folder)
-    return TrainedWith(env_id, env_kwargs, norm, tuple(said))
+    return TrainedWith(env_id=env_id, env_kwargs=env_kwargs, preset=preset, normalization=norm, said_by=tuple(said))
+
+
+def _zodrive_preset(folder: Path) -> str | None:
+    """The preset a zodrive run folder was trained on (`config.yaml`: `preset: {name: ...}`)."""
+    path = folder / "config.yaml"
+    if not path.is_file():
+        return None
+    data = read_zoo_yaml(path)
+    preset = data.get("preset") if isinstance(data, dict) else None
+    name = preset.get("name") if isinstance(preset, dict) else None
+    return name if isinstance(name, str) and name else None
+
+
+def _script_env_id(path: Path) -> str | None:
+    """The env id a training script recorded (`train.json`: `env_id`, as the zoo's and the examples' do)."""
+    if not path.is_file():
+        return None
+    import json
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return None
+    env_id = data.get("env_id") if isinstance(data, dict) else None
+    return env_id if isinstance(env_id, str) else None
 
 
 def _env_id_from_name(stem: str) -> str | None:

@@ -90,6 +90,9 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
     if preset is not None:
         return load_preset(preset, env_set)
     said = None if bl.is_baseline(model) or is_factory(model) or _is_onnx(model) else _trained_with(model)
+    if said is not None and said.preset is not None:
+        log.info("scenario: %s, the preset its run folder records", said.preset)
+        return load_preset(said.preset, env_set)
     if said is not None and said.env_id is not None:
         found = preset_for_env(said.env_id, said.env_kwargs, env_set)
         log.warning("scenario: %s, where %s says the model was trained", found["name"], ", ".join(said.said_by))
