@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from zodrive.cli.common import positive_int, progress_flag, workers_flag
+from zodrive.cli.common import episode_count, progress_flag, workers_flag
 from zodrive.errors import ZodriveError
 
 BOARD = Path("results/bench")
@@ -21,7 +21,7 @@ def add_parsers(sub: Any) -> None:
     bench.add_argument("--name", help="the row's name on the leaderboard (default: the model's label)")
     bench.add_argument("--board", type=Path, default=BOARD,
                        help="leaderboard folder: the row goes to BOARD/SCENARIO/NAME (default: results/bench)")
-    bench.add_argument("--episodes", type=positive_int, default=None,
+    bench.add_argument("--episodes", type=episode_count, default=None,
                        help="fewer episodes than the protocol's, for a quick look: the row is marked unofficial "
                             "(default: the protocol's)")
     bench.add_argument("--force", action="store_true", help="replace another bench in the row's folder")

@@ -45,19 +45,25 @@ class Parser(argparse.ArgumentParser):
 
 
 # -- argument types --------------------------------------------------------------------------
-def int_at_least(least: int, what: str) -> Callable[[str], int]:
-    """An argparse type: an integer >= `least`, with a one-line message naming `what`."""
+def int_at_least(least: int, what: str, most: int | None = None) -> Callable[[str], int]:
+    """An argparse type: an integer >= `least` (and <= `most`), with a one-line message naming `what`."""
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if value < least:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        if value < least or (most is not None and value > most):
+            raise argparse.ArgumentTypeError(f"expected {what}" + (f" (at most {most:,})" if most else "")
+                                             + f", got {value}")
         return value
 
     return parse
+
+
+MAX_EPISODES = 1_000_000
+episode_count = int_at_least(1, "a positive integer", MAX_EPISODES)
+"""--episodes: bounded before anything is allocated (a million episodes is days of CPU)."""
 
 
 def float_above(least: float, strict: bool, what: str) -> Callable[[str], float]:

@@ -12,6 +12,7 @@ from typing import Any
 
 from zodrive.cli.attack import add_attack_flags, attack_spec_from_args, option_type
 from zodrive.cli.common import (
+    episode_count,
     MODEL_HELP, check_trust, defense_name, envs_flag, envs_of, positive_int, preset_of, progress_flag,
     refuse_nonempty, scenario_flags, seed_number, workers_flag,
 )
@@ -25,7 +26,7 @@ def add_parsers(sub: Any) -> None:
     ev = sub.add_parser("evaluate", help="evaluate a model, clean or under attack")
     ev.add_argument("model", help=MODEL_HELP)
     scenario_flags(ev)
-    ev.add_argument("--episodes", type=positive_int, default=100, help="episodes to run")
+    ev.add_argument("--episodes", type=episode_count, default=100, help="episodes to run")
     ev.add_argument("--seed", type=seed_number, default=None, help=SEED_HELP)
     ev.add_argument("--out", type=Path, help="results folder (summary.json, episodes.jsonl, steps.jsonl); "
                                              "a folder of the same evaluation resumes")
@@ -53,7 +54,7 @@ def add_parsers(sub: Any) -> None:
     add_attack_flags(render)
 
     demo = sub.add_parser("demo", help="attack the shipped DQN driver for a few episodes and print the result")
-    demo.add_argument("--episodes", type=positive_int, default=3, help="episodes, clean and attacked")
+    demo.add_argument("--episodes", type=episode_count, default=3, help="episodes, clean and attacked")
     demo.add_argument("--model", default=None, help="model folder or zip (default: the DQN driver shipped inside "
                                                     "the package)")
     demo.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
@@ -63,7 +64,7 @@ def add_parsers(sub: Any) -> None:
     cert.add_argument("model", help="SB3 / sb3-contrib zip or model folder (MLP policies)")
     cert.add_argument("--eps", nargs="+", type=option_type("eps"), required=True, help="L-inf radii to certify")
     scenario_flags(cert, trust=False)
-    cert.add_argument("--episodes", type=positive_int, default=5, help="clean episodes whose states are certified")
+    cert.add_argument("--episodes", type=episode_count, default=5, help="clean episodes whose states are certified")
     cert.add_argument("--seed", type=seed_number, default=None, help="first episode seed (default: 100000)")
     cert.add_argument("--tol", type=option_type("tol"),
                       help="continuous policies: a state counts as certified if no action dimension can move more "

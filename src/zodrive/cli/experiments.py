@@ -13,6 +13,7 @@ from typing import Any
 
 from zodrive.cli.attack import option_type
 from zodrive.cli.common import (
+    episode_count,
     backend_flags, defense_or_none, envs_flag, envs_of, nonnegative_int, positive_int, progress_flag,
     refuse_nonempty, scenario_flags, workers_flag,
 )
@@ -23,7 +24,7 @@ from zodrive.errors import ZodriveError
 def add_parsers(sub: Any) -> None:
     rep = sub.add_parser("reproduce", help="the paper's Table 1, figures and a report, in one command")
     rep.add_argument("--out", type=Path, required=True, help="folder for the table, figures and report.html")
-    rep.add_argument("--episodes", type=positive_int, help="episodes per cell (default: 100)")
+    rep.add_argument("--episodes", type=episode_count, help="episodes per cell (default: 100)")
     workers_flag(rep, default=2)
     envs_flag(rep)
     rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes); not with --episodes")
@@ -50,7 +51,7 @@ def add_parsers(sub: Any) -> None:
                       help="PNG: with --query-budgets, return and success against queries per step; "
                            "otherwise return against eps under the strongest attack")
     backend_flags(cmp_)
-    cmp_.add_argument("--episodes", type=positive_int, default=20, help="episodes per cell")
+    cmp_.add_argument("--episodes", type=episode_count, default=20, help="episodes per cell")
     workers_flag(cmp_)
     envs_flag(cmp_)
     cmp_.add_argument("--out", type=Path, required=True, help="folder for the cells and the tables")

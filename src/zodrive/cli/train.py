@@ -15,6 +15,7 @@ from typing import Any
 
 from zodrive.cli.attack import option_type
 from zodrive.cli.common import (
+    episode_count,
     defense_name, env_set_flag, nonnegative_float, nonnegative_int, positive_float, positive_int, preset_of,
     probability_below_one, progress_flag, refuse_nonempty, scenario_flags, seed_number, trust_flag, workers_flag,
 )
@@ -164,7 +165,7 @@ def add_parsers(sub: Any) -> None:
 
     sel = sub.add_parser("select", help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
     sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
-    sel.add_argument("--episodes", type=positive_int, default=20, help="tuning episodes per checkpoint")
+    sel.add_argument("--episodes", type=episode_count, default=20, help="tuning episodes per checkpoint")
     sel.add_argument("--from-step", type=nonnegative_int, default=0, help="ignore checkpoints before this step")
     workers_flag(sel)
     sel.add_argument("--force", action="store_true", help="replace a selection already in RUN/selected.json")
