@@ -1,0 +1,55 @@
+"""Write the CARD.md of each zoo policy from its own records: the command and seed that trained it
+(`train.json`), the checkpoint chosen on tuning seeds (`selection.json`), its SHA-256, and its bench
+row (`results/bench/SCENARIO/NAME/row.json`). Nothing in a card is typed by hand.
+
+Run: python zoo/card.py
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from zodrive.runinfo import sha256
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def card(run: Path) -> str:
+    train = json.loads((run / "train.json").read_text())
+    selection = json.loads((run / "selection.json").read_text())
+    scenario, seed = train["scenario"], train["seed"]
+    name = f"dqn-{run.name}"
+    row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
+    lines = [f"# {run.parent.name} / {run.name}", "",
+             f"A DQN for `{scenario}` (highway-env `{train['env_id']}`), trained with plain stable-baselines3 by",
+             f"`python zoo/train.py --scenario {scenario} --seed {seed} --out {run.relative_to(ROOT)}` "
+             f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
+             f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
+             f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "
+             f"(`python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}`), copied to `model.zip`.", "",
+             f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
+    if row_path.is_file():
+        row = json.loads(row_path.read_text())
+        c = row["clean"]
+        lines += [f"Bench row ({row['protocol']}, `zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
+                  f"--name {name}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
+                  f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
+                  f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions). Under the "
+                  "strongest black-box attack: " + ", ".join(
+                      f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
+                  + ".", ""]
+    else:
+        lines += ["No bench row yet: `bash zoo/bench_all.sh`.", ""]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
+        if (run / "selection.json").is_file():
+            (run / "CARD.md").write_text(card(run))
+            print(f"wrote {run / 'CARD.md'}")
+
+
+if __name__ == "__main__":
+    main()
