@@ -50,3 +50,9 @@ def test_a_bench_refuses_in_one_line(tmp_path: Path, capsys) -> None:
                  str(tmp_path)]) == 2
     assert "one folder name" in capsys.readouterr().err
     assert main(["leaderboard", "--board", str(tmp_path / "none"), "--out", str(tmp_path / "l.md")]) == 2
+
+
+def test_the_committed_leaderboard_is_generated_from_the_committed_rows() -> None:
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "docs" / "leaderboard.md").read_text()
+    assert text == leaderboard_markdown(read_rows(root / "results" / "bench"))  # never typed
