@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any, Literal, Optional, Union
+from typing import Any, Literal, Mapping, Optional, Union
 
 from pydantic import ConfigDict, Field, StrictBool, StrictInt, field_validator
 
@@ -133,6 +133,31 @@ class AttackOptions(Strict):
         if isinstance(value, bool) or value is None:
             raise ValueError(f"must be auto, none, worst, an action name or index, or a list, not {value!r}")
         return int(value) if isinstance(value, numbers.Integral) else value
+
+
+REMOVED: dict[str, tuple[Any, str]] = {}
+"""Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
+against damage): each one's value that is the behaviour left, and where its measurement lives. A record
+written while the option existed (an `eval_key.json`, a config) that holds it at that value is the same
+attack today; one that holds another value describes an attack zodrive can no longer run."""
+
+
+def removed_settings(data: Mapping[str, Any]) -> list[str]:
+    """The removed options `data` (recorded attack options) sets to a value other than the behaviour left,
+    as `NAME=VALUE`."""
+    return [f"{name}={data[name]}" for name, (kept, _) in REMOVED.items() if name in data and data[name] != kept]
+
+
+def without_removed(data: Mapping[str, Any]) -> dict[str, Any]:
+    """`data` without the removed options that hold the behaviour left (a removed option at another value
+    stays, so that the record differs from every attack zodrive runs today)."""
+    return {k: v for k, v in data.items() if k not in REMOVED or v != REMOVED[k][0]}
+
+
+def removed_message(settings: list[str]) -> str:
+    """Why a record or config that sets removed options cannot run, and where their measurements live."""
+    where = "; ".join(f"{s} (its measurement: {REMOVED[s.split('=')[0]][1]})" for s in settings)
+    return f"{where}: removed from zodrive (docs/attacks.md, section \"Removed options\")"
 
 
 SIGNS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}

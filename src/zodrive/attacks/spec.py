@@ -12,7 +12,7 @@ from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
-from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions
+from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions, removed_message, removed_settings, without_removed
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
@@ -43,7 +43,11 @@ class AttackSpec(AttackOptions):
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
         """A spec from a mapping (YAML, overrides, a record), typed and range-checked by the schema
         (a boolean must be a boolean, a number a number); `name` and `description` are a config
-        file's words about itself."""
+        file's words about itself. A removed option (`schema.REMOVED`) at the behaviour left is dropped;
+        at another value it is refused."""
+        if removed_settings(data):
+            raise ZodriveError(f"{context}: {removed_message(removed_settings(data))}")
+        data = without_removed(data)
         try:
             spec = cls.model_validate({k: v for k, v in data.items() if k not in ("name", "description")})
         except ValidationError as exc:
