@@ -41,7 +41,7 @@ ATTACK = {
     "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
     "--timing": ["0.5", "2"], "--max-change": ["0.01", "-1"], "--access": ["score", "decision", "x"],
     "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"], "--episode-query-budget": ["10", "0"],
-    "--on-failure": ["best", "clean", "x"], "--warm-start": [None], "--trust-model": [None],
+    "--warm-start": [None], "--trust-model": [None],
     "--check-below": ["0.9", "2", "x"],
     "--defense": ["kinematic", "nope"],
 }

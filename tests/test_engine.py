@@ -201,17 +201,6 @@ def test_patience_gives_up_a_step_that_stopped_improving() -> None:
     assert quick.queries[failed].mean() < 0.5 * slow.queries[failed].mean()
 
 
-def test_a_failed_step_can_feed_the_clean_observation() -> None:
-    victim = linear_victim(seed=2)
-    x0 = observations(32, seed=5)
-    result, _, _ = _attack("zo-signsgd", victim, x0, eps=0.08, on_failure="clean")
-    failed = ~result.success
-    assert failed.sum() >= 5 and result.success.sum() >= 1
-    np.testing.assert_array_equal(result.x_adv[failed], x0[failed])
-    assert np.all(result.linf[failed] == 0) and np.all(result.linf[result.success] > 0)
-    np.testing.assert_allclose(result.adv_outputs, victim.query(result.x_adv), atol=1e-5)
-
-
 def test_worst_action_target_aims_at_what_the_victim_values_least() -> None:
     victim = linear_victim(seed=3)
     x0 = observations(32, seed=6)

@@ -19,7 +19,10 @@ from zodrive.evaluation.evaluate import check_same_evaluation, same_evaluation
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = sorted(ROOT.glob("results/**/eval_key.json")) + sorted(ROOT.glob("models/**/eval_key.json"))
-REFUSED: dict[str, str] = {}
+REFUSED = {
+    "results/on-failure/eps0.05-clean": "on_failure",
+    "results/on-failure/eps0.1-clean": "on_failure",
+}
 """The committed folders whose attack zodrive can no longer run, and the setting that says so."""
 
 

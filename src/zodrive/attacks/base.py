@@ -100,7 +100,6 @@ class Attack(abc.ABC):
         early_stop: bool = DEFAULTS.early_stop,
         patience: int | None = DEFAULTS.patience,
         warm_start: bool = DEFAULTS.warm_start,
-        on_failure: str = DEFAULTS.on_failure,
         restarts: int = DEFAULTS.restarts,
         timing: float | None = DEFAULTS.timing,
         max_change: float | None = DEFAULTS.max_change,
@@ -119,7 +118,6 @@ class Attack(abc.ABC):
         self.early_stop = bool(early_stop)
         self.patience = None if patience is None else int(patience)
         self.warm_start = bool(warm_start)
-        self.on_failure = on_failure
         self.restarts = int(restarts)
         self.timing = timing
         self.max_change = None if max_change is None else float(max_change)
@@ -395,9 +393,6 @@ class Attack(abc.ABC):
             self._carry = best.x - flat0
             self._carry[~live] = np.nan  # a row that could not pay carries nothing (its episode's budget is spent)
         fed, fed_out = best.x, best.out
-        if self.on_failure == "clean":
-            failed = ~best.ok
-            fed, fed_out = np.where(failed[:, None], start, best.x), np.where(failed[:, None], start_out, best.out)
         if self.max_change is not None:
             self._fed = fed - flat0
         x_adv = fed.reshape(n, *shape).astype(x0.dtype)
