@@ -240,21 +240,6 @@ def test_episode_query_budget_caps_an_episode_then_the_policy_sees_clean_data() 
     assert attack.perturb(observations(1), oracle, objective).queries[0] > 0
 
 
-def test_strategic_timing_attacks_only_where_the_policy_cares() -> None:
-    from zodrive.attacks.base import preference
-
-    victim = linear_victim(seed=2)
-    x0 = observations(64, seed=5)
-    pref = preference(victim.query(x0))
-    threshold = float(np.median(pref))
-    result, _, _ = _attack("zo-signsgd", victim, x0, eps=0.3, timing=threshold)
-    low = pref < threshold
-    assert np.all(result.queries[low] == 1) and np.all(result.x_adv[low] == x0[low])  # clean query only
-    assert result.queries[~low].mean() > 1 and result.success[~low].any()
-    with pytest.raises(ZodriveError, match="timing"):
-        AttackSpec(timing=0.5).build(linear_victim(kind="continuous"), **context("continuous"))
-
-
 def test_decision_only_access_hides_the_scores() -> None:
     victim = linear_victim(seed=2)
     x0 = observations(64, seed=5)

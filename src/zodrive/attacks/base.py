@@ -101,7 +101,6 @@ class Attack(abc.ABC):
         patience: int | None = DEFAULTS.patience,
         warm_start: bool = DEFAULTS.warm_start,
         restarts: int = DEFAULTS.restarts,
-        timing: float | None = DEFAULTS.timing,
         max_change: float | None = DEFAULTS.max_change,
         seed: int = DEFAULTS.seed,
     ) -> None:
@@ -119,7 +118,6 @@ class Attack(abc.ABC):
         self.patience = None if patience is None else int(patience)
         self.warm_start = bool(warm_start)
         self.restarts = int(restarts)
-        self.timing = timing
         self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
         self._rngs = [np.random.default_rng(seed)]  # one random stream per row
@@ -313,7 +311,6 @@ class Attack(abc.ABC):
 
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
-        timed = np.ones(n, dtype=bool) if self.timing is None else preference(clean) >= self.timing
         for run in range(1 + self.restarts):
             x = self.init(flat0.copy(), mask).astype(np.float32)
             if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
@@ -324,7 +321,7 @@ class Attack(abc.ABC):
                 x = np.where(carried[:, None], flat0 + self._carry, x)
             x = project(x[:, None], everyone)[:, 0]
             active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= (oracle.remaining(everyone) > 0) & timed & live  # timed: only where the policy cares which action
+            active &= (oracle.remaining(everyone) > 0) & live
             stalled = np.zeros(n, dtype=np.int64)
             for k in range(self.steps):
                 rows = np.flatnonzero(active)
@@ -442,16 +439,6 @@ def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.nd
     full = np.full((n, *values.shape[1:]), fill, dtype=np.float32)
     full[rows] = values
     return full
-
-
-def preference(outputs: np.ndarray) -> np.ndarray:
-    """How much a discrete policy cares which action it takes (Lin et al., "Tactics of
-    Adversarial Attack on Deep Reinforcement Learning Agents", IJCAI 2017): the gap between
-    the most and least preferred action of softmax(Q). Near 0 where the choice hardly
-    matters, so an attacker with few queries attacks where it is large."""
-    z = np.exp(outputs - outputs.max(axis=-1, keepdims=True))
-    p = z / z.sum(axis=-1, keepdims=True)
-    return p.max(axis=-1) - p.min(axis=-1)
 
 
 class GradientEstimateAttack(Attack):

@@ -74,9 +74,6 @@ class AttackOptions(Strict):
                                     off="start each step's search at the clean observation")
     restarts: StrictInt = option(0, "further runs from random points of the budget set (e.g. PGD)", ge=0,
                                 metavar="N")
-    timing: Optional[float] = option(
-        None, "strategically timed attack: only steps where the policy's action preference (in [0, 1)) is at least "
-        "this (discrete)", ge=0, lt=1, metavar="P")
     episode_query_budget: Optional[StrictInt] = option(None, "max queries per episode; none: no cap", ge=1, metavar="N")
     max_change: Optional[float] = option(
         None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
@@ -94,7 +91,7 @@ class AttackOptions(Strict):
         "queries pay for checks of fresh vertices (at most 1 query per step on average)", ge=0, le=1,
         metavar="R")
 
-    @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "timing", "max_change",
+    @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "max_change",
                      "check_below", mode="before")
     @classmethod
     def _finite_number(cls, value: Any) -> Any:
@@ -134,6 +131,7 @@ class AttackOptions(Strict):
 
 REMOVED: dict[str, tuple[Any, str]] = {
     "on_failure": ("best", "results/on-failure/"),  # clean: 321.77 against best's 70.21 (DQN driver, eps 0.05)
+    "timing": (None, "none committed"),  # the strategically timed attack (Lin et al., IJCAI 2017)
 }
 """Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
 against damage): each one's value that is the behaviour left, and where its measurement lives. A record

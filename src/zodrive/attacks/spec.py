@@ -162,8 +162,6 @@ class AttackSpec(AttackOptions):
         self._check_budgets(attack)
         objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
         attack.check_objective(objective)
-        if self.timing is not None and victim.kind != "discrete":
-            raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
         return attack, objective, QueryOracle(victim, self.query_budget, self.episode_query_budget)
