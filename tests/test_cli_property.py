@@ -39,7 +39,7 @@ ATTACK = {
     "--norm": ["linf", "l2", "l3"], "--mode": ["budgeted", "paper", "x"], "--steps": ["1", "2", "0", "x"],
     "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9", "not:SLOWER", "not:x", "FASTER,not:SLOWER", "FASTER,SLOWER"],
     "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
-    "--max-change": ["0.01", "-1"], "--access": ["score", "decision", "x"],
+    "--max-change": ["0.01", "-1"],
     "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"], "--episode-query-budget": ["10", "0"],
     "--warm-start": [None], "--trust-model": [None],
     "--check-below": ["0.9", "2", "x"],

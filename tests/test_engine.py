@@ -240,20 +240,6 @@ def test_episode_query_budget_caps_an_episode_then_the_policy_sees_clean_data() 
     assert attack.perturb(observations(1), oracle, objective).queries[0] > 0
 
 
-def test_decision_only_access_hides_the_scores() -> None:
-    victim = linear_victim(seed=2)
-    x0 = observations(64, seed=5)
-    seen: list[np.ndarray] = []
-    attack, objective, oracle = AttackSpec(attack="random-search", access="decision", eps=0.3).build(
-        recording(victim, seen), **CONTEXT)
-    result = attack.perturb(x0, oracle, objective)
-    assert set(np.unique(result.adv_outputs)) <= {0.0, 1.0} and np.all(result.adv_outputs.sum(axis=1) == 1)
-    assert result.success.sum() >= 5  # searching on the decision alone still flips some steps
-    np.testing.assert_array_equal(victim.query(result.x_adv).argmax(axis=1)[result.success], 3)
-    with pytest.raises(ZodriveError, match="decision-only"):
-        AttackSpec(attack="pgd", access="decision").build(victim, **CONTEXT)
-
-
 @pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd", "uniform-noise"])
 def test_max_change_keeps_every_fed_perturbation_within_reach_of_the_last(name: str) -> None:
     victim = linear_victim(seed=2)

@@ -78,8 +78,6 @@ class AttackOptions(Strict):
     max_change: Optional[float] = option(
         None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
         metavar="D")
-    access: Literal["score", "decision"] = option(
-        "score", "what the attacker's queries return: score (Q-values / action) or decision (the action only)")
     query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1,
                                                 metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
@@ -132,6 +130,7 @@ class AttackOptions(Strict):
 REMOVED: dict[str, tuple[Any, str]] = {
     "on_failure": ("best", "results/on-failure/"),  # clean: 321.77 against best's 70.21 (DQN driver, eps 0.05)
     "timing": (None, "none committed"),  # the strategically timed attack (Lin et al., IJCAI 2017)
+    "access": ("score", "none committed"),  # decision: the attacker saw only the action taken (one-hot)
 }
 """Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
 against damage): each one's value that is the behaviour left, and where its measurement lives. A record

@@ -7,7 +7,7 @@ from typing import Any, Sequence
 
 from pydantic import ValidationError
 
-from zodrive.attacks.victim import Victim, decision_only
+from zodrive.attacks.victim import Victim
 from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
@@ -146,10 +146,6 @@ class AttackSpec(AttackOptions):
         (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
         name) and `action_bounds` the continuous action box (targets inside it); `load_network`
         reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader)."""
-        if self.access == "decision":
-            if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
-                raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
-            victim = decision_only(victim)
         self._check_unread()
         threat = self.threat(features, bounds)
         width = threat.high - threat.low
