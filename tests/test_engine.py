@@ -224,22 +224,6 @@ def test_restarts_never_lose_and_count_their_queries(name: str) -> None:
     assert more.queries.max() <= attack.queries_per_step() == 4 * attack.queries_per_run()
 
 
-def test_episode_query_budget_caps_an_episode_then_the_policy_sees_clean_data() -> None:
-    victim = linear_victim(seed=2)
-    attack, objective, oracle = AttackSpec(attack="zo-signsgd", eps=0.02, episode_query_budget=500).build(
-        victim, **CONTEXT)
-    oracle.begin_episode()
-    spent = []
-    for i in range(6):
-        x0 = observations(1, seed=20 + i)
-        result = attack.perturb(x0, oracle, objective)
-        spent.append(int(result.queries[0]))
-    assert oracle.episode_queries == sum(spent) <= 500
-    assert spent[-1] == 0 and np.array_equal(result.x_adv, x0)  # nothing left: clean observation, no query
-    oracle.begin_episode()
-    assert attack.perturb(observations(1), oracle, objective).queries[0] > 0
-
-
 @pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd", "uniform-noise"])
 def test_max_change_keeps_every_fed_perturbation_within_reach_of_the_last(name: str) -> None:
     victim = linear_victim(seed=2)

@@ -100,17 +100,6 @@ def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them(name
     np.testing.assert_array_equal(together, run([0, 1, 2, 3]))
 
 
-@BOTH
-def test_a_spent_episode_budget_feeds_the_clean_observation(name: str) -> None:
-    seen: list[np.ndarray] = []
-    attack, objective, oracle = build(gate_victim(seen), name, episode_query_budget=3)
-    x0 = observations(1, seed=6)
-    attack.reseed(1)
-    results = [attack.perturb(x0, oracle, objective) for _ in range(5)]
-    assert [int(r.queries[0]) for r in results] == [1, 1, 1, 0, 0]
-    np.testing.assert_array_equal(results[-1].x_adv, x0)
-
-
 @pytest.mark.parametrize(("options", "message"), [
     ({"target": "none"}, "give it a fixed target"),
     ({"target": "worst"}, "not none or worst"),  # its success reads the clean outputs, never asked

@@ -275,27 +275,17 @@ class Attack(abc.ABC):
         everyone = np.arange(n)
         free = int(np.argmax(mask))  # a coordinate the attacker may change (any, if none)
         self._streams(n)
-        # a row whose episode budget cannot pay for one iteration is left untouched this step
-        live = np.ones(n, dtype=bool)
-        if oracle.episode_query_budget is not None:
-            live = oracle.remaining(everyone) >= self.first_iteration_cost()
-            if not live.any():
-                return self._untouched(x0, oracle, box)
-        asked = everyone if live.all() else np.flatnonzero(live)
         if self.black_box:
-            clean, grad0 = oracle(flat0[asked].reshape(-1, *shape), asked), None
+            clean, grad0 = oracle(flat0.reshape(-1, *shape), everyone), None
         else:
-            clean, grad0 = oracle.gradient(flat0[asked].reshape(-1, *shape), white_box_loss(None), asked)
-        if len(asked) < n:  # rows not asked: no outputs, never attacked (NaN: nothing is compared to them)
-            clean = _rows_of(clean, asked, n, np.nan)
-            grad0 = None if grad0 is None else _rows_of(grad0, asked, n, 0.0)
+            clean, grad0 = oracle.gradient(flat0.reshape(-1, *shape), white_box_loss(None), everyone)
         clean = clean.astype(np.float32)
-        already = objective.already(torch.from_numpy(clean)).numpy() & live
+        already = objective.already(torch.from_numpy(clean)).numpy()
         # the fallback: the clean observation, or with max_change the admissible point nearest it
         start, start_out, start_grad = flat0, clean, grad0
         if box is not None:
             start = project(flat0[:, None], everyone)[:, 0]
-            moved = np.flatnonzero(np.any(start != flat0, axis=1) & live)
+            moved = np.flatnonzero(np.any(start != flat0, axis=1))
             start_out = clean.copy()
             if moved.size and self.black_box:
                 start_out[moved] = oracle(start[moved].reshape(-1, *shape), moved)
@@ -304,7 +294,7 @@ class Attack(abc.ABC):
                 start_out[moved], start_grad[moved] = oracle.gradient(
                     start[moved].reshape(-1, *shape), white_box_loss(moved), moved)
         _, _, f0, ok0 = values(start[:, None], start_out[:, None], everyone)
-        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0] & live)
+        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0])
         # the last evaluated base point of each row, so that it is never queried twice
         known_x, known_out = start.copy(), start_out.copy()
         known_grad = None if start_grad is None else start_grad.reshape(n, dim).astype(np.float32)
@@ -321,7 +311,7 @@ class Attack(abc.ABC):
                 x = np.where(carried[:, None], flat0 + self._carry, x)
             x = project(x[:, None], everyone)[:, 0]
             active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= (oracle.remaining(everyone) > 0) & live
+            active &= oracle.remaining(everyone) > 0
             stalled = np.zeros(n, dtype=np.int64)
             for k in range(self.steps):
                 rows = np.flatnonzero(active)
@@ -388,7 +378,6 @@ class Attack(abc.ABC):
                     known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
         if self.warm_start:
             self._carry = best.x - flat0
-            self._carry[~live] = np.nan  # a row that could not pay carries nothing (its episode's budget is spent)
         fed, fed_out = best.x, best.out
         if self.max_change is not None:
             self._fed = fed - flat0
@@ -399,24 +388,6 @@ class Attack(abc.ABC):
             queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
             adv_outputs=fed_out, clean_outputs=clean, trace=records,
         )
-
-
-    def _untouched(self, x0: np.ndarray, oracle: QueryOracle,
-                   box: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> AttackResult:
-        """A step the attacker cannot afford to look at: nothing queried; the clean
-        observation is fed (with max_change, the admissible point nearest it)."""
-        n = len(x0)
-        flat0 = x0.reshape(n, -1)
-        fed = flat0 if box is None else np.clip(flat0, box[0], box[1])
-        if self.max_change is not None:
-            self._fed = fed - flat0
-        x_adv = fed.reshape(x0.shape).astype(x0.dtype)
-        linf, l2n = distortion(x_adv, x0)
-        nothing = np.zeros(n, dtype=bool)
-        empty = np.full((n, 0), np.nan, dtype=np.float32)
-        return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
-                            iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
-                            linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
 
 
 def needs_fixed_target(name: str) -> str:
@@ -432,13 +403,6 @@ ENGINE_OPTIONS = tuple(name for name, p in inspect.signature(Attack.__init__).pa
 # the search options and their defaults (mu and step_size are read by the searches that use them
 # only, so they are not checked)
 SEARCH_DEFAULTS = {name: getattr(DEFAULTS, name) for name in ENGINE_OPTIONS if name not in ("mu", "step_size")}
-
-
-def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.ndarray:
-    """`values` of `rows` placed in an array of `n` rows, the others `fill`."""
-    full = np.full((n, *values.shape[1:]), fill, dtype=np.float32)
-    full[rows] = values
-    return full
 
 
 class GradientEstimateAttack(Attack):

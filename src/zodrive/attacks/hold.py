@@ -101,25 +101,20 @@ class VertexHold(Attack):
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
-        """The step above for clean observations `x0` (N, *obs); a row whose episode budget
-        cannot pay the one query is fed its clean observation and holds nothing."""
-        step = self._begin(x0, oracle, objective)
-        if step is None:
-            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live, _ = step
+        """The step above for clean observations `x0` (N, *obs)."""
+        x0, delta, _ = self._begin(x0, oracle, objective)
         fed = self._project(x0, delta)
-        out, took = self._ask(fed, live, oracle, objective)
+        out, took = self._ask(fed, np.ones(len(x0), dtype=bool), oracle, objective)
         # the vertex itself is held, not its projection: a coordinate the box clipped at this step
         # is whole again at the next one if the observation has moved away from the edge
         self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
-        return self._result(x0, fed, live, took, out, oracle)
+        return self._result(x0, fed, took, out, oracle)
 
     def _begin(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """Start a step: (clean observations as float32, each row's flat vertex to try (held, or fresh
-        where none is held or the picker's `switch` drops it), the rows that can pay a query, the picker's
-        rating of each row's vertex where it is the held one and `_rates_held`, else -inf), or None when no
-        row can (nothing is held then)."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Start a step: clean observations as float32, each row's flat vertex to try (held, or fresh
+        where none is held or the picker's `switch` drops it), and the picker's rating of each row's
+        vertex where it is the held one and `_rates_held`, else -inf."""
         self.check_objective(objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         dim = int(np.prod(shape))
@@ -127,26 +122,22 @@ class VertexHold(Attack):
         flat0 = x0.reshape(n, dim)
         oracle.begin_step(rows=n)
         self._streams(n)
-        live = oracle.remaining(np.arange(n)) >= 1
-        if not live.any():
-            self._carry = np.full((n, dim), np.nan, dtype=np.float32)
-            return None
         held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
             np.full((n, dim), np.nan, dtype=np.float32)
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
         stale = np.isnan(held).any(axis=1)
         rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
         if self._rates_held():
-            for r in np.flatnonzero(~stale & live):  # one call per row: lockstep = one-row runs
+            for r in np.flatnonzero(~stale):  # one call per row: lockstep = one-row runs
                 rating[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0]
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
-        fresh = np.flatnonzero(stale & live)
+        fresh = np.flatnonzero(stale)
         if fresh.size:
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
             rating[fresh[take]] = -np.inf
-        return x0, delta, live, rating
+        return x0, delta, rating
 
     def _rates_held(self) -> bool:
         """Whether a step needs the picker's rating of the held vertex (for `switch`)."""
@@ -157,11 +148,11 @@ class VertexHold(Attack):
         L-inf projection is elementwise: row by row is the same)."""
         return self.threat.project((x0.reshape(len(x0), -1) + delta).reshape(x0.shape), x0).astype(np.float32)
 
-    def _ask(self, fed: np.ndarray, live: np.ndarray, oracle: QueryOracle, objective: Objective
+    def _ask(self, fed: np.ndarray, ask: np.ndarray, oracle: QueryOracle, objective: Objective
              ) -> tuple[np.ndarray, np.ndarray]:
-        """One counted query per live row on `fed`: the outputs (NaN for a row not asked) and
+        """One counted query per row in `ask` on `fed`: the outputs (NaN for a row not asked) and
         whether the victim took the target."""
-        asked = np.flatnonzero(live)
+        asked = np.flatnonzero(ask)
         took = np.zeros(len(fed), dtype=bool)
         if not asked.size:  # vertex check skipped every check: no outputs, as on a step with nothing asked
             return np.full((len(fed), 0), np.nan, dtype=np.float32), took
@@ -177,13 +168,12 @@ class VertexHold(Attack):
         out_t = torch.from_numpy(answered)
         return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
 
-    def _result(self, x0: np.ndarray, fed: np.ndarray, live: np.ndarray, success: np.ndarray, out: np.ndarray,
+    def _result(self, x0: np.ndarray, fed: np.ndarray, success: np.ndarray, out: np.ndarray,
                 oracle: QueryOracle) -> AttackResult:
         n = len(x0)
-        x_adv = np.where(live.reshape(n, *([1] * (x0.ndim - 1))), fed, x0)
-        linf, l2 = distortion(x_adv, x0)
-        return AttackResult(x_adv=x_adv, success=success, already=np.zeros(n, dtype=bool),  # clean never asked
-                            iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
+        linf, l2 = distortion(fed, x0)
+        return AttackResult(x_adv=fed, success=success, already=np.zeros(n, dtype=bool),  # clean never asked
+                            iterations=np.ones(n, dtype=np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
     def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -265,16 +255,13 @@ class VertexCheck(VertexHold):
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
-        step = self._begin(x0, oracle, objective)
-        if step is None:
-            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live, rating = step
+        x0, delta, rating = self._begin(x0, oracle, objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         flat0 = x0.reshape(n, -1)
         if self._bank is None or len(self._bank) != n:
             self._bank = np.zeros(n, dtype=np.int64)
-        self._bank[live] += 1
-        ask = live if self.check_below is None else live & (rating < self.check_below)  # -inf: a fresh vertex
+        self._bank += 1
+        ask = np.ones(n, dtype=bool) if self.check_below is None else rating < self.check_below  # -inf: a fresh vertex
         fed = self._project(x0, delta)
         out, took = self._ask(fed, ask, oracle, objective)
         self._bank[ask] -= 1
@@ -297,5 +284,5 @@ class VertexCheck(VertexHold):
         out[failed[~took[failed]]] = np.nan  # fed unasked
         if failed.size:  # only their vertices changed (the projection is row by row)
             fed[failed] = self._project(x0[failed], delta[failed])
-        self._carry = np.where(live[:, None], delta, np.nan).astype(np.float32)
-        return self._result(x0, fed, live, took, out, oracle)
+        self._carry = delta.astype(np.float32)
+        return self._result(x0, fed, took, out, oracle)

@@ -198,7 +198,7 @@ class LearnedAdversary(Attack):
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
         """delta = eps * pi(observation [, victim's clean action]) on the free coordinates,
-        projected; a row whose episode budget cannot pay the one query is left clean."""
+        projected."""
         n, shape = len(x0), tuple(x0.shape[1:])
         if tuple(self.meta["obs_shape"]) != shape:
             raise ZodriveError(f"adversary {self.folder} was trained on observations of shape "

@@ -74,7 +74,6 @@ class AttackOptions(Strict):
                                     off="start each step's search at the clean observation")
     restarts: StrictInt = option(0, "further runs from random points of the budget set (e.g. PGD)", ge=0,
                                 metavar="N")
-    episode_query_budget: Optional[StrictInt] = option(None, "max queries per episode; none: no cap", ge=1, metavar="N")
     max_change: Optional[float] = option(
         None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
         metavar="D")
@@ -99,7 +98,7 @@ class AttackOptions(Strict):
             raise ValueError(f"must be a finite number, not {value}")
         return float(value) if value is not None else None
 
-    @field_validator("steps", "n_directions", "patience", "restarts", "episode_query_budget", "query_budget", "seed",
+    @field_validator("steps", "n_directions", "patience", "restarts", "query_budget", "seed",
                      mode="before")
     @classmethod
     def _integer(cls, value: Any) -> Any:
@@ -131,6 +130,7 @@ REMOVED: dict[str, tuple[Any, str]] = {
     "on_failure": ("best", "results/on-failure/"),  # clean: 321.77 against best's 70.21 (DQN driver, eps 0.05)
     "timing": (None, "none committed"),  # the strategically timed attack (Lin et al., IJCAI 2017)
     "access": ("score", "none committed"),  # decision: the attacker saw only the action taken (one-hot)
+    "episode_query_budget": (None, "none committed"),  # a cap on an episode's queries
 }
 """Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
 against damage): each one's value that is the behaviour left, and where its measurement lives. A record

@@ -130,10 +130,9 @@ class AttackSpec(AttackOptions):
 
     def _check_budgets(self, attack: Attack) -> None:
         one = attack.first_iteration_cost()
-        for name, budget in (("query budget", self.query_budget), ("episode query budget", self.episode_query_budget)):
-            if budget is not None and 1 <= budget < one:  # < 1: the oracle says so
-                raise ZodriveError(f"{name} {budget} is below one iteration of {self.attack} "
-                                   f"({one} queries with these settings): the attack could do nothing")
+        if self.query_budget is not None and 1 <= self.query_budget < one:  # < 1: the oracle says so
+            raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
+                               f"({one} queries with these settings): the attack could do nothing")
 
     def build(
         self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int,
@@ -160,7 +159,7 @@ class AttackSpec(AttackOptions):
         attack.check_objective(objective)
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
-        return attack, objective, QueryOracle(victim, self.query_budget, self.episode_query_budget)
+        return attack, objective, QueryOracle(victim, self.query_budget)
 
 
 def _known(attack: str) -> None:
