@@ -248,7 +248,7 @@ def test_rows_are_independent_of_each_other(kind: str) -> None:
     for name in ["zo-signsgd", "zo-sgd", "nes", "spsa", "coordinate-fd", "random-search", "uniform-noise",
                  "pgd", "fgsm"]:
         options = dict(steps=6 if kind == "discrete" else 12, n_directions=5, warm_start=True, max_change=0.05,
-                       restarts=1, query_budget=40, eps=0.1)
+                       query_budget=40, eps=0.1)
         spec = AttackSpec(attack=name, **options)
         together = spec.build(linear_victim(kind=kind), **context(kind))
         together[0].reseed([11, 12, 13, 14, 15])

@@ -40,7 +40,7 @@ ATTACK = {
     "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9", "not:SLOWER", "not:x", "FASTER,not:SLOWER", "FASTER,SLOWER"],
     "--loss": ["margin", "paper", "x"], "--query-budget": ["1", "50", "0"], "--patience": ["1", "0"],
     "--max-change": ["0.01", "-1"],
-    "--attack-seed": NUMBERS, "--restarts": ["0", "1", "-1"],
+    "--attack-seed": NUMBERS,
     "--warm-start": [None], "--trust-model": [None],
     "--check-below": ["0.9", "2", "x"],
     "--defense": ["kinematic", "nope"],

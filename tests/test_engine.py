@@ -213,17 +213,6 @@ def test_worst_action_target_aims_at_what_the_victim_values_least() -> None:
         AttackSpec(target="worst").build(linear_victim(kind="continuous"), **context("continuous"))
 
 
-@pytest.mark.parametrize("name", ["pgd", "zo-signsgd"])
-def test_restarts_never_lose_and_count_their_queries(name: str) -> None:
-    victim = linear_victim(seed=2)
-    x0 = observations(64, seed=8)
-    one, _, _ = _attack(name, victim, x0, eps=0.1, steps=20)
-    more, _, attack = _attack(name, victim, x0, eps=0.1, steps=20, restarts=3)
-    assert more.success.sum() >= one.success.sum()
-    assert np.all(more.success[one.success])  # a won row stays won: restarts only run for the others
-    assert more.queries.max() <= attack.queries_per_step() == 4 * attack.queries_per_run()
-
-
 @pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd", "uniform-noise"])
 def test_max_change_keeps_every_fed_perturbation_within_reach_of_the_last(name: str) -> None:
     victim = linear_victim(seed=2)

@@ -158,7 +158,7 @@ def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path,
     assert "not a trained adversary" in _error(capsys, [*base, "--attack", f"learned:{tmp_path / 'empty'}"])
     assert "needs a trained adversary" in _error(capsys, [*base, "--attack", "learned", "--eps", "0.1"])
     assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--target", "1"])
-    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--restarts", "2"])
+    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--patience", "2"])
     assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--attack-seed", "3"])
     other = _victim(tmp_path, seed=5)
     assert "train one against this model" in _error(

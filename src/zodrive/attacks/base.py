@@ -100,7 +100,6 @@ class Attack(abc.ABC):
         early_stop: bool = DEFAULTS.early_stop,
         patience: int | None = DEFAULTS.patience,
         warm_start: bool = DEFAULTS.warm_start,
-        restarts: int = DEFAULTS.restarts,
         max_change: float | None = DEFAULTS.max_change,
         seed: int = DEFAULTS.seed,
     ) -> None:
@@ -117,7 +116,6 @@ class Attack(abc.ABC):
         self.early_stop = bool(early_stop)
         self.patience = None if patience is None else int(patience)
         self.warm_start = bool(warm_start)
-        self.restarts = int(restarts)
         self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
         self._rngs = [np.random.default_rng(seed)]  # one random stream per row
@@ -190,8 +188,8 @@ class Attack(abc.ABC):
         docstring's formula)."""
 
     def queries_per_step(self) -> int:
-        """Upper bound on victim queries per environment step: every restart is a new run."""
-        return (1 + self.restarts) * self.queries_per_run()
+        """Upper bound on victim queries per environment step."""
+        return self.queries_per_run()
 
     def first_iteration_cost(self) -> int:
         """Queries of the clean observation and one iteration (and, with `max_change`, of
@@ -301,81 +299,78 @@ class Attack(abc.ABC):
 
         iterations = np.zeros(n, dtype=np.int64)
         records: list[dict[str, np.ndarray]] = []
-        for run in range(1 + self.restarts):
-            x = self.init(flat0.copy(), mask).astype(np.float32)
-            if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
-                x = flat0 + self.draw(everyone, lambda g: self.threat.random_delta((1, dim), mask, g)[0])
-            elif self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
-                # consecutive observations differ little: start where the last step ended
-                carried = ~np.isnan(self._carry).any(axis=1)
-                x = np.where(carried[:, None], flat0 + self._carry, x)
-            x = project(x[:, None], everyone)[:, 0]
-            active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= oracle.remaining(everyone) > 0
-            stalled = np.zeros(n, dtype=np.int64)
-            for k in range(self.steps):
-                rows = np.flatnonzero(active)
+        x = self.init(flat0.copy(), mask).astype(np.float32)
+        if self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
+            # consecutive observations differ little: start where the last step ended
+            carried = ~np.isnan(self._carry).any(axis=1)
+            x = np.where(carried[:, None], flat0 + self._carry, x)
+        x = project(x[:, None], everyone)[:, 0]
+        active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
+        active &= oracle.remaining(everyone) > 0
+        stalled = np.zeros(n, dtype=np.int64)
+        for k in range(self.steps):
+            rows = np.flatnonzero(active)
+            if rows.size == 0:
+                break
+            probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32, copy=False), rows)
+            cand = np.concatenate([x[rows, None], probes], axis=1)  # the base point is already projected
+            need = np.ones(cand.shape[:2], dtype=bool)
+            need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
+            afford = oracle.remaining(rows) >= need.sum(axis=1)
+            if not afford.all():  # a row's own budget is spent: that row stops, the others go on
+                active[rows[~afford]] = False
+                rows, cand, need = rows[afford], cand[afford], need[afford]
+                self.keep_proposals(afford)
                 if rows.size == 0:
                     break
-                probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32, copy=False), rows)
-                cand = np.concatenate([x[rows, None], probes], axis=1)  # the base point is already projected
-                need = np.ones(cand.shape[:2], dtype=bool)
-                need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
-                afford = oracle.remaining(rows) >= need.sum(axis=1)
-                if not afford.all():  # a row's own budget is spent: that row stops, the others go on
-                    active[rows[~afford]] = False
-                    rows, cand, need = rows[afford], cand[afford], need[afford]
-                    self.keep_proposals(afford)
-                    if rows.size == 0:
-                        break
-                a, m = cand.shape[:2]
-                owners = np.repeat(rows, need.sum(axis=1))
-                grad = None
-                if self.black_box and owners.size == a * m:  # every point is new (the usual case): one call
-                    out = oracle(cand.reshape(-1, *shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
-                else:  # a known base point is not asked again: its outputs are filled in
-                    out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
-                    out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
-                    if self.black_box and owners.size:
-                        out[need] = oracle(cand[need].reshape(-1, *shape), owners)
-                    elif not self.black_box:
-                        grad = known_grad[rows].copy()
-                        ask = need[:, 0]
-                        if ask.any():
-                            o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]),
-                                                   rows[ask])
-                            out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
-                        known_grad[rows] = grad
-                known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
-                iterations[rows] += 1
-                l1, l2, f, ok = values(cand, out, rows)
-                has_ok = ok.any(axis=1)
-                pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
-                ar = np.arange(a)
-                if self.patience is None:
-                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-                else:  # give up on a step that has stopped improving
-                    before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
-                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-                    improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
-                    stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
-                    active[rows[stalled[rows] >= self.patience]] = False
-                if trace:
-                    rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
-                    rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
-                    records.append(rec)
-                if self.early_stop:
-                    active[rows[has_ok]] = False
-                if k == self.steps - 1:
-                    break
-                x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
-                if self.black_box:  # a step onto a queried point (random search) costs no new query
-                    same = cand[:, :, free] == x[rows, None, free]  # one coordinate first: most points differ there
-                    if same.any():
-                        same &= np.all(cand == x[rows, None], axis=2)
-                    hit = same.any(axis=1)
-                    col = same.argmax(axis=1)[hit]
-                    known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
+            a, m = cand.shape[:2]
+            owners = np.repeat(rows, need.sum(axis=1))
+            grad = None
+            if self.black_box and owners.size == a * m:  # every point is new (the usual case): one call
+                out = oracle(cand.reshape(-1, *shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
+            else:  # a known base point is not asked again: its outputs are filled in
+                out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
+                out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
+                if self.black_box and owners.size:
+                    out[need] = oracle(cand[need].reshape(-1, *shape), owners)
+                elif not self.black_box:
+                    grad = known_grad[rows].copy()
+                    ask = need[:, 0]
+                    if ask.any():
+                        o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]),
+                                               rows[ask])
+                        out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
+                    known_grad[rows] = grad
+            known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
+            iterations[rows] += 1
+            l1, l2, f, ok = values(cand, out, rows)
+            has_ok = ok.any(axis=1)
+            pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+            ar = np.arange(a)
+            if self.patience is None:
+                best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+            else:  # give up on a step that has stopped improving
+                before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
+                best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+                improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
+                stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
+                active[rows[stalled[rows] >= self.patience]] = False
+            if trace:
+                rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
+                rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
+                records.append(rec)
+            if self.early_stop:
+                active[rows[has_ok]] = False
+            if k == self.steps - 1:
+                break
+            x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
+            if self.black_box:  # a step onto a queried point (random search) costs no new query
+                same = cand[:, :, free] == x[rows, None, free]  # one coordinate first: most points differ there
+                if same.any():
+                    same &= np.all(cand == x[rows, None], axis=2)
+                hit = same.any(axis=1)
+                col = same.argmax(axis=1)[hit]
+                known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
         if self.warm_start:
             self._carry = best.x - flat0
         fed, fed_out = best.x, best.out

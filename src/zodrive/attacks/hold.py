@@ -73,9 +73,6 @@ class VertexHold(Attack):
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1
 
-    def queries_per_step(self) -> int:
-        return self.queries_per_run()
-
     def first_iteration_cost(self) -> int:
         return 1
 

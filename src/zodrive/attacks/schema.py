@@ -72,8 +72,6 @@ class AttackOptions(Strict):
         clear="run every step until its goal is met or T iterations are spent")
     warm_start: StrictBool = option(False, "start each step's search from the previous step's perturbation",
                                     off="start each step's search at the clean observation")
-    restarts: StrictInt = option(0, "further runs from random points of the budget set (e.g. PGD)", ge=0,
-                                metavar="N")
     max_change: Optional[float] = option(
         None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
         metavar="D")
@@ -98,7 +96,7 @@ class AttackOptions(Strict):
             raise ValueError(f"must be a finite number, not {value}")
         return float(value) if value is not None else None
 
-    @field_validator("steps", "n_directions", "patience", "restarts", "query_budget", "seed",
+    @field_validator("steps", "n_directions", "patience", "query_budget", "seed",
                      mode="before")
     @classmethod
     def _integer(cls, value: Any) -> Any:
@@ -131,6 +129,7 @@ REMOVED: dict[str, tuple[Any, str]] = {
     "timing": (None, "none committed"),  # the strategically timed attack (Lin et al., IJCAI 2017)
     "access": ("score", "none committed"),  # decision: the attacker saw only the action taken (one-hot)
     "episode_query_budget": (None, "none committed"),  # a cap on an episode's queries
+    "restarts": (0, "results/ceiling/ (per state only)"),  # further runs from random points of the budget set
 }
 """Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
 against damage): each one's value that is the behaviour left, and where its measurement lives. A record
