@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import torch
 
-from toys import context, linear_victim, observations
+from toys import blind_picker, context, linear_victim, observations
 from zodrive.attacks import ATTACKS, AttackSpec
 from zodrive.attacks.base import AttackResult
 from zodrive.attacks.picker import Picker
@@ -83,15 +83,10 @@ def run(case: dict[str, Any], seed: int) -> str:
     picker, check_below = options.pop("picker", None), options.pop("check_below", None)
     victim = linear_victim(seed=3, kind=kind)
     steps = {} if options["attack"] in ("vertex-hold", "vertex-check") else {"steps": 6, "n_directions": 4}
-    spec = AttackSpec(**{"eps": 0.1, **steps, **options})
-    if options["attack"] == "vertex-check":  # a picker held in memory (a folder's is fitted by picker-train)
-        spec = spec.with_overrides(attack="vertex-hold")
+    folder = {"adversary": blind_picker(0.1)} if options["attack"] == "vertex-check" else {}
+    spec = AttackSpec(**{"eps": 0.1, **steps, **options, **folder})
     attack, objective, oracle = spec.build(victim, **context(kind))
-    if options["attack"] == "vertex-check":
-        from zodrive.attacks.hold import VertexCheck
-
-        attack = VertexCheck(attack.threat, seed=spec.seed)
-    if picker is not None:
+    if picker is not None:  # a picker held in memory (a folder's is an MLP fitted by picker-train)
         attack.use_picker(toy_picker(picker), {"target": 3, "tol": None})
     if check_below is not None:
         attack.check_below = check_below

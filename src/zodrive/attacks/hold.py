@@ -23,10 +23,10 @@ the one a picker fitted offline from counted queries (`zodrive picker-train`,
 `zodrive.attacks.picker`) rates most likely to make the victim take the target; a held vertex the
 picker rates below its `switch` at the new state is replaced the same way. The picker runs locally.
 
-`vertex-check` (`VertexCheck`, below) spends the query before feeding instead: the vertex about to be fed
-is checked, and one that would fail is swapped for a fresh vertex, fed unasked.
+`vertex-check:DIR` (`VertexCheck`, below) spends the query before feeding instead: the vertex about to be
+fed is checked, and one that would fail is swapped for the picker's best fresh vertex, fed unasked.
 
-Queries per environment step: 1 (with a picker too; `vertex-check --check-below` averages at most 1).
+Queries per environment step: 1 (with a picker too; `vertex-check:DIR --check-below` averages at most 1).
 """
 
 from __future__ import annotations
@@ -200,10 +200,14 @@ class VertexHold(Attack):
         return drawn, scores
 
 
+PLAIN_CHECK = ("vertex-check needs a picker: --attack vertex-check:DIR (`zodrive picker-train`); without one it was "
+               "removed from zodrive (docs/attacks.md, section \"Removed options\")")
+
+
 class VertexCheck(VertexHold):
-    """Vertex hold that asks before it feeds: the one query of a step checks the vertex about to be
-    fed (the one fed at the last step, or a fresh one); if the victim would not take the target on
-    it, a fresh vertex is fed instead, unasked, and is the one checked at the next step.
+    """Vertex hold with a picker that asks before it feeds: the one query of a step checks the vertex
+    about to be fed (the one fed at the last step, or a fresh one); if the victim would not take the
+    target on it, a fresh vertex is fed instead, unasked, and is the one checked at the next step.
 
     Vertex hold learns that a held vertex stopped working only from the victim's move on it; here
     the query comes first, so that move is never made on a vertex known to fail. A step is missed
@@ -211,7 +215,7 @@ class VertexCheck(VertexHold):
     outputs (NaN) and its step counts as no success: `success` is the share of steps on which a
     check confirmed the target (a lower bound on the share taken; the action counts give the rest).
 
-    `check_below` (with a picker): a held vertex the picker rates at least this at the new state is
+    `check_below`: a held vertex the picker rates at least this at the new state is
     fed without a check, and each query so saved pays for one check of a fresh vertex where a check
     fails (the picker's best first, up to `candidates`). A row never spends more queries than steps
     so far in its episode, so the average stays at most one per step; one step may spend more.
@@ -224,10 +228,9 @@ class VertexCheck(VertexHold):
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, check_below: float | None = None,
                  **kwargs: Any) -> None:
+        if adversary is None:
+            raise ZodriveError(PLAIN_CHECK)
         super().__init__(threat, adversary=adversary, **kwargs)
-        if check_below is not None and self.picker is None:  # its range is the schema's
-            raise ZodriveError("check_below reads a picker's rating: use vertex-check:DIR (a picker from "
-                               "`zodrive picker-train`)")
         self.check_below = None if check_below is None else float(check_below)
         self._bank: np.ndarray | None = None  # per row: queries earned (one per step) and not yet spent
 

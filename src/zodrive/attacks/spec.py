@@ -9,6 +9,7 @@ from pydantic import ValidationError
 
 from zodrive.attacks.victim import Victim
 from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
+from zodrive.attacks.hold import PLAIN_CHECK, VertexCheck
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
@@ -37,7 +38,7 @@ class AttackSpec(AttackOptions):
             super().__init__(**data)
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, "attack options", FIELDS)) from None
-        _known(self.attack)
+        _known(self)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
@@ -52,7 +53,7 @@ class AttackSpec(AttackOptions):
             spec = cls.model_validate({k: v for k, v in data.items() if k not in ("name", "description")})
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, context, FIELDS)) from None
-        _known(spec.attack)
+        _known(spec)
         return spec
 
     def with_overrides(self, clear: Sequence[str] = (), **changes: Any) -> "AttackSpec":
@@ -162,15 +163,18 @@ class AttackSpec(AttackOptions):
         return attack, objective, QueryOracle(victim, self.query_budget)
 
 
-def _known(attack: str) -> None:
-    if attack not in ATTACKS and attack != LEARNED:
-        raise ZodriveError(f"unknown attack {attack!r} (known: {', '.join(KNOWN)})")
+def _known(spec: AttackOptions) -> None:
+    if spec.attack not in ATTACKS and spec.attack != LEARNED:
+        raise ZodriveError(f"unknown attack {spec.attack!r} (known: {', '.join(KNOWN)})")
+    if spec.attack == VertexCheck.name and spec.adversary is None:
+        raise ZodriveError(PLAIN_CHECK)
 
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
     `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`), `vertex-hold:DIR` and
-    `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`)."""
+    `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`;
+    vertex check has no other form)."""
     from zodrive.config import available
 
     head, colon, folder = name.partition(":")
