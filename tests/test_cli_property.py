@@ -73,8 +73,8 @@ COMMANDS = {
     "curves": ({"--bin": NUMBERS, "--plot": ["{tmp}/c.png", "{tmp}/c.txt"]}, False),
     "env": ({}, False),
     "picker-train": ({"--eps": EPS, "--out": ["{tmp}/pk", "/proc/pk"], "--seed": ["0", "4", "5", "x"],
-                      "--target": ATTACK["--target"], "--rounds": NUMBERS, "--switch": ["0.3", "1", "x"],
-                      "--candidates": NUMBERS, "--loss": ["bce", "rank", "x"], "--preset": COMMON["--preset"], "--force": [None]}, True),
+                      "--rounds": NUMBERS, "--switch": ["0.3", "1", "x"],
+                      "--candidates": NUMBERS, "--preset": COMMON["--preset"], "--force": [None]}, True),
     "certify": ({"--eps": EPS, "--episodes": ["1", "0", "x"], "--preset": COMMON["--preset"], "--tol": EPS,
                  "--out": ["{tmp}/ce", "/proc/ce"], "--force": [None]}, True),
 }

@@ -19,7 +19,7 @@ from zodrive.cli.common import (
     probability_below_one, progress_flag, refuse_nonempty, scenario_flags, seed_number, trust_flag, workers_flag,
 )
 from zodrive.errors import ZodriveError
-from zodrive.training.picker import LOSSES, PickerFit  # torch-free
+from zodrive.training.picker import PickerFit  # torch-free
 
 VICTIM_HELP = "SB3 zip or model folder: the victim (fixed)"
 PRESET_HELP = "preset the model trains on (default: the paper's preset of its action kind)"
@@ -146,8 +146,6 @@ def add_parsers(sub: Any) -> None:
     pick.add_argument("--out", type=Path, required=True, help="the picker's folder")
     pick.add_argument("--seed", type=seed_number, default=0, help="fit seed: training episodes 10000*seed + "
                                                                   "1000*round + i")
-    pick.add_argument("--target", default="auto", help="what the picker rates vertices for, as evaluate's --target: "
-                                                       "auto (FASTER / '1,0.5'), an action name or index, or not:ACTION")
     for flag, kind, what in (("rounds", positive_int, "rounds of driving under vertex hold, querying, refitting"),
                              ("episodes", positive_int, "training episodes driven per round"),
                              ("probes", positive_int, "random vertices queried at every state met"),
@@ -157,8 +155,6 @@ def add_parsers(sub: Any) -> None:
                              ("switch", probability_below_one, "a held vertex the picker rates below this is replaced "
                                                                "(0: never)")):
         pick.add_argument(f"--{flag}", type=kind, help=f"{what} (default: {getattr(PickerFit, flag)})")
-    pick.add_argument("--loss", choices=LOSSES, help="bce: each vertex's label alone; rank: also the order of the "
-                                                     f"vertices within each state (default: {PickerFit.loss})")
     scenario_flags(pick, trust=False)
     pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
@@ -269,13 +265,12 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
 
     given = {f.name: getattr(args, f.name) for f in fields(PickerFit) if getattr(args, f.name) is not None}
     path = picker_train(str(args.model), preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
-                        seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
+                        seed=args.seed, force=args.force, report=lambda line: print(line, flush=True))
     scenario = "".join([f" --preset {args.preset}" if args.preset else "",
                         *(f" --env-set {item}" for item in args.env_set),
                         f" --env-id {args.env_id}" if args.env_id else "",
                         f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
-    target = "" if args.target == "auto" else f" --target {args.target}"
-    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{target}{scenario})")
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{scenario})")
     return 0
 
 
