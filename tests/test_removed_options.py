@@ -108,3 +108,17 @@ def test_a_removed_option_at_the_behaviour_left_resumes_and_at_another_value_is_
     assert AttackSpec.from_mapping({"attack": "random-search", "gone": "kept"}) == AttackSpec(attack="random-search")
     with pytest.raises(ZodriveError, match="gone=other"):
         AttackSpec.from_mapping({"attack": "random-search", "gone": "other"})
+
+
+def test_a_committed_adversary_that_records_victim_action_false_still_loads(tmp_path: Path) -> None:
+    """`attack-train --victim-action` was removed: every committed adversary.json records it false (what is left)
+    and is read; one that records true is refused in one line."""
+    from zodrive.attacks.learned import META_FILE, read_meta
+
+    folder = ROOT / "results" / "learned-adversary" / "amortized-dqn-close-eps0.02"
+    meta = json.loads((folder / META_FILE).read_text())
+    assert meta["victim_action"] is False and read_meta(folder)["eps"] == 0.02
+    (tmp_path / META_FILE).write_text(json.dumps({**meta, "victim_action": True}))
+    (tmp_path / "model.zip").write_bytes(b"")
+    with pytest.raises(ZodriveError, match=r"clean action \(attack-train --victim-action\): removed from zodrive"):
+        read_meta(tmp_path)

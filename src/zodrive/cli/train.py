@@ -104,14 +104,9 @@ def add_parsers(sub: Any) -> None:
                           "distilling a surrogate from counted victim queries, fitting the mean action to make the "
                           "surrogate take the target action (zodrive.training.amortized)")
     atk.add_argument("--pretrain-episodes", type=positive_int, help="episodes driven per round (default: 10)")
-    atk.add_argument("--pretrain-probe", choices=("ball", "vertices"),  # amortized.PROBES (torch-free here)
-                     help="where the surrogate's random queries are drawn around each visited state: uniformly in "
-                          "the eps-ball (default) or on its vertices, half near the adversary's own")
-    atk.add_argument("--pretrain-loss", choices=("scores", "decisions"),  # amortized.LOSSES
-                     help="the surrogate's fit: MSE on the victim's scores (default), or, for a discrete victim, that "
-                          "plus cross-entropy on its chosen action")
     atk.add_argument("--pretrain-probes", type=nonnegative_int,
-                     help="random eps-ball points queried per visited state for the surrogate (default: 4)")
+                     help="random points queried per visited state, uniform in the eps-ball, for the surrogate (fitted "
+                          "by MSE on the victim's outputs; default: 4)")
     atk.add_argument("--pretrain-margin", type=nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default: 1)")
@@ -129,8 +124,6 @@ def add_parsers(sub: Any) -> None:
     atk.add_argument("--seed", type=seed_number, default=0, help="training seed (PPO and the environment)")
     atk.add_argument("--defense", type=defense_name, metavar="shield[@EPS]|close-shield[@EPS]",
                      help="train against the defended system (stateless defenses only)")
-    atk.add_argument("--victim-action", action="store_true",
-                     help="the adversary also observes the victim's clean action (1 query per step at attack time)")
     atk.add_argument("--reward", choices=["minus", "horizon"], default="minus",
                      help="minus: -(victim's reward); horizon: 1 - reward per step and the steps a crash cuts off "
                           "at once (the same objective, credited when the crash happens)")
@@ -235,8 +228,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
 
     preset = preset_of(args)
     given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin),
-                                            ("probe", args.pretrain_probe), ("probes", args.pretrain_probes),
-                                            ("loss", args.pretrain_loss))
+                                            ("probes", args.pretrain_probes))
              if value is not None}
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
     if pretrain is None and given:
@@ -244,7 +236,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
-                        victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
+                        reward=args.reward, pretrain=pretrain,
                         target=args.target, explore_std=args.explore_std,
                         critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
