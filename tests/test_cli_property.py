@@ -60,7 +60,7 @@ COMMANDS = {
                    "--out": ["{tmp}/a"], "--warmup": NUMBERS, "--trust-model": [None],
                    "--attack-set": ["eps=0.1", "early_stop=nope"]}, True),
     "attack-train": ({"--eps": EPS, "--steps": NUMBERS, "--out": ["{tmp}/at", "/proc/at"], "--seed": NUMBERS,
-                      "--defense": ["kinematic", "shield", "shield@0.05", "x"], "--victim-action": [None],
+                      "--defense": ["kinematic", "shield", "shield@0.05", "x"],
                       "--preset": COMMON["--preset"], "--force": [None], "--target": ["FASTER", "FASTER,not:SLOWER", "x"]}, True),
     "robust-train": ({"--method": ["sa", "at", "distill", "x"], "--eps": EPS, "--steps": NUMBERS,
                       "--out": ["{tmp}/rt"], "--kappa": NUMBERS, "--epochs": NUMBERS,
