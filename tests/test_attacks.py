@@ -239,7 +239,7 @@ def test_vectorized_attack_sends_one_call_per_iteration_for_all_envs() -> None:
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_rows_are_independent_of_each_other(kind: str) -> None:
     """N rows with their own seeds give what N one-row runs give, bit for bit, for every
-    attack, with per-step and per-episode budgets and the per-step state (warm start,
+    attack, with per-step budgets and the per-step state (warm start,
     max_change) carried over two steps: what lockstep evaluation rests on. The continuous
     victim's target is out of reach, so rows run until their budgets stop them, at
     different iterations (a row whose base point is known spends one query less)."""
@@ -248,7 +248,7 @@ def test_rows_are_independent_of_each_other(kind: str) -> None:
     for name in ["zo-signsgd", "zo-sgd", "nes", "spsa", "coordinate-fd", "random-search", "uniform-noise",
                  "pgd", "fgsm"]:
         options = dict(steps=6 if kind == "discrete" else 12, n_directions=5, warm_start=True, max_change=0.05,
-                       restarts=1, query_budget=40, episode_query_budget=70, eps=0.1)
+                       query_budget=40, eps=0.1)
         spec = AttackSpec(attack=name, **options)
         together = spec.build(linear_victim(kind=kind), **context(kind))
         together[0].reseed([11, 12, 13, 14, 15])

@@ -67,10 +67,10 @@ def test_a_flag_is_read_and_checked_by_its_option_s_type_and_range() -> None:
     from zodrive.errors import ZodriveError
 
     parse = build_parser().parse_args
-    args = parse(["evaluate", "m.zip", "--attack", "nes", "--n-directions", "7", "--timing", "0.5", "--frozen", "none"])
-    assert (args.n_directions, args.timing, args.frozen) == (7, 0.5, [])
+    args = parse(["evaluate", "m.zip", "--attack", "nes", "--n-directions", "7", "--max-change", "0.5", "--frozen", "none"])
+    assert (args.n_directions, args.max_change, args.frozen) == (7, 0.5, [])
     assert parse(["evaluate", "m.zip", "--attack", "nes", "--frozen", "presence,x"]).frozen == ["presence", "x"]
-    for flag, value in (("--n-directions", "0"), ("--timing", "1"), ("--eps", "inf"), ("--steps", "1.5"),
+    for flag, value in (("--n-directions", "0"), ("--max-change", "0"), ("--eps", "inf"), ("--steps", "1.5"),
                         ("--attack-seed", "-1"), ("--check-below", "2")):
         with pytest.raises(ZodriveError, match=f"argument {flag}: expected"):
             parse(["evaluate", "m.zip", "--attack", "nes", flag, value])

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from toys import context, linear_victim, observations
+from toys import blind_picker, context, linear_victim, observations
 from zodrive.attacks import AttackSpec
+from zodrive.attacks.spec import load_attack
 from zodrive.attacks.picker import Picker
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
@@ -38,6 +39,8 @@ BOTH = pytest.mark.parametrize("name", ["vertex-hold", "vertex-check"])
 
 
 def build(victim: Victim, name: str = "vertex-hold", **kw):
+    if name == "vertex-check":  # vertex check runs with a picker only
+        kw = {"adversary": blind_picker(EPS), **kw}
     return AttackSpec(attack=name, eps=EPS, **kw).build(victim, **context("discrete"))
 
 
@@ -100,17 +103,6 @@ def test_rows_in_lockstep_get_what_one_row_runs_get_and_a_seed_repeats_them(name
     np.testing.assert_array_equal(together, run([0, 1, 2, 3]))
 
 
-@BOTH
-def test_a_spent_episode_budget_feeds_the_clean_observation(name: str) -> None:
-    seen: list[np.ndarray] = []
-    attack, objective, oracle = build(gate_victim(seen), name, episode_query_budget=3)
-    x0 = observations(1, seed=6)
-    attack.reseed(1)
-    results = [attack.perturb(x0, oracle, objective) for _ in range(5)]
-    assert [int(r.queries[0]) for r in results] == [1, 1, 1, 0, 0]
-    np.testing.assert_array_equal(results[-1].x_adv, x0)
-
-
 @pytest.mark.parametrize(("options", "message"), [
     ({"target": "none"}, "give it a fixed target"),
     ({"target": "worst"}, "not none or worst"),  # its success reads the clean outputs, never asked
@@ -127,7 +119,8 @@ def test_what_it_cannot_do_is_a_one_line_error(options: dict, message: str, name
         build(linear_victim(), name, **options)
     if "norm" not in options and "steps" not in options and "warm_start" not in options:
         with pytest.raises(ZodriveError, match=message):  # and before any episode runs (`zodrive compare`)
-            AttackSpec(attack=name, eps=EPS, **options).check()
+            AttackSpec(attack=name, eps=EPS, **options, **({"adversary": blind_picker(EPS)} if name == "vertex-check"
+                                                              else {})).check()
 
 
 def test_the_vertex_is_held_whole_where_the_box_clipped_it() -> None:
@@ -177,12 +170,11 @@ def test_a_default_compare_grid_leaves_out_what_cannot_take_its_options() -> Non
     from zodrive.attacks.registry import ATTACKS
     from zodrive.experiments.compare import default_attacks
 
-    assert default_attacks([]) == (list(ATTACKS), {})
+    assert default_attacks([]) == ([name for name in ATTACKS if name != "vertex-check"], {})  # it needs a picker
     names, left_out = default_attacks(["target=none"])
     assert "vertex-hold" not in names and "random-search" in names and "fixed target" in left_out["vertex-hold"]
-    assert "vertex-check" not in names and "fixed target" in left_out["vertex-check"]
     names, left_out = default_attacks(["steps=50"])
-    assert set(left_out) == {"vertex-hold", "vertex-check"} and "steps has no effect" in left_out["vertex-check"]
+    assert set(left_out) == {"vertex-hold"} and "steps has no effect" in left_out["vertex-hold"]
 
 
 def flipping_gate_victim() -> Victim:
@@ -323,13 +315,14 @@ def test_check_below_never_spends_more_than_one_query_per_step_on_average_even_w
     assert most > 1  # the bank was spent: some step checked more than one vertex
 
 
-@pytest.mark.parametrize(("options", "message"), [
-    ({"check_below": 0.9}, "use vertex-check:DIR"),  # no picker to rate with
-    ({"check_below": 1.5}, "check_below must be <= 1"),
-])
-def test_check_below_needs_a_picker_and_a_rating(options: dict, message: str) -> None:
-    with pytest.raises(ZodriveError, match=message):
-        build(flipping_gate_victim(), "vertex-check", **options)
+def test_vertex_check_needs_a_picker_and_check_below_a_rating() -> None:
+    for options in ({}, {"check_below": 0.9}):  # vertex check without a picker was removed
+        with pytest.raises(ZodriveError, match=r"vertex-check needs a picker: --attack vertex-check:DIR .*removed"):
+            AttackSpec(attack="vertex-check", eps=EPS, **options)
+    with pytest.raises(ZodriveError, match="vertex-check needs a picker"):
+        load_attack("vertex-check")
+    with pytest.raises(ZodriveError, match="check_below must be <= 1"):
+        build(flipping_gate_victim(), "vertex-check", check_below=1.5)
 
 
 def test_check_below_is_refused_by_every_other_attack() -> None:

@@ -58,12 +58,11 @@ def test_the_perturbation_stays_in_the_ball_the_mask_and_the_box() -> None:
         assert x.max() <= 1.0 and x.min() >= -1.0
 
 
-@pytest.mark.parametrize("victim_action", [False, True])
-def test_adversary_env_reward_is_minus_the_victims_and_queries_are_counted(victim_action: bool) -> None:
+def test_adversary_env_reward_is_minus_the_victims_and_queries_are_counted() -> None:
     victim = linear_victim()
-    env = AdversaryEnv(ToyRoad(), victim, _threat(), victim_action=victim_action)
+    env = AdversaryEnv(ToyRoad(), victim, _threat())
     obs, _ = env.reset(seed=3)
-    assert obs.shape == (25 + 5 * victim_action,) and env.action_space.shape == (20,)
+    assert obs.shape == (25,) and env.action_space.shape == (20,)
     steps = 0
     done = False
     rng = np.random.default_rng(1)
@@ -77,8 +76,7 @@ def test_adversary_env_reward_is_minus_the_victims_and_queries_are_counted(victi
         assert info["action"] == expected and reward == -info["victim_reward"] == pytest.approx(-0.1 * (expected + 1))
         assert info["linf"] <= 0.05 + 1e-7
         done = terminated or truncated
-    # one query per step for the victim's decision, one more per observation with victim_action
-    assert env.oracle.total_queries == steps + victim_action * (steps + 1)
+    assert env.oracle.total_queries == steps  # one query per step: the victim's decision
 
 
 def _victim(tmp_path: Path, seed: int = 0) -> Path:
@@ -102,24 +100,23 @@ def _error(capsys, args: list[str]) -> str:
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory) -> tuple[Path, Path, Path]:
-    """A victim, an adversary trained against it (observation only) and one with its action."""
+def trained(tmp_path_factory) -> tuple[Path, Path]:
+    """A victim and an adversary trained against it."""
     tmp = tmp_path_factory.mktemp("learned")
     victim = _victim(tmp)
-    for name, extra in (("adv", []), ("adv-action", ["--victim-action"])):
-        assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "64", "--out", str(tmp / name),
-                     "--seed", "1", "--no-progress", *extra]) == 0
-    return victim, tmp / "adv", tmp / "adv-action"
+    assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "64", "--out", str(tmp / "adv"),
+                 "--seed", "1", "--no-progress"]) == 0
+    return victim, tmp / "adv"
 
 
 def test_attack_train_writes_a_model_folder(trained) -> None:
-    victim, adv, _ = trained
+    victim, adv = trained
     for name in ("model.zip", "adversary.json", "train.json", "config.yaml", "run.json", "CARD.md"):
         assert (adv / name).is_file(), name
     train = json.loads((adv / "train.json").read_text())
     meta = json.loads((adv / "adversary.json").read_text())
     assert train["victim_queries"] == train["total_timesteps"] >= 64 and train["queries_per_step"] == 1.0
-    assert meta["eps"] == 0.1 and meta["action_dim"] == 4 and meta["victim_action"] is False
+    assert meta["eps"] == 0.1 and meta["action_dim"] == 4 and "victim_action" not in meta
     assert "--attack learned:" in (adv / "CARD.md").read_text()
 
 
@@ -127,10 +124,10 @@ def test_attack_learned_reads_it_in_the_ball_deterministic_and_lockstep_equal(tr
                                                                              monkeypatch) -> None:
     from stable_baselines3 import PPO
 
-    victim, adv, adv_action = trained
+    victim, adv = trained
     monkeypatch.setattr(PPO, "load", lambda *a, **k: pytest.fail("the adversary must be read by the safe loader"))
     records = {}
-    for adversary, envs in ((adv, 1), (adv, 3), (adv_action, 1), (adv_action, 3)):
+    for adversary, envs in ((adv, 1), (adv, 3)):
         out = tmp_path / f"{adversary.name}-{envs}"
         assert main(["evaluate", str(victim), *CART, "--attack", f"learned:{adversary}", "--eps", "0.1",
                      "--episodes", "3", "--envs", str(envs), "--out", str(out), "--no-progress"]) == 0, \
@@ -138,19 +135,19 @@ def test_attack_learned_reads_it_in_the_ball_deterministic_and_lockstep_equal(tr
         assert "n/a" in capsys.readouterr().out
         summary = json.loads((out / "summary.json").read_text())
         assert summary["max_linf"] <= 0.1 + 1e-6 and summary["attack_success_rate"] is None
-        assert summary["queries_per_step"] == (1.0 if adversary == adv_action else 0.0)
+        assert summary["queries_per_step"] == 0.0
         records[out.name] = [{k: v for k, v in json.loads(line).items()}
                              for line in (out / "episodes.jsonl").read_text().splitlines()]
         steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
         assert max(s["linf"] for s in steps) <= 0.1 + 1e-6
-    for name in ("adv", "adv-action"):  # N episodes side by side = N one-episode runs, bit for bit
+    for name in ("adv",):  # N episodes side by side = N one-episode runs, bit for bit
         one = sorted(records[f"{name}-1"], key=lambda r: r["episode"])
         three = sorted(records[f"{name}-3"], key=lambda r: r["episode"])
         assert one == three
 
 
 def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path, capsys) -> None:
-    victim, adv, _ = trained
+    victim, adv = trained
     base = ["evaluate", str(victim), *CART, "--episodes", "1", "--no-progress"]
     assert "trained at linf eps 0.1" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.2"])
     assert "not found" in _error(capsys, [*base, "--attack", f"learned:{tmp_path / 'nope'}", "--eps", "0.1"])
@@ -158,7 +155,7 @@ def test_learned_adversary_mistakes_are_one_line_errors(trained, tmp_path: Path,
     assert "not a trained adversary" in _error(capsys, [*base, "--attack", f"learned:{tmp_path / 'empty'}"])
     assert "needs a trained adversary" in _error(capsys, [*base, "--attack", "learned", "--eps", "0.1"])
     assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--target", "1"])
-    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--restarts", "2"])
+    assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--patience", "2"])
     assert "has no effect" in _error(capsys, [*base, "--attack", f"learned:{adv}", "--eps", "0.1", "--attack-seed", "3"])
     other = _victim(tmp_path, seed=5)
     assert "train one against this model" in _error(
@@ -181,7 +178,7 @@ def test_an_adversary_trained_against_another_shield_version_is_refused(trained,
     from zodrive.attacks.learned import check_adversary
     from zodrive.defense.shield import VERSION
 
-    victim, adv, _ = trained
+    victim, adv = trained
     meta = json.loads((adv / "adversary.json").read_text())
     assert meta["defense"] is None and meta["defense_version"] is None
     old = tmp_path / "old"
@@ -224,9 +221,8 @@ class ToyCar(ToyRoad):
         return self._obs(), 0.1, self.t >= 10, False, {}
 
 
-@pytest.mark.parametrize(("kind", "probe", "loss"), [("discrete", "ball", "scores"), ("continuous", "ball", "scores"),
-                                                      ("discrete", "vertices", "decisions")])
-def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind: str, probe: str, loss: str) -> None:
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind: str) -> None:
     """The amortized start (`--pretrain-rounds`): from queries alone (the victim offers no
     gradients), the adversary's mean action comes to make the victim take the target (FASTER;
     [1, 0.5] within 0.2 for a continuous victim) on most states where it took it on few; every
@@ -256,8 +252,7 @@ def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind
         return float(objective.success(out[:, None], out)[:, 0].float().mean())
 
     before = target_share()
-    settings = Pretrain(rounds=2, episodes=20, probes=4, epochs=20 if kind == "discrete" else 60, hidden=64,
-                        probe=probe, loss=loss)
+    settings = Pretrain(rounds=2, episodes=20, probes=4, epochs=20 if kind == "discrete" else 60, hidden=64)
     fitted = pretrain(agent.policy, type(road)(), victim, threat, objective, free, settings, 0)
     after = target_share()
     if kind == "discrete":
@@ -269,25 +264,25 @@ def test_a_pretrained_start_makes_a_black_box_victim_take_the_target_action(kind
 
 
 def test_pretraining_mistakes_are_one_line_errors(trained, tmp_path: Path, capsys) -> None:
-    victim, _, _ = trained
+    victim, _ = trained
     base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--out", str(tmp_path / "a"), "--no-progress"]
     assert "--pretrain-episodes applies with --pretrain-rounds" in _error(capsys, [*base, "--steps", "8",
                                                                                    "--pretrain-episodes", "3"])
     assert "--steps 0 trains nothing" in _error(capsys, [*base, "--steps", "0"])
-    assert "drop --victim-action" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1",
-                                                     "--victim-action"])
     assert "do not have" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1"])  # CartPole: no FASTER
-    assert "--pretrain-probe applies with --pretrain-rounds" in _error(capsys, [*base, "--steps", "8",
-                                                                                 "--pretrain-probe", "vertices"])
-    assert "invalid choice: 'corners'" in _error(capsys, [*base, "--steps", "0", "--pretrain-rounds", "1",
-                                                          "--pretrain-probe", "corners"])
+    assert "--pretrain-probes applies with --pretrain-rounds" in _error(capsys, [*base, "--steps", "8",
+                                                                                  "--pretrain-probes", "8"])
+    for removed in (["--victim-action"], ["--pretrain-loss", "decisions"]):  # removed (issue 45)
+        assert "unrecognized arguments" in _error(capsys, [*base, "--steps", "8", *removed])
+    # argparse reads --pretrain-probe as a prefix of --pretrain-probes, whose value is an integer
+    assert "expected an integer" in _error(capsys, [*base, "--steps", "8", "--pretrain-probe", "vertices"])
     assert not (tmp_path / "a").exists()  # refused before anything is written
 
 
 def test_attack_train_target_is_the_fitted_start_s_and_is_recorded(trained, tmp_path: Path, capsys) -> None:
     """`attack-train --target` sets the per-step target the start is fitted to (here CartPole's action 1, else not
     0), recorded in train.json, run.json and the card; without --pretrain-rounds it would do nothing: an error."""
-    victim, _, _ = trained
+    victim, _ = trained
     base = ["attack-train", str(victim), *CART, "--eps", "0.1", "--no-progress"]
     assert "--target 1 is the per-step target of the fitted start" in _error(capsys, [*base, "--steps", "8", "--target",
                                                                                     "1", "--out", str(tmp_path / "a")])
@@ -302,43 +297,12 @@ def test_attack_train_target_is_the_fitted_start_s_and_is_recorded(trained, tmp_
     assert "(target: 1,not:0)" in (out / "CARD.md").read_text()
 
 
-def test_vertex_probes_sit_on_the_ball_s_vertices_half_of_them_near_the_adversary_s_own() -> None:
-    """`--pretrain-probe vertices`: every probe is a vertex (+-1 per coordinate, before eps and
-    the mask); the second half keep most of the adversary's signs (0-30 % flipped, 15 % on
-    average), the first half are random (50 % agree); "ball" probes are inside, not on vertices."""
-    from zodrive.training.amortized import Pretrain, probe_noise
-    from zodrive.errors import ZodriveError
-
-    rng = np.random.default_rng(0)
-    free = np.arange(5, 25)
-    action = rng.uniform(-1.0, 1.0, size=len(free))
-    noise = probe_noise("vertices", action, free, 400, (5, 5), rng).reshape(400, -1)
-    assert set(np.unique(noise)) == {-1.0, 1.0}
-    agree = (noise[:, free] == np.sign(action)).mean(axis=1)
-    assert 0.45 < agree[:200].mean() < 0.55 and 0.8 < agree[200:].mean() < 0.9
-    assert probe_noise("vertices", action, free, 0, (5, 5), rng).shape == (0, 5, 5)  # --pretrain-probes 0
-    ball = probe_noise("ball", action, free, 400, (5, 5), rng)
-    assert np.abs(ball).max() <= 1.0 and np.mean(np.abs(ball) == 1.0) == 0.0
-    with pytest.raises(ZodriveError, match="probe must be one of ball, vertices"):
-        Pretrain(probe="corners")
-    with pytest.raises(ZodriveError, match="loss must be one of scores, decisions"):
-        Pretrain(loss="argmax")
-    from zodrive.training.amortized import check
-    from zodrive.attacks.objectives import make_objective
-
-    with pytest.raises(ZodriveError, match="decisions fits a discrete victim's chosen action"):
-        check(Pretrain(loss="decisions"), "continuous", make_objective("continuous", "1,0.5"))
-
-
 def test_the_card_describes_a_fitted_start_of_either_kind() -> None:
     from zodrive.training.adversary import _pretrain_lines
 
     rounds = [{"round": 0, "steps": 9, "victim_return": 1.5, "target_share": 0.25, "surrogate_agreement": 0.9}]
     discrete = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds})
     assert "4 random points per visited state, uniform in the ball" in discrete[0]
-    vertices = _pretrain_lines({"queries": 45, "margin": 0.3, "wall_time_s": 1.0, "rounds": rounds,
-                                "settings": {"probes": 8, "probe": "vertices"}})
-    assert "8 random points per visited state, on the ball's vertices" in vertices[0]
     assert "by a margin of 0.3" in discrete[0] and "on 25.0% of steps" in discrete[1] and "90.0%" in discrete[1]
     rounds = [{**rounds[0], "surrogate_rmse": 0.12}]
     del rounds[0]["surrogate_agreement"]
@@ -353,7 +317,7 @@ def test_explore_std_trains_with_a_plain_gaussian_of_that_std(trained, tmp_path:
     import torch
     from stable_baselines3 import PPO
 
-    victim, adv, _ = trained
+    victim, adv = trained
     out = tmp_path / "g"
     assert main(["attack-train", str(victim), *CART, "--eps", "0.1", "--steps", "16", "--explore-std", "0.2",
                  "--out", str(out), "--seed", "1", "--no-progress"]) == 0
@@ -380,7 +344,7 @@ def test_critic_warmup_trains_the_value_function_only_then_both(trained, tmp_pat
     import torch
     from stable_baselines3 import PPO
 
-    victim, _, _ = trained
+    victim, _ = trained
     snapshots: list[tuple[list[torch.Tensor], list[torch.Tensor]]] = []
     original = PPO.learn
 

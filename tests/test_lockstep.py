@@ -34,8 +34,8 @@ def _job(model: str, preset: str, attack: str, *overrides: str) -> EvalJob:
 
 
 CASES = [("dqn-driver", "discrete", name) for name in available("attacks")] + [
-    ("dqn-driver", "discrete", "zo-signsgd", "warm_start=true", "patience=3", "episode_query_budget=2000"),
-    ("dqn-driver", "discrete", "random-search", "restarts=1", "query_budget=30", "timing=0.1"),
+    ("dqn-driver", "discrete", "zo-signsgd", "warm_start=true", "patience=3"),
+    ("dqn-driver", "discrete", "random-search", "query_budget=30"),
     ("ddpg-driver", "continuous", "zo-signsgd"),
     ("ddpg-driver", "continuous", "random-search-smooth"),
     ("ddpg-driver", "continuous", "pgd", "norm=l2", "eps=0.3"),

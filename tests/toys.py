@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import tempfile
+from functools import lru_cache
+from pathlib import Path
+
 import numpy as np
 import torch
 
@@ -53,3 +58,23 @@ def counting_victim(calls: list[int]) -> Victim:
         return base.query(x)
 
     return Victim(query=counted, kind="discrete", obs_shape=(5, 5), calibrate=base.calibrate)  # calibration uncounted
+
+
+@lru_cache(maxsize=None)
+def blind_picker(eps: float) -> str:
+    """A picker folder (`vertex-check:DIR`) that rates every vertex alike and ranks one candidate: vertex
+    check with it draws its fresh vertices as blind vertex check did (the same random numbers), for FASTER
+    (index 3) at `eps` with `presence` frozen."""
+    from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, network
+
+    folder = Path(tempfile.mkdtemp(prefix="blind-picker-"))
+    net = network(25, 1)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.zero_()
+    torch.save(net.state_dict(), folder / WEIGHTS_FILE)
+    meta = {"format": FORMAT, "victim": "toy", "victim_sha256": "-", "preset": {}, "eps": eps, "norm": "linf",
+            "frozen": ["presence"], "target": 3, "tol": None, "obs_shape": [5, 5], "width": 1, "candidates": 1,
+            "switch": 0.0}
+    (folder / META_FILE).write_text(json.dumps(meta))
+    return str(folder)

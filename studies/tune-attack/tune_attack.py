@@ -49,7 +49,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--every", type=int, default=5, help="keep every n-th state")
     parser.add_argument("--grid", nargs="*", default=[], metavar="KEY=V1,V2",
-                        help="attack options to cross, e.g. attack=random-search,pgd eps=0.05,0.1 restarts=0,4")
+                        help="attack options to cross, e.g. attack=random-search,pgd eps=0.05,0.1 patience=null,10")
     parser.add_argument("--seed", type=int, default=TUNING_SEED,
                         help="first episode seed of the states (default: the tuning seeds; 100000 to check on evaluation seeds)")
     args = parser.parse_args()

@@ -2,7 +2,8 @@
 
 An attack turns clean observations `x0` (N environments at once) into perturbed ones
 inside a `ThreatModel`, talking to the victim only through a `QueryOracle`. The driver
-(`Attack.perturb`) owns everything attacks share, so that no attack can get it wrong:
+(`Attack.perturb`, its phases in `Search`) owns everything attacks share, so that no attack can
+get it wrong:
 
     query x0 (the clean outputs; iteration 0's base point, never queried twice)
     x = init(x0)
@@ -100,9 +101,6 @@ class Attack(abc.ABC):
         early_stop: bool = DEFAULTS.early_stop,
         patience: int | None = DEFAULTS.patience,
         warm_start: bool = DEFAULTS.warm_start,
-        on_failure: str = DEFAULTS.on_failure,
-        restarts: int = DEFAULTS.restarts,
-        timing: float | None = DEFAULTS.timing,
         max_change: float | None = DEFAULTS.max_change,
         seed: int = DEFAULTS.seed,
     ) -> None:
@@ -119,9 +117,6 @@ class Attack(abc.ABC):
         self.early_stop = bool(early_stop)
         self.patience = None if patience is None else int(patience)
         self.warm_start = bool(warm_start)
-        self.on_failure = on_failure
-        self.restarts = int(restarts)
-        self.timing = timing
         self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
         self._rngs = [np.random.default_rng(seed)]  # one random stream per row
@@ -194,8 +189,8 @@ class Attack(abc.ABC):
         docstring's formula)."""
 
     def queries_per_step(self) -> int:
-        """Upper bound on victim queries per environment step: every restart is a new run."""
-        return (1 + self.restarts) * self.queries_per_run()
+        """Upper bound on victim queries per environment step."""
+        return self.queries_per_run()
 
     def first_iteration_cost(self) -> int:
         """Queries of the clean observation and one iteration (and, with `max_change`, of
@@ -242,189 +237,220 @@ class Attack(abc.ABC):
     def perturb(
         self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
     ) -> AttackResult:
-        """Attack clean observations `x0` (N, *obs); see the module docstring and `AttackResult`."""
-        n, shape = len(x0), x0.shape[1:]
-        dim = int(np.prod(shape))
-        mask = self.threat.mask(shape).reshape(-1)
-        flat0 = np.asarray(x0, dtype=np.float32).reshape(n, dim)
-        oracle.begin_step(rows=n)
-        box = self.smooth_box(flat0.reshape(n, *shape))
+        """Attack clean observations `x0` (N, *obs); see the module docstring and `AttackResult`.
+        The phases are `Search`'s: the clean query, the fallback and the start point; then, per
+        iteration, the candidates a row can pay for, their queries, the best point so far and who
+        stops, and the step to the next base points; then the result."""
+        search = Search(self, x0, oracle, objective, trace)
+        search.query_clean()
+        search.fallback()
+        search.start_point()
+        for k in range(self.steps):
+            batch = search.candidates(k)
+            if batch is None:  # every row has stopped
+                break
+            rows, cand, need = batch
+            out, grad = search.ask(rows, cand, need)
+            f = search.keep_best(rows, cand, out)
+            if k == self.steps - 1:
+                break
+            search.advance(k, rows, cand, f, out, grad)
+        return search.result(x0)
 
-        around = self.threat.around(flat0, shape)
 
-        def project(cand: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (A, M, dim) into the threat model
-            if cand.shape[1] == 0 or len(rows) == 0:  # an attack without probes (PGD, noise)
-                return cand
-            inside = around(cand, rows)
-            if box is not None:  # both are boxes containing the carried point: clipping stays in both
-                inside = np.clip(inside, box[0][rows, None], box[1][rows, None])
-                # a point already inside up to rounding keeps its exact value (projection is then
-                # idempotent, so a step onto a queried point is recognised and not queried again)
-                snap = (np.abs(inside - cand) <= 1e-6) & box[2][rows, None, None]
-                inside = np.where(snap, cand, inside)
-            return inside
+class Search:
+    """One environment step of the driver (`Attack.perturb`) over N rows: the clean outputs, the
+    best queried point of each row, the last point each row evaluated (never queried twice), the
+    base points `x` and the rows still `active`."""
 
-        def values(cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
-            out_t, clean_t = torch.from_numpy(out), torch.from_numpy(clean[rows])
-            l1 = objective.loss(out_t, clean_t).numpy().astype(np.float64)
-            if self.l2_weight == 0 and not trace:  # f = l1 + 0 * l2 = l1 exactly: l2 is not needed
-                return l1, None, l1, objective.success(out_t, clean_t).numpy()
-            l2 = ((cand - flat0[rows, None]).astype(np.float64) ** 2).sum(axis=-1)
-            return l1, l2, l1 + self.l2_weight * l2, objective.success(out_t, clean_t).numpy()
+    def __init__(self, attack: Attack, x0: np.ndarray, oracle: QueryOracle, objective: Objective,
+                 trace: bool) -> None:
+        self.attack, self.oracle, self.objective, self.trace = attack, oracle, objective, trace
+        self.n, self.shape = len(x0), x0.shape[1:]
+        self.dim = int(np.prod(self.shape))
+        self.mask = attack.threat.mask(self.shape).reshape(-1)
+        self.flat0 = np.asarray(x0, dtype=np.float32).reshape(self.n, self.dim)
+        oracle.begin_step(rows=self.n)
+        self.box = attack.smooth_box(self.flat0.reshape(self.n, *self.shape))
+        self.around = attack.threat.around(self.flat0, self.shape)
+        self.everyone = np.arange(self.n)
+        self.free = int(np.argmax(self.mask))  # a coordinate the attacker may change (any, if none)
+        self.iterations = np.zeros(self.n, dtype=np.int64)
+        self.records: list[dict[str, np.ndarray]] = []
+        attack._streams(self.n)
 
-        def white_box_loss(rows: np.ndarray):  # L1 at the base points of `rows`, for autograd
-            clean_t = None if rows is None else torch.from_numpy(clean[rows])
-            return lambda out: objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
+    # -- the threat model and the objective -------------------------------------------
+    def project(self, cand: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Points (A, M, dim) of `rows` into the threat model (and, with max_change, the box)."""
+        if cand.shape[1] == 0 or len(rows) == 0:  # an attack without probes (PGD, noise)
+            return cand
+        inside = self.around(cand, rows)
+        if self.box is not None:  # both are boxes containing the carried point: clipping stays in both
+            low, high, has = self.box
+            inside = np.clip(inside, low[rows, None], high[rows, None])
+            # a point already inside up to rounding keeps its exact value (projection is then
+            # idempotent, so a step onto a queried point is recognised and not queried again)
+            snap = (np.abs(inside - cand) <= 1e-6) & has[rows, None, None]
+            inside = np.where(snap, cand, inside)
+        return inside
 
-        everyone = np.arange(n)
-        free = int(np.argmax(mask))  # a coordinate the attacker may change (any, if none)
-        self._streams(n)
-        # a row whose episode budget cannot pay for one iteration is left untouched this step
-        live = np.ones(n, dtype=bool)
-        if oracle.episode_query_budget is not None:
-            live = oracle.remaining(everyone) >= self.first_iteration_cost()
-            if not live.any():
-                return self._untouched(x0, oracle, box)
-        asked = everyone if live.all() else np.flatnonzero(live)
-        if self.black_box:
-            clean, grad0 = oracle(flat0[asked].reshape(-1, *shape), asked), None
+    def values(self, cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+        """L1, L2 (None when not needed), f = L1 + l2_weight * L2 and success of points (A, M, dim)."""
+        out_t, clean_t = torch.from_numpy(out), torch.from_numpy(self.clean[rows])
+        l1 = self.objective.loss(out_t, clean_t).numpy().astype(np.float64)
+        if self.attack.l2_weight == 0 and not self.trace:  # f = l1 + 0 * l2 = l1 exactly: l2 is not needed
+            return l1, None, l1, self.objective.success(out_t, clean_t).numpy()
+        l2 = ((cand - self.flat0[rows, None]).astype(np.float64) ** 2).sum(axis=-1)
+        return l1, l2, l1 + self.attack.l2_weight * l2, self.objective.success(out_t, clean_t).numpy()
+
+    def white_box_loss(self, rows: np.ndarray | None) -> Callable[[torch.Tensor], torch.Tensor]:
+        """L1 at the base points of `rows` (None: at the clean points, judged against themselves), for autograd."""
+        clean_t = None if rows is None else torch.from_numpy(self.clean[rows])
+        return lambda out: self.objective.loss(out[:, None], out.detach() if clean_t is None else clean_t)[:, 0]
+
+    # -- before the first iteration ------------------------------------------------------
+    def query_clean(self) -> None:
+        """Iteration 0's base point, asked once: the clean outputs (white-box: and the gradient)."""
+        batch = self.flat0.reshape(-1, *self.shape)
+        if self.attack.black_box:
+            clean, self.grad0 = self.oracle(batch, self.everyone), None
         else:
-            clean, grad0 = oracle.gradient(flat0[asked].reshape(-1, *shape), white_box_loss(None), asked)
-        if len(asked) < n:  # rows not asked: no outputs, never attacked (NaN: nothing is compared to them)
-            clean = _rows_of(clean, asked, n, np.nan)
-            grad0 = None if grad0 is None else _rows_of(grad0, asked, n, 0.0)
-        clean = clean.astype(np.float32)
-        already = objective.already(torch.from_numpy(clean)).numpy() & live
-        # the fallback: the clean observation, or with max_change the admissible point nearest it
-        start, start_out, start_grad = flat0, clean, grad0
-        if box is not None:
-            start = project(flat0[:, None], everyone)[:, 0]
-            moved = np.flatnonzero(np.any(start != flat0, axis=1) & live)
-            start_out = clean.copy()
-            if moved.size and self.black_box:
-                start_out[moved] = oracle(start[moved].reshape(-1, *shape), moved)
-            elif moved.size:
-                start_grad = grad0.copy()
-                start_out[moved], start_grad[moved] = oracle.gradient(
-                    start[moved].reshape(-1, *shape), white_box_loss(moved), moved)
-        _, _, f0, ok0 = values(start[:, None], start_out[:, None], everyone)
-        best = Best(start, start_out, f0[:, 0], already if box is None else ok0[:, 0] & live)
-        # the last evaluated base point of each row, so that it is never queried twice
-        known_x, known_out = start.copy(), start_out.copy()
-        known_grad = None if start_grad is None else start_grad.reshape(n, dim).astype(np.float32)
+            clean, self.grad0 = self.oracle.gradient(batch, self.white_box_loss(None), self.everyone)
+        self.clean = clean.astype(np.float32)
+        self.already = self.objective.already(torch.from_numpy(self.clean)).numpy()
 
-        iterations = np.zeros(n, dtype=np.int64)
-        records: list[dict[str, np.ndarray]] = []
-        timed = np.ones(n, dtype=bool) if self.timing is None else preference(clean) >= self.timing
-        for run in range(1 + self.restarts):
-            x = self.init(flat0.copy(), mask).astype(np.float32)
-            if run > 0:  # a restart: a random point of the budget set, for the rows not yet won
-                x = flat0 + self.draw(everyone, lambda g: self.threat.random_delta((1, dim), mask, g)[0])
-            elif self.warm_start and self._carry is not None and self._carry.shape == flat0.shape:
-                # consecutive observations differ little: start where the last step ended
-                carried = ~np.isnan(self._carry).any(axis=1)
-                x = np.where(carried[:, None], flat0 + self._carry, x)
-            x = project(x[:, None], everyone)[:, 0]
-            active = ~best.ok if self.early_stop else np.ones(n, dtype=bool)
-            active &= (oracle.remaining(everyone) > 0) & timed & live  # timed: only where the policy cares which action
-            stalled = np.zeros(n, dtype=np.int64)
-            for k in range(self.steps):
-                rows = np.flatnonzero(active)
-                if rows.size == 0:
-                    break
-                probes = project(self.propose(k, x[rows], rows, mask).astype(np.float32, copy=False), rows)
-                cand = np.concatenate([x[rows, None], probes], axis=1)  # the base point is already projected
-                need = np.ones(cand.shape[:2], dtype=bool)
-                need[:, 0] = ~np.all(cand[:, 0] == known_x[rows], axis=1)
-                afford = oracle.remaining(rows) >= need.sum(axis=1)
-                if not afford.all():  # a row's own budget is spent: that row stops, the others go on
-                    active[rows[~afford]] = False
-                    rows, cand, need = rows[afford], cand[afford], need[afford]
-                    self.keep_proposals(afford)
-                    if rows.size == 0:
-                        break
-                a, m = cand.shape[:2]
-                owners = np.repeat(rows, need.sum(axis=1))
-                grad = None
-                if self.black_box and owners.size == a * m:  # every point is new (the usual case): one call
-                    out = oracle(cand.reshape(-1, *shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
-                else:  # a known base point is not asked again: its outputs are filled in
-                    out = np.empty((a, m, clean.shape[1]), dtype=np.float32)
-                    out[~need[:, 0], 0] = known_out[rows[~need[:, 0]]]
-                    if self.black_box and owners.size:
-                        out[need] = oracle(cand[need].reshape(-1, *shape), owners)
-                    elif not self.black_box:
-                        grad = known_grad[rows].copy()
-                        ask = need[:, 0]
-                        if ask.any():
-                            o, g = oracle.gradient(cand[ask, 0].reshape(-1, *shape), white_box_loss(rows[ask]),
-                                                   rows[ask])
-                            out[ask, 0], grad[ask] = o, g.reshape(-1, dim)
-                        known_grad[rows] = grad
-                known_x[rows], known_out[rows] = cand[:, 0], out[:, 0]
-                iterations[rows] += 1
-                l1, l2, f, ok = values(cand, out, rows)
-                has_ok = ok.any(axis=1)
-                pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
-                ar = np.arange(a)
-                if self.patience is None:
-                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-                else:  # give up on a step that has stopped improving
-                    before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
-                    best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
-                    improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
-                    stalled[rows] = np.where(improved, 0, stalled[rows] + 1)
-                    active[rows[stalled[rows] >= self.patience]] = False
-                if trace:
-                    rec = {"l1": np.full(n, np.nan), "l2": np.full(n, np.nan)}
-                    rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
-                    records.append(rec)
-                if self.early_stop:
-                    active[rows[has_ok]] = False
-                if k == self.steps - 1:
-                    break
-                x[rows] = project(self.step(k, cand, f, rows, grad)[:, None].astype(np.float32), rows)[:, 0]
-                if self.black_box:  # a step onto a queried point (random search) costs no new query
-                    same = cand[:, :, free] == x[rows, None, free]  # one coordinate first: most points differ there
-                    if same.any():
-                        same &= np.all(cand == x[rows, None], axis=2)
-                    hit = same.any(axis=1)
-                    col = same.argmax(axis=1)[hit]
-                    known_x[rows[hit]], known_out[rows[hit]] = cand[hit, col], out[hit, col]
-        if self.warm_start:
-            self._carry = best.x - flat0
-            self._carry[~live] = np.nan  # a row that could not pay carries nothing (its episode's budget is spent)
-        fed, fed_out = best.x, best.out
-        if self.on_failure == "clean":
-            failed = ~best.ok
-            fed, fed_out = np.where(failed[:, None], start, best.x), np.where(failed[:, None], start_out, best.out)
-        if self.max_change is not None:
-            self._fed = fed - flat0
-        x_adv = fed.reshape(n, *shape).astype(x0.dtype)
+    def fallback(self) -> None:
+        """What a row is fed if nothing better is found, where its best point and its known point
+        start: the clean observation, or with max_change the admissible point nearest it."""
+        start, out, grad = self.flat0, self.clean, self.grad0
+        if self.box is not None:
+            start = self.project(self.flat0[:, None], self.everyone)[:, 0]
+            moved = np.flatnonzero(np.any(start != self.flat0, axis=1))
+            out = self.clean.copy()
+            if moved.size and self.attack.black_box:
+                out[moved] = self.oracle(start[moved].reshape(-1, *self.shape), moved)
+            elif moved.size:
+                grad = self.grad0.copy()
+                out[moved], grad[moved] = self.oracle.gradient(
+                    start[moved].reshape(-1, *self.shape), self.white_box_loss(moved), moved)
+        _, _, f0, ok0 = self.values(start[:, None], out[:, None], self.everyone)
+        self.best = Best(start, out, f0[:, 0], self.already if self.box is None else ok0[:, 0])
+        self.known_x, self.known_out = start.copy(), out.copy()
+        self.known_grad = None if grad is None else grad.reshape(self.n, self.dim).astype(np.float32)
+
+    def start_point(self) -> None:
+        """The first base points (the attack's `init`, or with warm start where the last step
+        ended) and the rows that search: not yet won (early stop) and with budget left."""
+        attack, carry = self.attack, self.attack._carry
+        x = attack.init(self.flat0.copy(), self.mask).astype(np.float32)
+        if attack.warm_start and carry is not None and carry.shape == self.flat0.shape:
+            # consecutive observations differ little: start where the last step ended
+            carried = ~np.isnan(carry).any(axis=1)
+            x = np.where(carried[:, None], self.flat0 + carry, x)
+        self.x = self.project(x[:, None], self.everyone)[:, 0]
+        self.active = ~self.best.ok if attack.early_stop else np.ones(self.n, dtype=bool)
+        self.active &= self.oracle.remaining(self.everyone) > 0
+        self.stalled = np.zeros(self.n, dtype=np.int64)  # iterations without progress (patience)
+
+    # -- one iteration -------------------------------------------------------------------
+    def candidates(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The active rows that can pay for their points, the points (A, 1 + P, dim: the base point
+        first) and which need a query (a known base point does not); None when no row is left."""
+        rows = np.flatnonzero(self.active)
+        if rows.size == 0:
+            return None
+        probes = self.project(self.attack.propose(k, self.x[rows], rows, self.mask).astype(np.float32, copy=False),
+                              rows)
+        cand = np.concatenate([self.x[rows, None], probes], axis=1)  # the base point is already projected
+        need = np.ones(cand.shape[:2], dtype=bool)
+        need[:, 0] = ~np.all(cand[:, 0] == self.known_x[rows], axis=1)
+        afford = self.oracle.remaining(rows) >= need.sum(axis=1)
+        if not afford.all():  # a row's own budget is spent: that row stops, the others go on
+            self.active[rows[~afford]] = False
+            rows, cand, need = rows[afford], cand[afford], need[afford]
+            self.attack.keep_proposals(afford)
+            if rows.size == 0:
+                return None
+        return rows, cand, need
+
+    def ask(self, rows: np.ndarray, cand: np.ndarray, need: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The victim's outputs on the candidates (A, 1 + P, k), in one call where every point is
+        new, and for white-box attacks the gradient at the base points."""
+        a, m = cand.shape[:2]
+        owners = np.repeat(rows, need.sum(axis=1))
+        grad = None
+        if self.attack.black_box and owners.size == a * m:  # every point is new (the usual case): one call
+            out = self.oracle(cand.reshape(-1, *self.shape), owners).reshape(a, m, -1).astype(np.float32, copy=False)
+        else:  # a known base point is not asked again: its outputs are filled in
+            out = np.empty((a, m, self.clean.shape[1]), dtype=np.float32)
+            out[~need[:, 0], 0] = self.known_out[rows[~need[:, 0]]]
+            if self.attack.black_box and owners.size:
+                out[need] = self.oracle(cand[need].reshape(-1, *self.shape), owners)
+            elif not self.attack.black_box:
+                grad = self.known_grad[rows].copy()
+                ask = need[:, 0]
+                if ask.any():
+                    o, g = self.oracle.gradient(cand[ask, 0].reshape(-1, *self.shape),
+                                                self.white_box_loss(rows[ask]), rows[ask])
+                    out[ask, 0], grad[ask] = o, g.reshape(-1, self.dim)
+                self.known_grad[rows] = grad
+        self.known_x[rows], self.known_out[rows] = cand[:, 0], out[:, 0]
+        self.iterations[rows] += 1
+        return out, grad
+
+    def keep_best(self, rows: np.ndarray, cand: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Offer each row's best candidate (successful first, then the lowest f) to `best`; stop
+        the rows that succeeded (early stop) or stopped improving (patience); return f (A, 1 + P)."""
+        attack, best = self.attack, self.best
+        l1, l2, f, ok = self.values(cand, out, rows)
+        has_ok = ok.any(axis=1)
+        pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+        ar = np.arange(len(rows))
+        before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
+        best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+        if attack.patience is not None:  # give up on a step that has stopped improving
+            improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
+            self.stalled[rows] = np.where(improved, 0, self.stalled[rows] + 1)
+            self.active[rows[self.stalled[rows] >= attack.patience]] = False
+        if self.trace:
+            rec = {"l1": np.full(self.n, np.nan), "l2": np.full(self.n, np.nan)}
+            rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
+            self.records.append(rec)
+        if attack.early_stop:
+            self.active[rows[has_ok]] = False
+        return f
+
+    def advance(self, k: int, rows: np.ndarray, cand: np.ndarray, f: np.ndarray, out: np.ndarray,
+                grad: np.ndarray | None) -> None:
+        """The attack's step to the next base points, projected; a step onto a queried point
+        (random search) takes that point's outputs, so it costs no new query."""
+        step = self.attack.step(k, cand, f, rows, grad)[:, None].astype(np.float32)
+        self.x[rows] = self.project(step, rows)[:, 0]
+        if self.attack.black_box:
+            x = self.x[rows, None]
+            same = cand[:, :, self.free] == x[:, :, self.free]  # one coordinate first: most points differ there
+            if same.any():
+                same &= np.all(cand == x, axis=2)
+            hit = same.any(axis=1)
+            col = same.argmax(axis=1)[hit]
+            self.known_x[rows[hit]], self.known_out[rows[hit]] = cand[hit, col], out[hit, col]
+
+    # -- after the last iteration --------------------------------------------------------
+    def result(self, x0: np.ndarray) -> AttackResult:
+        """Each row is fed its best point; what carries to the next step is kept (warm start,
+        max_change)."""
+        attack, best = self.attack, self.best
+        if attack.warm_start:
+            attack._carry = best.x - self.flat0
+        if attack.max_change is not None:
+            attack._fed = best.x - self.flat0
+        x_adv = best.x.reshape(self.n, *self.shape).astype(x0.dtype)
         linf, l2n = distortion(x_adv, x0)
         return AttackResult(
-            x_adv=x_adv, success=best.ok & ~already, already=already, iterations=iterations,
-            queries=oracle.row_queries.copy(), linf=linf, l2=l2n,
-            adv_outputs=fed_out, clean_outputs=clean, trace=records,
+            x_adv=x_adv, success=best.ok & ~self.already, already=self.already, iterations=self.iterations,
+            queries=self.oracle.row_queries.copy(), linf=linf, l2=l2n,
+            adv_outputs=best.out, clean_outputs=self.clean, trace=self.records,
         )
-
-
-    def _untouched(self, x0: np.ndarray, oracle: QueryOracle,
-                   box: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> AttackResult:
-        """A step the attacker cannot afford to look at: nothing queried; the clean
-        observation is fed (with max_change, the admissible point nearest it)."""
-        n = len(x0)
-        flat0 = x0.reshape(n, -1)
-        fed = flat0 if box is None else np.clip(flat0, box[0], box[1])
-        if self.max_change is not None:
-            self._fed = fed - flat0
-        x_adv = fed.reshape(x0.shape).astype(x0.dtype)
-        linf, l2n = distortion(x_adv, x0)
-        nothing = np.zeros(n, dtype=bool)
-        empty = np.full((n, 0), np.nan, dtype=np.float32)
-        return AttackResult(x_adv=x_adv, success=nothing, already=nothing.copy(),
-                            iterations=np.zeros(n, dtype=np.int64), queries=oracle.row_queries.copy(),
-                            linf=linf, l2=l2n, adv_outputs=empty, clean_outputs=empty)
 
 
 def needs_fixed_target(name: str) -> str:
@@ -440,23 +466,6 @@ ENGINE_OPTIONS = tuple(name for name, p in inspect.signature(Attack.__init__).pa
 # the search options and their defaults (mu and step_size are read by the searches that use them
 # only, so they are not checked)
 SEARCH_DEFAULTS = {name: getattr(DEFAULTS, name) for name in ENGINE_OPTIONS if name not in ("mu", "step_size")}
-
-
-def _rows_of(values: np.ndarray, rows: np.ndarray, n: int, fill: float) -> np.ndarray:
-    """`values` of `rows` placed in an array of `n` rows, the others `fill`."""
-    full = np.full((n, *values.shape[1:]), fill, dtype=np.float32)
-    full[rows] = values
-    return full
-
-
-def preference(outputs: np.ndarray) -> np.ndarray:
-    """How much a discrete policy cares which action it takes (Lin et al., "Tactics of
-    Adversarial Attack on Deep Reinforcement Learning Agents", IJCAI 2017): the gap between
-    the most and least preferred action of softmax(Q). Near 0 where the choice hardly
-    matters, so an attacker with few queries attacks where it is large."""
-    z = np.exp(outputs - outputs.max(axis=-1, keepdims=True))
-    p = z / z.sum(axis=-1, keepdims=True)
-    return p.max(axis=-1) - p.min(axis=-1)
 
 
 class GradientEstimateAttack(Attack):

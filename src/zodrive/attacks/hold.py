@@ -23,10 +23,10 @@ the one a picker fitted offline from counted queries (`zodrive picker-train`,
 `zodrive.attacks.picker`) rates most likely to make the victim take the target; a held vertex the
 picker rates below its `switch` at the new state is replaced the same way. The picker runs locally.
 
-`vertex-check` (`VertexCheck`, below) spends the query before feeding instead: the vertex about to be fed
-is checked, and one that would fail is swapped for a fresh vertex, fed unasked.
+`vertex-check:DIR` (`VertexCheck`, below) spends the query before feeding instead: the vertex about to be
+fed is checked, and one that would fail is swapped for the picker's best fresh vertex, fed unasked.
 
-Queries per environment step: 1 (with a picker too; `vertex-check --check-below` averages at most 1).
+Queries per environment step: 1 (with a picker too; `vertex-check:DIR --check-below` averages at most 1).
 """
 
 from __future__ import annotations
@@ -73,9 +73,6 @@ class VertexHold(Attack):
     def queries_per_run(self, steps: int | None = None) -> int:
         return 1
 
-    def queries_per_step(self) -> int:
-        return self.queries_per_run()
-
     def first_iteration_cost(self) -> int:
         return 1
 
@@ -101,25 +98,20 @@ class VertexHold(Attack):
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
-        """The step above for clean observations `x0` (N, *obs); a row whose episode budget
-        cannot pay the one query is fed its clean observation and holds nothing."""
-        step = self._begin(x0, oracle, objective)
-        if step is None:
-            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live, _ = step
+        """The step above for clean observations `x0` (N, *obs)."""
+        x0, delta, _ = self._begin(x0, oracle, objective)
         fed = self._project(x0, delta)
-        out, took = self._ask(fed, live, oracle, objective)
+        out, took = self._ask(fed, np.ones(len(x0), dtype=bool), oracle, objective)
         # the vertex itself is held, not its projection: a coordinate the box clipped at this step
         # is whole again at the next one if the observation has moved away from the edge
         self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
-        return self._result(x0, fed, live, took, out, oracle)
+        return self._result(x0, fed, took, out, oracle)
 
     def _begin(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """Start a step: (clean observations as float32, each row's flat vertex to try (held, or fresh
-        where none is held or the picker's `switch` drops it), the rows that can pay a query, the picker's
-        rating of each row's vertex where it is the held one and `_rates_held`, else -inf), or None when no
-        row can (nothing is held then)."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Start a step: clean observations as float32, each row's flat vertex to try (held, or fresh
+        where none is held or the picker's `switch` drops it), and the picker's rating of each row's
+        vertex where it is the held one and `_rates_held`, else -inf."""
         self.check_objective(objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         dim = int(np.prod(shape))
@@ -127,26 +119,22 @@ class VertexHold(Attack):
         flat0 = x0.reshape(n, dim)
         oracle.begin_step(rows=n)
         self._streams(n)
-        live = oracle.remaining(np.arange(n)) >= 1
-        if not live.any():
-            self._carry = np.full((n, dim), np.nan, dtype=np.float32)
-            return None
         held = self._carry if self._carry is not None and self._carry.shape == flat0.shape else \
             np.full((n, dim), np.nan, dtype=np.float32)
         delta = np.where(np.isnan(held), 0.0, held).astype(np.float32)
         stale = np.isnan(held).any(axis=1)
         rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
         if self._rates_held():
-            for r in np.flatnonzero(~stale & live):  # one call per row: lockstep = one-row runs
+            for r in np.flatnonzero(~stale):  # one call per row: lockstep = one-row runs
                 rating[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0]
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
-        fresh = np.flatnonzero(stale & live)
+        fresh = np.flatnonzero(stale)
         if fresh.size:
             drawn, rated = self._fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
             rating[fresh[take]] = -np.inf
-        return x0, delta, live, rating
+        return x0, delta, rating
 
     def _rates_held(self) -> bool:
         """Whether a step needs the picker's rating of the held vertex (for `switch`)."""
@@ -157,11 +145,11 @@ class VertexHold(Attack):
         L-inf projection is elementwise: row by row is the same)."""
         return self.threat.project((x0.reshape(len(x0), -1) + delta).reshape(x0.shape), x0).astype(np.float32)
 
-    def _ask(self, fed: np.ndarray, live: np.ndarray, oracle: QueryOracle, objective: Objective
+    def _ask(self, fed: np.ndarray, ask: np.ndarray, oracle: QueryOracle, objective: Objective
              ) -> tuple[np.ndarray, np.ndarray]:
-        """One counted query per live row on `fed`: the outputs (NaN for a row not asked) and
+        """One counted query per row in `ask` on `fed`: the outputs (NaN for a row not asked) and
         whether the victim took the target."""
-        asked = np.flatnonzero(live)
+        asked = np.flatnonzero(ask)
         took = np.zeros(len(fed), dtype=bool)
         if not asked.size:  # vertex check skipped every check: no outputs, as on a step with nothing asked
             return np.full((len(fed), 0), np.nan, dtype=np.float32), took
@@ -177,13 +165,12 @@ class VertexHold(Attack):
         out_t = torch.from_numpy(answered)
         return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
 
-    def _result(self, x0: np.ndarray, fed: np.ndarray, live: np.ndarray, success: np.ndarray, out: np.ndarray,
+    def _result(self, x0: np.ndarray, fed: np.ndarray, success: np.ndarray, out: np.ndarray,
                 oracle: QueryOracle) -> AttackResult:
         n = len(x0)
-        x_adv = np.where(live.reshape(n, *([1] * (x0.ndim - 1))), fed, x0)
-        linf, l2 = distortion(x_adv, x0)
-        return AttackResult(x_adv=x_adv, success=success, already=np.zeros(n, dtype=bool),  # clean never asked
-                            iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
+        linf, l2 = distortion(fed, x0)
+        return AttackResult(x_adv=fed, success=success, already=np.zeros(n, dtype=bool),  # clean never asked
+                            iterations=np.ones(n, dtype=np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
     def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -213,10 +200,14 @@ class VertexHold(Attack):
         return drawn, scores
 
 
+PLAIN_CHECK = ("vertex-check needs a picker: --attack vertex-check:DIR (`zodrive picker-train`); without one it was "
+               "removed from zodrive (docs/attacks.md, section \"Removed options\")")
+
+
 class VertexCheck(VertexHold):
-    """Vertex hold that asks before it feeds: the one query of a step checks the vertex about to be
-    fed (the one fed at the last step, or a fresh one); if the victim would not take the target on
-    it, a fresh vertex is fed instead, unasked, and is the one checked at the next step.
+    """Vertex hold with a picker that asks before it feeds: the one query of a step checks the vertex
+    about to be fed (the one fed at the last step, or a fresh one); if the victim would not take the
+    target on it, a fresh vertex is fed instead, unasked, and is the one checked at the next step.
 
     Vertex hold learns that a held vertex stopped working only from the victim's move on it; here
     the query comes first, so that move is never made on a vertex known to fail. A step is missed
@@ -224,7 +215,7 @@ class VertexCheck(VertexHold):
     outputs (NaN) and its step counts as no success: `success` is the share of steps on which a
     check confirmed the target (a lower bound on the share taken; the action counts give the rest).
 
-    `check_below` (with a picker): a held vertex the picker rates at least this at the new state is
+    `check_below`: a held vertex the picker rates at least this at the new state is
     fed without a check, and each query so saved pays for one check of a fresh vertex where a check
     fails (the picker's best first, up to `candidates`). A row never spends more queries than steps
     so far in its episode, so the average stays at most one per step; one step may spend more.
@@ -237,10 +228,9 @@ class VertexCheck(VertexHold):
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, check_below: float | None = None,
                  **kwargs: Any) -> None:
+        if adversary is None:
+            raise ZodriveError(PLAIN_CHECK)
         super().__init__(threat, adversary=adversary, **kwargs)
-        if check_below is not None and self.picker is None:  # its range is the schema's
-            raise ZodriveError("check_below reads a picker's rating: use vertex-check:DIR (a picker from "
-                               "`zodrive picker-train`)")
         self.check_below = None if check_below is None else float(check_below)
         self._bank: np.ndarray | None = None  # per row: queries earned (one per step) and not yet spent
 
@@ -265,16 +255,13 @@ class VertexCheck(VertexHold):
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
-        step = self._begin(x0, oracle, objective)
-        if step is None:
-            return self._untouched(np.asarray(x0, dtype=np.float32), oracle)
-        x0, delta, live, rating = step
+        x0, delta, rating = self._begin(x0, oracle, objective)
         n, shape = len(x0), tuple(x0.shape[1:])
         flat0 = x0.reshape(n, -1)
         if self._bank is None or len(self._bank) != n:
             self._bank = np.zeros(n, dtype=np.int64)
-        self._bank[live] += 1
-        ask = live if self.check_below is None else live & (rating < self.check_below)  # -inf: a fresh vertex
+        self._bank += 1
+        ask = np.ones(n, dtype=bool) if self.check_below is None else rating < self.check_below  # -inf: a fresh vertex
         fed = self._project(x0, delta)
         out, took = self._ask(fed, ask, oracle, objective)
         self._bank[ask] -= 1
@@ -297,5 +284,5 @@ class VertexCheck(VertexHold):
         out[failed[~took[failed]]] = np.nan  # fed unasked
         if failed.size:  # only their vertices changed (the projection is row by row)
             fed[failed] = self._project(x0[failed], delta[failed])
-        self._carry = np.where(live[:, None], delta, np.nan).astype(np.float32)
-        return self._result(x0, fed, live, took, out, oracle)
+        self._carry = delta.astype(np.float32)
+        return self._result(x0, fed, took, out, oracle)

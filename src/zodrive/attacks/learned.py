@@ -13,9 +13,7 @@ At attack time the adversary's deterministic action (its Gaussian mean, clipped 
 rebuilt by the safe loader: nothing in the folder is unpickled) is computed row by row, so N
 episodes in lockstep get bit for bit what N one-episode runs get. It keeps no state.
 
-Queries per environment step: 0, or 1 (the victim's output on the clean observation) for an
-adversary trained with `--victim-action`, which also observes the victim's clean action. It
-has no per-step goal (it maximizes the victim's loss over the episode), so no per-step
+Queries per environment step: 0. It has no per-step goal (it maximizes the victim's loss over the episode), so no per-step
 success is reported: judge it by the return.
 """
 
@@ -56,22 +54,6 @@ def apply_action(threat: ThreatModel, x0: np.ndarray, action: np.ndarray, free: 
     return threat.project((flat0 + delta).reshape(x0.shape), np.asarray(x0, dtype=np.float32)).astype(x0.dtype)
 
 
-def encode_outputs(outputs: np.ndarray, kind: str) -> np.ndarray:
-    """What an adversary with `victim_action` sees of the victim (N, k): the chosen action
-    one-hot (discrete; so score and decision-only access give the same input) or the action."""
-    outputs = np.asarray(outputs, dtype=np.float32)
-    if kind == "discrete":
-        return np.eye(outputs.shape[-1], dtype=np.float32)[outputs.argmax(axis=-1)]
-    return outputs
-
-
-def adversary_input(x0: np.ndarray, clean: np.ndarray | None, kind: str) -> np.ndarray:
-    """The adversary's observation (N, D [+ k]): the flattened true observation, and the
-    victim's encoded clean output when it was trained with it."""
-    flat = np.asarray(x0, dtype=np.float32).reshape(len(x0), -1)
-    return flat if clean is None else np.concatenate([flat, encode_outputs(clean, kind)], axis=1)
-
-
 def read_description(folder: str | Path, files: tuple[str, str], keys: tuple[str, ...], fmt: int, *, kind: str,
                      being: str, how: str) -> dict[str, Any]:
     """A trained folder's JSON description (`files`: it, then the weights beside it) with every key of
@@ -95,10 +77,13 @@ def read_description(folder: str | Path, files: tuple[str, str], keys: tuple[str
 
 def read_meta(folder: str | Path) -> dict[str, Any]:
     """A trained adversary's `adversary.json`, or a one-line error saying what is missing."""
-    keys = ("format", "eps", "norm", "frozen", "victim_action", "kind", "obs_shape", "action_dim", "victim_sha256",
-            "preset", "defense")
-    return read_description(folder, (META_FILE, "model.zip"), keys, FORMAT, kind="adversary",
+    keys = ("format", "eps", "norm", "frozen", "kind", "obs_shape", "action_dim", "victim_sha256", "preset", "defense")
+    meta = read_description(folder, (META_FILE, "model.zip"), keys, FORMAT, kind="adversary",
                             being="a trained adversary", how="train one with `zodrive attack-train`")
+    if meta.get("victim_action", False) is not False:  # written before it was removed: false then meant what is left
+        raise ZodriveError(f"adversary {folder} observes the victim's clean action (attack-train --victim-action): "
+                           "removed from zodrive (docs/attacks.md, section \"Removed options\")")
+    return meta
 
 
 def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str, preset: dict[str, Any]) -> None:
@@ -132,7 +117,7 @@ def check_adversary(folder: str | Path, *, model_file: str, preset: dict[str, An
 class LearnedAdversary(Attack):
     """SA-RL's learned optimal adversary (Zhang et al., ICLR 2021) read from a trained folder.
 
-    Queries per environment step: 0, or 1 with `victim_action` (the clean observation)."""
+    Queries per environment step: 0."""
 
     name = NAME
     search = False
@@ -159,7 +144,6 @@ class LearnedAdversary(Attack):
             raise ZodriveError(f"adversary {self.folder} was trained at {self.meta['norm']} eps "
                                f"{self.meta['eps']:g}, not {threat.norm} eps {threat.eps:g}: pass --eps "
                                f"{self.meta['eps']:g} or train one at this eps")
-        self.victim_action = bool(self.meta["victim_action"])
         self.net = None
         if load_network is None:
             return
@@ -175,13 +159,10 @@ class LearnedAdversary(Attack):
                                f"{self.meta['frozen'] or 'none'}, not {list(threat.frozen) or 'none'}")
 
     def queries_per_run(self, steps: int | None = None) -> int:
-        return int(self.victim_action)
-
-    def queries_per_step(self) -> int:
-        return int(self.victim_action)
+        return 0
 
     def first_iteration_cost(self) -> int:
-        return int(self.victim_action)
+        return 0
 
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         raise AssertionError("a learned adversary takes no search step")  # perturb is its own
@@ -197,8 +178,7 @@ class LearnedAdversary(Attack):
 
     def perturb(self, x0: np.ndarray, oracle: QueryOracle, objective: Objective, *, trace: bool = False
                 ) -> AttackResult:
-        """delta = eps * pi(observation [, victim's clean action]) on the free coordinates,
-        projected; a row whose episode budget cannot pay the one query is left clean."""
+        """delta = eps * pi(observation) on the free coordinates, projected."""
         n, shape = len(x0), tuple(x0.shape[1:])
         if tuple(self.meta["obs_shape"]) != shape:
             raise ZodriveError(f"adversary {self.folder} was trained on observations of shape "
@@ -209,25 +189,9 @@ class LearnedAdversary(Attack):
                                f"threat model frees {len(free)}")
         oracle.begin_step(rows=n)
         x0 = np.asarray(x0, dtype=np.float32)
-        live = np.ones(n, dtype=bool)
-        clean = None
-        k = 0
-        if self.victim_action:
-            live = oracle.remaining(np.arange(n)) >= 1
-            asked = np.flatnonzero(live)
-            if asked.size:
-                answered = np.asarray(oracle(x0[asked], asked), dtype=np.float32)
-                k = answered.shape[1]
-                clean = np.full((n, k), np.nan, dtype=np.float32)
-                clean[asked] = answered
-        x_adv = x0.copy()
-        rows = np.flatnonzero(live)
-        if rows.size:
-            inputs = adversary_input(x0[rows], None if clean is None else clean[rows], self.meta["kind"])
-            x_adv[rows] = apply_action(self.threat, x0[rows], self.actions(inputs), free)
+        x_adv = apply_action(self.threat, x0, self.actions(x0.reshape(n, -1)), free)
         linf, l2 = distortion(x_adv, x0)
-        nothing = np.zeros(n, dtype=bool)
-        outputs = np.full((n, k), np.nan, dtype=np.float32) if clean is None else clean
-        return AttackResult(x_adv=x_adv, success=nothing, already=np.ones(n, dtype=bool),  # no per-step goal
-                            iterations=live.astype(np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
-                            adv_outputs=np.full_like(outputs, np.nan), clean_outputs=outputs)
+        nothing = np.full((n, 0), np.nan, dtype=np.float32)  # no victim output is asked
+        return AttackResult(x_adv=x_adv, success=np.zeros(n, dtype=bool), already=np.ones(n, dtype=bool),  # no goal
+                            iterations=np.ones(n, dtype=np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
+                            adv_outputs=nothing, clean_outputs=nothing.copy())

@@ -21,8 +21,7 @@ class QueryOracle:
     A step attacks `rows` environments at once (`begin_step`); every query belongs to one
     row (`owners`) and `query_budget` caps the queries of each row in one environment step
     (None = unlimited). Rows never share an allowance: a row that finishes early leaves
-    nothing to the others. `episode_query_budget` caps the queries of each row's episode
-    (since `begin_episode`; a row is one environment: one in the attack wrapper, N when
+    nothing to the others (a row is one environment: one in the attack wrapper, N when
     episodes run in lockstep). Counters: `row_queries` (per row, since `begin_step`),
     `row_episode_queries` (per row, since `begin_episode`), `step_queries`,
     `episode_queries` (their sums), `total_queries`, and `calls` (oracle calls).
@@ -37,15 +36,11 @@ class QueryOracle:
     would send it. That is what makes N episodes in lockstep equal N one-episode runs.
     """
 
-    def __init__(self, victim: Victim, query_budget: int | None = None,
-                 episode_query_budget: int | None = None) -> None:
+    def __init__(self, victim: Victim, query_budget: int | None = None) -> None:
         if query_budget is not None and query_budget < 1:
             raise ZodriveError(f"query_budget must be >= 1, not {query_budget}")
-        if episode_query_budget is not None and episode_query_budget < 1:
-            raise ZodriveError(f"episode_query_budget must be >= 1, not {episode_query_budget}")
         self.victim = victim
         self.query_budget = query_budget
-        self.episode_query_budget = episode_query_budget
         self.row_queries = np.zeros(1, dtype=np.int64)
         self.row_episode_queries = np.zeros(1, dtype=np.int64)
         self.total_queries = 0
@@ -70,8 +65,6 @@ class QueryOracle:
         left = np.full(len(rows), np.inf)
         if self.query_budget is not None:
             left = (self.query_budget - self.row_queries[rows]).astype(np.float64)
-        if self.episode_query_budget is not None:
-            left = np.minimum(left, self.episode_query_budget - self.row_episode_queries[rows])
         return left
 
     def begin_episode(self, row: int | None = None) -> None:
@@ -101,11 +94,6 @@ class QueryOracle:
             raise QueryBudgetExhausted(
                 f"row {over} would spend {int(self.row_queries[over] + counts[over])} of {self.query_budget} queries"
             )
-        if self.episode_query_budget is not None and np.any(self.row_episode_queries + counts > self.episode_query_budget):
-            over = int(np.argmax(self.row_episode_queries + counts - self.episode_query_budget))
-            raise QueryBudgetExhausted(f"row {over}'s episode would spend "
-                                       f"{int(self.row_episode_queries[over] + counts[over])} of "
-                                       f"{self.episode_query_budget} queries")
         self.row_queries += counts
         self.row_episode_queries += counts
 

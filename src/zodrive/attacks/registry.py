@@ -25,11 +25,13 @@ ATTACKS: dict[str, type[Attack]] = {
 
 
 PICKER_ATTACKS = ("vertex-hold", "vertex-check")  # the attacks that read a picker (`NAME:DIR`)
-KNOWN = (*ATTACKS, "learned:DIR", *(f"{name}:DIR" for name in PICKER_ATTACKS))
-"""Every attack name: the attacks above (nine searches, vertex hold and vertex check), the learned adversary
-(`learned`, read from a folder `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has
-no place in the registry of attacks that run from nothing but their options, and vertex hold with a
-picker (`vertex-hold:DIR`, `vertex-check:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
+KNOWN = (*(name for name in ATTACKS if name != VertexCheck.name), "learned:DIR",
+         *(f"{name}:DIR" for name in PICKER_ATTACKS))
+"""Every attack name: the attacks above (nine searches and vertex hold; vertex check runs only with a
+picker), the learned adversary (`learned`, read from a folder `zodrive attack-train` wrote;
+`zodrive.attacks.learned`), which has no place in the registry of attacks that run from nothing but their
+options, and vertex hold and vertex check with a picker (`vertex-hold:DIR`, `vertex-check:DIR`, fitted by
+`zodrive picker-train`; `zodrive.attacks.picker`)."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:

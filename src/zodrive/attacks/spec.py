@@ -7,12 +7,13 @@ from typing import Any, Sequence
 
 from pydantic import ValidationError
 
-from zodrive.attacks.victim import Victim, decision_only
+from zodrive.attacks.victim import Victim
 from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
+from zodrive.attacks.hold import PLAIN_CHECK, VertexCheck
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
-from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions
+from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions, removed_message, removed_settings, without_removed
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
 from zodrive.errors import ZodriveError
@@ -37,18 +38,22 @@ class AttackSpec(AttackOptions):
             super().__init__(**data)
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, "attack options", FIELDS)) from None
-        _known(self.attack)
+        _known(self)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
         """A spec from a mapping (YAML, overrides, a record), typed and range-checked by the schema
         (a boolean must be a boolean, a number a number); `name` and `description` are a config
-        file's words about itself."""
+        file's words about itself. A removed option (`schema.REMOVED`) at the behaviour left is dropped;
+        at another value it is refused."""
+        if removed_settings(data):
+            raise ZodriveError(f"{context}: {removed_message(removed_settings(data))}")
+        data = without_removed(data)
         try:
             spec = cls.model_validate({k: v for k, v in data.items() if k not in ("name", "description")})
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, context, FIELDS)) from None
-        _known(spec.attack)
+        _known(spec)
         return spec
 
     def with_overrides(self, clear: Sequence[str] = (), **changes: Any) -> "AttackSpec":
@@ -126,10 +131,9 @@ class AttackSpec(AttackOptions):
 
     def _check_budgets(self, attack: Attack) -> None:
         one = attack.first_iteration_cost()
-        for name, budget in (("query budget", self.query_budget), ("episode query budget", self.episode_query_budget)):
-            if budget is not None and 1 <= budget < one:  # < 1: the oracle says so
-                raise ZodriveError(f"{name} {budget} is below one iteration of {self.attack} "
-                                   f"({one} queries with these settings): the attack could do nothing")
+        if self.query_budget is not None and 1 <= self.query_budget < one:  # < 1: the oracle says so
+            raise ZodriveError(f"query budget {self.query_budget} is below one iteration of {self.attack} "
+                               f"({one} queries with these settings): the attack could do nothing")
 
     def build(
         self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int,
@@ -142,10 +146,6 @@ class AttackSpec(AttackOptions):
         (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
         name) and `action_bounds` the continuous action box (targets inside it); `load_network`
         reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader)."""
-        if self.access == "decision":
-            if self.attack in ATTACKS and not ATTACKS[self.attack].black_box:
-                raise ZodriveError(f"{self.attack} reads gradients; decision-only access gives none")
-            victim = decision_only(victim)
         self._check_unread()
         threat = self.threat(features, bounds)
         width = threat.high - threat.low
@@ -158,22 +158,23 @@ class AttackSpec(AttackOptions):
         self._check_budgets(attack)
         objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
         attack.check_objective(objective)
-        if self.timing is not None and victim.kind != "discrete":
-            raise ZodriveError("timing needs action values (a discrete victim): a continuous policy states no preference")
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
-        return attack, objective, QueryOracle(victim, self.query_budget, self.episode_query_budget)
+        return attack, objective, QueryOracle(victim, self.query_budget)
 
 
-def _known(attack: str) -> None:
-    if attack not in ATTACKS and attack != LEARNED:
-        raise ZodriveError(f"unknown attack {attack!r} (known: {', '.join(KNOWN)})")
+def _known(spec: AttackOptions) -> None:
+    if spec.attack not in ATTACKS and spec.attack != LEARNED:
+        raise ZodriveError(f"unknown attack {spec.attack!r} (known: {', '.join(KNOWN)})")
+    if spec.attack == VertexCheck.name and spec.adversary is None:
+        raise ZodriveError(PLAIN_CHECK)
 
 
 def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
     `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`), `vertex-hold:DIR` and
-    `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`)."""
+    `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`;
+    vertex check has no other form)."""
     from zodrive.config import available
 
     head, colon, folder = name.partition(":")

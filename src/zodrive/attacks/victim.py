@@ -41,19 +41,3 @@ class Victim:
         """The action(s) the victim takes given its outputs."""
         return outputs.argmax(axis=-1) if self.kind == "discrete" else outputs
 
-
-def decision_only(victim: Victim) -> Victim:
-    """The victim as a real car shows it: only the action it takes, no scores.
-
-    Discrete: a one-hot vector of the chosen action (score-based objectives then see a flat
-    landscape except where the decision flips: only attacks that search on the decision
-    itself make progress). Continuous: the output already is the action, so nothing changes.
-    """
-    if victim.kind == "continuous":
-        return victim
-
-    def query(batch: np.ndarray) -> np.ndarray:
-        out = np.asarray(victim.query(batch))
-        return np.eye(out.shape[-1], dtype=np.float32)[out.argmax(axis=-1)]
-
-    return Victim(query=query, kind=victim.kind, obs_shape=victim.obs_shape, reads=victim.reads)

@@ -20,7 +20,7 @@ from zodrive.cli.common import (
     probability_below_one, progress_flag, refuse_nonempty, scenario_flags, seed_number, trust_flag, workers_flag,
 )
 from zodrive.errors import ZodriveError
-from zodrive.training.picker import LOSSES, PickerFit  # torch-free
+from zodrive.training.picker import PickerFit  # torch-free
 
 VICTIM_HELP = "SB3 zip or model folder: the victim (fixed)"
 PRESET_HELP = "preset the model trains on (default: the paper's preset of its action kind)"
@@ -105,14 +105,9 @@ def add_parsers(sub: Any) -> None:
                           "distilling a surrogate from counted victim queries, fitting the mean action to make the "
                           "surrogate take the target action (zodrive.training.amortized)")
     atk.add_argument("--pretrain-episodes", type=positive_int, help="episodes driven per round (default: 10)")
-    atk.add_argument("--pretrain-probe", choices=("ball", "vertices"),  # amortized.PROBES (torch-free here)
-                     help="where the surrogate's random queries are drawn around each visited state: uniformly in "
-                          "the eps-ball (default) or on its vertices, half near the adversary's own")
-    atk.add_argument("--pretrain-loss", choices=("scores", "decisions"),  # amortized.LOSSES
-                     help="the surrogate's fit: MSE on the victim's scores (default), or, for a discrete victim, that "
-                          "plus cross-entropy on its chosen action")
     atk.add_argument("--pretrain-probes", type=nonnegative_int,
-                     help="random eps-ball points queried per visited state for the surrogate (default: 4)")
+                     help="random points queried per visited state, uniform in the eps-ball, for the surrogate (fitted "
+                          "by MSE on the victim's outputs; default: 4)")
     atk.add_argument("--pretrain-margin", type=nonnegative_float,
                      help="the target action must win on the surrogate by this many of the victim's median decision "
                           "gaps (default: 1)")
@@ -130,8 +125,6 @@ def add_parsers(sub: Any) -> None:
     atk.add_argument("--seed", type=seed_number, default=0, help="training seed (PPO and the environment)")
     atk.add_argument("--defense", type=defense_name, metavar="shield[@EPS]|close-shield[@EPS]",
                      help="train against the defended system (stateless defenses only)")
-    atk.add_argument("--victim-action", action="store_true",
-                     help="the adversary also observes the victim's clean action (1 query per step at attack time)")
     atk.add_argument("--reward", choices=["minus", "horizon"], default="minus",
                      help="minus: -(victim's reward); horizon: 1 - reward per step and the steps a crash cuts off "
                           "at once (the same objective, credited when the crash happens)")
@@ -147,8 +140,6 @@ def add_parsers(sub: Any) -> None:
     pick.add_argument("--out", type=Path, required=True, help="the picker's folder")
     pick.add_argument("--seed", type=seed_number, default=0, help="fit seed: training episodes 10000*seed + "
                                                                   "1000*round + i")
-    pick.add_argument("--target", default="auto", help="what the picker rates vertices for, as evaluate's --target: "
-                                                       "auto (FASTER / '1,0.5'), an action name or index, or not:ACTION")
     for flag, kind, what in (("rounds", positive_int, "rounds of driving under vertex hold, querying, refitting"),
                              ("episodes", positive_int, "training episodes driven per round"),
                              ("probes", positive_int, "random vertices queried at every state met"),
@@ -158,8 +149,6 @@ def add_parsers(sub: Any) -> None:
                              ("switch", probability_below_one, "a held vertex the picker rates below this is replaced "
                                                                "(0: never)")):
         pick.add_argument(f"--{flag}", type=kind, help=f"{what} (default: {getattr(PickerFit, flag)})")
-    pick.add_argument("--loss", choices=LOSSES, help="bce: each vertex's label alone; rank: also the order of the "
-                                                     f"vertices within each state (default: {PickerFit.loss})")
     scenario_flags(pick, trust=False)
     pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
@@ -240,8 +229,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
 
     preset = preset_of(args)
     given = {name: value for name, value in (("episodes", args.pretrain_episodes), ("margin", args.pretrain_margin),
-                                            ("probe", args.pretrain_probe), ("probes", args.pretrain_probes),
-                                            ("loss", args.pretrain_loss))
+                                            ("probes", args.pretrain_probes))
              if value is not None}
     pretrain = Pretrain(rounds=args.pretrain_rounds, **given) if args.pretrain_rounds else None
     if pretrain is None and given:
@@ -249,7 +237,7 @@ def cmd_attack_train(args: argparse.Namespace) -> int:
     if pretrain is None and args.steps == 0:
         raise ZodriveError("--steps 0 trains nothing: give PPO steps, or a fitted start with --pretrain-rounds")
     path = attack_train(str(args.model), preset, args.eps, args.steps, args.out, seed=args.seed, defense=args.defense,
-                        victim_action=args.victim_action, reward=args.reward, pretrain=pretrain,
+                        reward=args.reward, pretrain=pretrain,
                         target=args.target, explore_std=args.explore_std,
                         critic_warmup=args.critic_warmup or 0, force=args.force, progress_bar=not args.no_progress)
     train = json.loads((path / "train.json").read_text())
@@ -270,13 +258,12 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
 
     given = {f.name: getattr(args, f.name) for f in fields(PickerFit) if getattr(args, f.name) is not None}
     path = picker_train(str(args.model), preset_of(args), args.eps, args.out, replace(PickerFit(), **given),
-                        seed=args.seed, target=args.target, force=args.force, report=lambda line: print(line, flush=True))
+                        seed=args.seed, force=args.force, report=lambda line: print(line, flush=True))
     scenario = "".join([f" --preset {args.preset}" if args.preset else "",
                         *(f" --env-set {item}" for item in args.env_set),
                         f" --env-id {args.env_id}" if args.env_id else "",
                         f" --obs-bounds {args.obs_bounds[0]:g},{args.obs_bounds[1]:g}" if args.obs_bounds else ""])
-    target = "" if args.target == "auto" else f" --target {args.target}"
-    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{target}{scenario})")
+    print(f"saved {path} (use: --attack vertex-hold:{path} --eps {args.eps:g}{scenario})")
     return 0
 
 

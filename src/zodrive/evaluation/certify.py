@@ -206,7 +206,7 @@ def episode_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int
     return np.stack(states)
 
 
-PER_EPISODE = ("warm_start", "max_change", "timing", "episode_query_budget", "check_below")
+PER_EPISODE = ("warm_start", "max_change", "check_below")
 """Attack settings about an episode's sequence of steps; the sandwich attacks each state on its own."""
 
 CHUNK = 512  # states attacked per call

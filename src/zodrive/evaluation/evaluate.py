@@ -360,11 +360,13 @@ def _mean_of(records: list[dict[str, Any]], key: str) -> float | None:
 
 def _with_later_defaults(key: dict[str, Any]) -> dict[str, Any]:
     """An attack option that a folder's key does not record was added to zodrive later: its
-    default is the behaviour the folder was made with, so it counts as set to the default."""
+    default is the behaviour the folder was made with, so it counts as set to the default. One
+    it records that zodrive removed since counts when it holds the behaviour left (`schema.REMOVED`)."""
     if isinstance(key.get("attack"), dict):
+        from zodrive.attacks.schema import without_removed
         from zodrive.attacks.spec import AttackSpec
 
-        key = {**key, "attack": {**AttackSpec().to_dict(), **key["attack"]}}
+        key = {**key, "attack": {**AttackSpec().to_dict(), **without_removed(key["attack"])}}
     return key
 
 
@@ -378,6 +380,11 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     on_disk = _with_later_defaults(on_disk)
     if on_disk == wanted:
         return
+    from zodrive.attacks.schema import removed_message, removed_settings
+
+    if isinstance(on_disk.get("attack"), dict) and removed_settings(on_disk["attack"]):
+        raise ZodriveError(f"{out} holds an evaluation made with {removed_message(removed_settings(on_disk['attack']))}; "
+                           "use --force to replace it, or choose another --out")
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
     what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
             "attack": "the attack settings or the attack engine's version", "seed": "the first seed",

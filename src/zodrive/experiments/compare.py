@@ -106,13 +106,14 @@ def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:
 
 
 def default_attacks(attack_set: list[str] | None = None) -> tuple[list[str], dict[str, str]]:
-    """Every registered attack that takes `attack_set` (the grid without `--attacks`), and why each
-    of the others does not (vertex-hold with `target=none`, say): a default grid leaves an attack
-    out, where one named in `--attacks` is an error."""
-    from zodrive.attacks.registry import ATTACKS
+    """Every registered attack that runs without a trained folder (not vertex check) and takes
+    `attack_set` (the grid without `--attacks`), and why each of the others does not (vertex-hold
+    with `target=none`, say): a default grid leaves an attack out, where one named in `--attacks`
+    is an error."""
+    from zodrive.attacks.registry import ATTACKS, KNOWN
 
     names, left_out = [], {}
-    for name in ATTACKS:
+    for name in (name for name in ATTACKS if name in KNOWN):
         try:
             load_attack(name, attack_set).check()
         except ZodriveError as err:

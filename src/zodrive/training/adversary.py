@@ -1,7 +1,7 @@
 """Train a learned optimal adversary (`zodrive attack-train`): SA-RL, Zhang et al., ICLR 2021.
 
 The attacker is an SB3 PPO agent in an environment of its own (`AdversaryEnv`): it observes
-the true observation (and, with `victim_action`, the victim's clean action), its action
+the true observation, its action
 a in [-1, 1]^d becomes the perturbation eps * a on the d perturbable coordinates, projected
 by the same threat model as every attack (`zodrive.attacks.learned.apply_action`); the fixed
 victim acts on the perturbed observation, the real environment steps, and the adversary's
@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 from zodrive.training.amortized import Pretrain, check, pretrain as fit_start, surrogate_fit
-from zodrive.attacks.learned import FORMAT, META_FILE, adversary_input, apply_action, free_coordinates
+from zodrive.attacks.learned import FORMAT, META_FILE, apply_action, free_coordinates
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
 from zodrive.attacks.victim import Victim
@@ -55,23 +55,22 @@ whatever the mean. `explore_std` replaces it by a plain Gaussian of a stated std
 class AdversaryEnv(gym.Env):
     """The adversary's MDP around a fixed victim and the preset's environment.
 
-    Observation: the flattened true observation (+ the victim's encoded clean action with
-    `victim_action`, one counted query). Action: a in [-1, 1]^d, d = perturbable coordinates.
+    Observation: the flattened true observation. Action: a in [-1, 1]^d, d = perturbable coordinates.
     Step: the victim acts on `apply_action(threat, obs, a)` (one counted query), the
     environment steps, and the reward is minus the victim's reward (`info["victim_reward"]`).
     """
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, env: gym.Env, victim: Victim, threat: ThreatModel, *, victim_action: bool = False,
-                 reward: str = "minus", horizon: int | None = None) -> None:
+    def __init__(self, env: gym.Env, victim: Victim, threat: ThreatModel, *, reward: str = "minus",
+                 horizon: int | None = None) -> None:
         if reward not in REWARDS:
             raise ZodriveError(f"reward must be one of {', '.join(REWARDS)}, not {reward!r}")
         if reward == "horizon" and not (isinstance(horizon, int) and horizon >= 1):
             raise ZodriveError("reward horizon needs the episode's horizon (a preset whose per-step reward is at most "
                                "1 and whose length is known); use reward minus")
         self.env, self.victim, self.threat = env, victim, threat
-        self.victim_action, self.reward, self.horizon = victim_action, reward, horizon
+        self.reward, self.horizon = reward, horizon
         self.t = 0
         self.episode_return = 0.0
         self.victim_returns: list[float] = []  # the victim's return of every finished episode
@@ -81,22 +80,13 @@ class AdversaryEnv(gym.Env):
         self.free = free_coordinates(threat, shape)
         if len(self.free) == 0:
             raise ZodriveError("the threat model leaves no coordinate to perturb")
-        width = int(np.prod(shape)) + (self._outputs() if victim_action else 0)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (width,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (int(np.prod(shape)),), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (len(self.free),), np.float32)
         self._obs: np.ndarray | None = None
 
-    def _outputs(self) -> int:
-        probe = np.zeros((1, *self.obs_shape), dtype=np.float32)
-        return int(np.asarray(self.victim.query(probe)).shape[-1])  # a shape probe on zeros, not an observation
-
     def _observe(self, obs: np.ndarray) -> np.ndarray:
         self._obs = np.asarray(obs, dtype=np.float32)
-        clean = None
-        if self.victim_action:
-            self.oracle.begin_step(1)
-            clean = self.oracle(self._obs[None])
-        return adversary_input(self._obs[None], clean, self.victim.kind)[0]
+        return self._obs.reshape(-1)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):  # type: ignore[override]
         super().reset(seed=seed)
@@ -148,9 +138,8 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
            "(sum: horizon - the victim's return)."), "",
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..)"
         + (f" behind defense `{meta['defense']}`" if meta["defense"] else ""),
-        f"- preset: {meta['preset'].get('name')}; observes the true observation"
-        + (" and the victim's clean action (1 query per step at attack time)" if meta["victim_action"]
-           else " only (0 queries per step at attack time)"),
+        f"- preset: {meta['preset'].get('name')}; observes the true observation only (0 queries per step at "
+        "attack time)",
         *_pretrain_lines(train.get("pretrain")),
         f"- PPO training: {train['total_timesteps']} steps, seed {train['seed']}, {train['episodes']} episodes, "
         f"{train['wall_time_s']} s; victim queries {train['victim_queries']}; exploration: {train['exploration']}"
@@ -168,9 +157,8 @@ def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
         return []
     by = "" if fitted["margin"] is None else f" by a margin of {fitted['margin']:.3g}"
     settings = fitted.get("settings") or {}
-    where = "on the ball's vertices" if settings.get("probe") == "vertices" else "uniform in the ball"
     lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
-             f"victim queries ({settings.get('probes', 4)} random points per visited state, {where}), the mean "
+             f"victim queries ({settings.get('probes', 4)} random points per visited state, uniform in the ball), the mean "
              f"action fitted to make it take the target action{by} (target: {fitted.get('target', 'auto')}); "
              f"{fitted['wall_time_s']} s. Per round (driving "
              "with the previous round's fit):"]
@@ -190,7 +178,6 @@ def attack_train(
     *,
     seed: int = 0,
     defense: str | None = None,
-    victim_action: bool = False,
     reward: str = "minus",
     pretrain: Pretrain | None = None,
     target: str = "auto",
@@ -232,8 +219,6 @@ def attack_train(
     if pretrain is None and target != "auto":
         raise ZodriveError(f"--target {target} is the per-step target of the fitted start; it applies with "
                            "--pretrain-rounds (PPO alone lowers the victim's return, with no per-step target)")
-    if pretrain is not None and victim_action:
-        raise ZodriveError("--pretrain-rounds fits an adversary that observes the observation only; drop --victim-action")
     if not (np.isfinite(eps) and eps > 0):
         raise ZodriveError(f"eps must be > 0, not {eps}")
     if resolve(model).kind != "model":
@@ -275,15 +260,15 @@ def attack_train(
         horizon = int(max_return)
     meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
             "preset": preset, "defense": defense, "defense_version": defense and defense_version(defense),
-            "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "victim_action": bool(victim_action), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
+            "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
             "action_dim": 0, "reward": reward, "horizon": horizon}
-    inner = AdversaryEnv(make_env(preset), victim, threat, victim_action=victim_action, reward=reward, horizon=horizon)
+    inner = AdversaryEnv(make_env(preset), victim, threat, reward=reward, horizon=horizon)
     meta["action_dim"] = int(inner.action_space.shape[0])
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("model.zip", META_FILE, "train.json", "CARD.md", "monitor.monitor.csv"):
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
     write_run_info(out, {"victim": str(model), "preset": preset, "defense": defense, "eps": float(eps),
-                         "steps": steps, "victim_action": bool(victim_action), "reward": reward, "algo": "ppo", "ppo": ppo,
+                         "steps": steps, "reward": reward, "algo": "ppo", "ppo": ppo,
                          "log_std_init": log_std, "explore_std": explore_std, "critic_warmup": critic_warmup,
                          "pretrain": pretrain and pretrain.__dict__, "target": target}, seed)
     env = Monitor(inner, filename=str(out / "monitor"))

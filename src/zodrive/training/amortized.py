@@ -38,44 +38,15 @@ from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import to_action
 
 
-PROBES = ("ball", "vertices")
-LOSSES = ("scores", "decisions")
-
-
-def probe_noise(kind: str, action: np.ndarray, free: np.ndarray, n: int, shape: tuple[int, ...],
-                rng: np.random.Generator) -> np.ndarray:
-    """`n` directions (n, *shape) in [-1, 1] around a visited state, to be scaled by eps and
-    projected: uniform in the ball, or vertices (see `Pretrain.probe`); `action` (len(free),)
-    is the adversary's action there."""
-    dim = int(np.prod(shape))
-    if kind == "ball":
-        return rng.uniform(-1.0, 1.0, size=(n, *shape)).astype(np.float32)
-    if n == 0:
-        return np.zeros((0, *shape), dtype=np.float32)
-    signs = rng.choice(np.array([-1.0, 1.0], dtype=np.float32), size=(n, dim))
-    own = np.sign(np.asarray(action, dtype=np.float32).reshape(-1))
-    own = np.where(own == 0, signs[0, free], own)
-    local = slice(n // 2, n)  # the second half: the adversary's vertex, a random share of its signs flipped
-    flip = rng.random((n - n // 2, len(free))) < rng.uniform(0.0, 0.3, size=(n - n // 2, 1))
-    signs[local, free] = np.where(flip, -own, own)
-    return signs.reshape(n, *shape)
-
-
 @dataclass(frozen=True)
 class Pretrain:
     """How the adversary's start is fitted (see the module docstring)."""
 
     rounds: int = 3       # drive, query, fit; each round on the states the current adversary leads to
     episodes: int = 10    # episodes driven per round
-    probes: int = 4       # random eps-ball points queried per visited state, for the surrogate
-    probe: str = "ball"   # where they are drawn: "ball" (uniform inside it) or "vertices" (half random
-    #                       vertices, half the adversary's own vertex with up to 30 % of its signs flipped:
-    #                       where the adversary and the vertex searches act, so the surrogate is fitted there)
+    probes: int = 4       # random points queried per visited state, uniform in the eps-ball, for the surrogate
     epochs: int = 20      # passes over all data so far, per fit
-    hidden: int = 256     # the surrogate's two hidden layers
-    loss: str = "scores"  # the surrogate's fit: "scores" (MSE on the victim's outputs) or, discrete only,
-    #                       "decisions" (that plus cross-entropy on the victim's chosen action: the argmax is
-    #                       what the attack needs right, and small score errors flip it near a boundary)
+    hidden: int = 256     # the surrogate's two hidden layers (fitted by MSE on the victim's outputs)
     margin: float | None = None  # discrete: the target must win on the surrogate by this many of the
     #                              victim's median decision gaps (None: 1); continuous victims have no margin
 
@@ -88,10 +59,6 @@ class Pretrain:
             raise ZodriveError(f"pretrain margin must be a number >= 0, not {self.margin}")
         if not (isinstance(self.probes, int) and self.probes >= 0):
             raise ZodriveError(f"pretrain probes must be an integer >= 0, not {self.probes}")
-        if self.loss not in LOSSES:
-            raise ZodriveError(f"pretrain loss must be one of {', '.join(LOSSES)}, not {self.loss!r}")
-        if self.probe not in PROBES:
-            raise ZodriveError(f"pretrain probe must be one of {', '.join(PROBES)}, not {self.probe!r}")
 
 
 def check(settings: Pretrain, kind: str, objective: Objective) -> None:
@@ -99,8 +66,6 @@ def check(settings: Pretrain, kind: str, objective: Objective) -> None:
     if not objective.targeted:
         raise ZodriveError("--pretrain-rounds fits the adversary to a target action (FASTER, or [1, 0.5] for a "
                            "continuous victim); an untargeted objective has none")
-    if kind != "discrete" and settings.loss == "decisions":
-        raise ZodriveError("--pretrain-loss decisions fits a discrete victim's chosen action; this victim is continuous")
     if kind != "discrete" and settings.margin is not None:
         raise ZodriveError("--pretrain-margin is a margin between a discrete victim's action scores; this victim "
                            "is continuous")
@@ -165,7 +130,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 with torch.no_grad():
                     action = _mean(policy, torch.from_numpy(x.reshape(1, -1))).numpy()
                 fed = apply_action(threat, x, action, free)
-                noise = probe_noise(settings.probe, action[0], free, settings.probes, shape, rng) * mask.reshape(shape)
+                noise = rng.uniform(-1.0, 1.0, size=(settings.probes, *shape)).astype(np.float32) * mask.reshape(shape)
                 probes = threat.project(x + eps * noise, np.repeat(x, settings.probes, axis=0))
                 batch = np.concatenate([fed, probes])
                 oracle.begin_step(1)
@@ -194,14 +159,9 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
                 top2 = np.sort(Y.numpy(), axis=1)[:, -2:]
                 width = float(np.median(top2[:, 1] - top2[:, 0]))  # the victim's typical decision gap
         scale = Y.std().clamp(min=1e-6)
-        decisions = Y.argmax(1)  # the victim's chosen actions (discrete), for the "decisions" loss
 
         def surrogate_loss(i: torch.Tensor) -> torch.Tensor:
-            out = surrogate(X[i])
-            mse = (((out - Y[i]) / scale) ** 2).mean()
-            if settings.loss == "scores":
-                return mse
-            return mse + torch.nn.functional.cross_entropy(out, decisions[i])
+            return (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean()
 
         mse = _fit(list(surrogate.parameters()), surrogate_loss, len(X), settings.epochs, gen)
         with torch.no_grad():  # discrete: the share of points where it picks the victim's action; continuous: RMSE
@@ -236,7 +196,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
         rounds.append({"round": r, "episodes": settings.episodes, "steps": steps,
                        "victim_return": float(np.mean(returns)), "target_share": hits / max(steps, 1),
                        "queries": int(oracle.total_queries),
-                       ("surrogate_mse" if settings.loss == "scores" else "surrogate_loss"): round(mse, 4),  # + CE
+                       "surrogate_mse": round(mse, 4),
                        ("surrogate_agreement" if discrete else "surrogate_rmse"): round(agree, 4),
                        "adversary_loss": round(fit, 4), "surrogate_target_share": round(won, 4)})
     return {"rounds": rounds, "queries": int(oracle.total_queries), "margin": kappa, "settings": settings.__dict__}

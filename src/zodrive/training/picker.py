@@ -28,7 +28,6 @@ if TYPE_CHECKING:
     import torch
 
 HELD_OUT = 0.05  # the share of labelled vertices kept out of the fit to report its accuracy
-LOSSES = ("bce", "rank")
 BATCH, LEARNING_RATE = 4096, 1e-3
 
 
@@ -45,7 +44,6 @@ class PickerFit:
     width: int = 512        # hidden units of each of the MLP's two layers
     candidates: int = 64    # random vertices ranked at attack time when a vertex is needed
     switch: float = 0.3     # a held vertex rated below this at the new state is replaced
-    loss: str = "bce"       # "rank": also a listwise term per state (see `_fit`)
 
     def check(self) -> None:
         from zodrive.attacks.picker import MAX_CANDIDATES, MAX_WIDTH
@@ -57,52 +55,21 @@ class PickerFit:
                 raise ZodriveError(f"picker {name} must be an integer from 1 to {most}, not {value!r}")
         if not (isinstance(self.switch, (int, float)) and not isinstance(self.switch, bool) and 0 <= self.switch < 1):
             raise ZodriveError(f"picker switch must be a probability in [0, 1), not {self.switch!r}")
-        if self.loss not in LOSSES:
-            raise ZodriveError(f"picker loss must be one of {', '.join(LOSSES)}, not {self.loss!r}")
 
 
-def rank_term(logits: torch.Tensor, labels: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
-    """ListNet's top-one loss over states (rows: states, columns: their vertices): the mean, over the
-    states with a kept vertex that works, of the cross-entropy between the uniform distribution over
-    those vertices and the softmax of the logits over the kept ones; 0 if no state has one."""
-    import torch
-
-    wanted = labels * keep
-    some = wanted.sum(1) > 0
-    if not some.any():
-        return logits.sum() * 0.0
-    log_p = torch.log_softmax(logits[some].masked_fill(~keep[some], float("-inf")), dim=1)
-    share = wanted[some] / wanted[some].sum(1, keepdim=True)
-    return -(share * log_p.masked_fill(~keep[some], 0.0)).sum(1).mean()
-
-
-def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Tensor, epochs: int, *,
-         per_state: int, loss: str = "bce") -> float:
-    """Binary cross-entropy on the rows not `held` out; returns the accuracy on the held-out rows.
-
-    The rows come in blocks of `per_state` (the vertices probed at one state). `loss="rank"` draws batches
-    of whole states and adds `rank_term`. Why: vertex hold feeds the best-rated vertex of one state, so the
-    order within a state is what matters, and BCE gives little weight to the states where few vertices
-    work. There the picker misses (results/learned-adversary/pilots/one-query/pool.py)."""
+def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Tensor, epochs: int) -> float:
+    """Binary cross-entropy on the rows not `held` out, in shuffled batches; returns the accuracy on the
+    held-out rows. (A listwise term per state, `--loss rank`, changed nothing on dqn-close and was removed:
+    results/vertex-hold/picker/README.md.)"""
     import torch
 
     bce = torch.nn.functional.binary_cross_entropy_with_logits
     opt = torch.optim.Adam(net.parameters(), LEARNING_RATE)
     net.train()
-    if loss == "bce":  # batches of rows
-        fit_x, fit_y = x[~held], y[~held]
-        count, size = len(fit_x), BATCH
-    else:  # batches of whole states, about as many rows
-        count, size = len(x) // per_state, max(1, BATCH // per_state)
-        sx, sy, sh = (t.view(count, per_state, *t.shape[1:]) for t in (x, y, held))
+    fit_x, fit_y = x[~held], y[~held]
     for _ in range(epochs):
-        for batch in torch.randperm(count).split(size):
-            if loss == "bce":
-                out = bce(net(fit_x[batch]).squeeze(1), fit_y[batch])
-            else:
-                keep, labels = ~sh[batch], sy[batch]
-                logits = net(sx[batch].flatten(0, 1)).view(len(batch), per_state)
-                out = bce(logits[keep], labels[keep]) + rank_term(logits, labels, keep)
+        for batch in torch.randperm(len(fit_x)).split(BATCH):
+            out = bce(net(fit_x[batch]).squeeze(1), fit_y[batch])
             opt.zero_grad()
             out.backward()
             opt.step()
@@ -113,10 +80,9 @@ def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Ten
 
 
 def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit: PickerFit = PickerFit(), *,
-                 seed: int = 0, target: Any = "auto", force: bool = False,
-                 report: Callable[[str], None] | None = None) -> Path:
-    """Fit a picker against `model` (a model file) at L-inf `eps` for `target` (as `--target`: auto is
-    the search attacks' default), write the folder `out` and return it. `report` receives a line per round."""
+                 seed: int = 0, force: bool = False, report: Callable[[str], None] | None = None) -> Path:
+    """Fit a picker against `model` (a model file) at L-inf `eps` for the search attacks' default target
+    (auto: FASTER / [1, 0.5]), write the folder `out` and return it. `report` receives a line per round."""
     import torch
 
     from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, Picker, network, objective_target
@@ -141,7 +107,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     check_run_folder(out, resume=False, force=force, resumable=False)
     victim = load_policy(model, preset, None)  # the safe loader
     context = attack_context(preset)
-    spec = AttackSpec(attack="vertex-hold", eps=eps, seed=seed, target=target)
+    spec = AttackSpec(attack="vertex-hold", eps=eps, seed=seed)
     attack, objective, oracle = spec.build(victim, context["features"], context["bounds"], context["n_actions"],
                                            context.get("action_names"), context.get("action_bounds"))
     threat = attack.threat
@@ -184,8 +150,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
         x_all = torch.from_numpy(np.concatenate(xs))
         y_all = torch.from_numpy(np.concatenate(ys).astype(np.float32))
         held.append(rng.random(len(y_all) - sum(map(len, held))) < HELD_OUT)
-        accuracy = _fit(net, x_all, y_all, torch.from_numpy(np.concatenate(held)), fit.epochs,
-                        per_state=fit.probes, loss=fit.loss)
+        accuracy = _fit(net, x_all, y_all, torch.from_numpy(np.concatenate(held)), fit.epochs)
         attack.use_picker(Picker(net, fit.candidates, float(fit.switch)), objective_target(objective))  # type: ignore[attr-defined]
         rounds.append({"round": r, "episodes": fit.episodes, "steps": steps, "victim_return": float(np.mean(returns)),
                        "target_share": taken / max(steps, 1), "labelled": len(y_all),
@@ -197,7 +162,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     out.mkdir(parents=True, exist_ok=True)
     for stale in (WEIGHTS_FILE, META_FILE, "train.json", "CARD.md"):
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's
-    write_run_info(out, {"victim": str(model), "preset": preset, "eps": eps, "target": target, "fit": asdict(fit)}, seed)
+    write_run_info(out, {"victim": str(model), "preset": preset, "eps": eps, "fit": asdict(fit)}, seed)
     tmp = out / f".{WEIGHTS_FILE}.tmp"
     torch.save(net.state_dict(), tmp)
     tmp.replace(out / WEIGHTS_FILE)
@@ -205,7 +170,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
             "preset": preset, "eps": eps, "norm": threat.norm, "frozen": list(threat.frozen),
             **objective_target(objective), "obs_shape": list(shape), "width": fit.width,
             "candidates": fit.candidates, "switch": float(fit.switch)}
-    train = {"kind": "picker for vertex hold", "victim": str(model), "eps": eps, "seed": seed, "target": target,
+    train = {"kind": "picker for vertex hold", "victim": str(model), "eps": eps, "seed": seed, "target": spec.target,
              "fit": asdict(fit),
              "rounds": rounds, "victim_queries": int(oracle.total_queries),
              "wall_time_s": round(time.perf_counter() - start, 1)}
@@ -234,11 +199,9 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"{fit['switch']:g}. That is still one victim query per step.", "",
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..), preset {meta['preset'].get('name')}",
         f"- fit: seed {train['seed']}, {fit['rounds']} rounds of {fit['episodes']} training episodes, {fit['probes']} random "
-        f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round, loss "
-        f"{fit['loss']}; "
+        f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round; "
         f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
         *[f"  - {round_line(r)}" for r in train["rounds"]], "",
-        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}"
-        f"{'' if train['target'] == 'auto' else ' --target ' + str(train['target'])}` on the preset "
+        f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}` on the preset "
         "it was fitted on (config.yaml: a picker is refused elsewhere)", "",
     ])

@@ -4,6 +4,8 @@
 # (uniform ball probes, MSE on scores), each evaluated on tuning seeds 900000-900029, with random
 # search on the same seeds; adversaries and cells in runs/adv-vert (not committed), printed output in
 # results/learned-adversary/pilots/decision-focused.
+# The variants use attack-train --pretrain-probe / --pretrain-loss, removed since (docs/attacks.md, "Removed
+# options"): run them from a checkout before that (git log -S pretrain-probe); the other cells run on today's zodrive.
 set -u
 cd "$(dirname "$0")/../../../.."
 . .venv/bin/activate

@@ -5,6 +5,8 @@
 # `attack-train --target FASTER,not:SLOWER`), training seeds 0-2, beside the committed fitted start and random
 # search with and without that target. Adversaries and cells in runs/prefer (scratch, not committed); printed
 # output in results/learned-adversary/pilots/fallback; paired differences in paired.txt there.
+# The variants use attack-train --pretrain-probe / --pretrain-loss, removed since (docs/attacks.md, "Removed
+# options"): run them from a checkout before that (git log -S pretrain-probe); the other cells run on today's zodrive.
 set -u
 cd "$(dirname "$0")/../../../.."
 . .venv/bin/activate

@@ -1,0 +1,128 @@
+"""`Attack.perturb` returns, bit for bit, what it returned when these digests were recorded: every
+registered attack on the toy victims (`toys.py`), over a few seeds, with the options that change the
+driver's path (early stop, patience, warm start, the max-change box, per-row budgets, the L2 term,
+white-box gradients, vertex hold's picker and vertex check's `check_below`).
+
+A refactoring of the driver must leave every digest as it is. A change of behaviour that is meant
+(and bumps `ENGINE_VERSION`) records them again: `python tests/test_perturb_golden.py` rewrites
+`golden/perturb.json`. The digests are of float arithmetic on this CPU's numpy and torch builds, in one
+torch thread (a matmul's rounding depends on how many threads split it)."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+from toys import blind_picker, context, linear_victim, observations
+from zodrive.attacks import ATTACKS, AttackSpec
+from zodrive.attacks.base import AttackResult
+from zodrive.attacks.picker import Picker
+from zodrive.compute import one_torch_thread
+
+GOLDEN = Path(__file__).parent / "golden" / "perturb.json"
+SEEDS = (0, 1, 2)
+ROWS = 4  # environment rows attacked side by side
+STEPS = 3  # consecutive environment steps of one episode (warm start and max_change carry state)
+
+SEARCH_OPTIONS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "continuous": {"kind": "continuous"},
+    "untargeted": {"target": "none"},
+    "fallback-l2": {"target": "FASTER,not:SLOWER", "norm": "l2", "eps": 0.3},
+    "full-trace": {"early_stop": False, "l2_weight": 0.5, "trace": True},
+    "patience": {"patience": 2, "steps": 12},
+    "budget": {"query_budget": 17},
+    "warm-box": {"warm_start": True, "max_change": 0.03},
+    "box-budget": {"max_change": 0.02, "query_budget": 13, "early_stop": False},
+    "paper": {"mode": "paper", "loss": "paper"},
+}
+HOLD_OPTIONS: dict[str, dict[str, Any]] = {
+    "vertex-hold": {"attack": "vertex-hold"},
+    "vertex-hold-budget": {"attack": "vertex-hold", "query_budget": 1},
+    "vertex-hold-picker": {"attack": "vertex-hold", "picker": 8},
+    "vertex-check-picker": {"attack": "vertex-check", "picker": 8},
+    "vertex-check-below": {"attack": "vertex-check", "picker": 8, "check_below": 0.6},
+}
+
+
+def cases() -> dict[str, dict[str, Any]]:
+    found = {f"{name}/{label}": {"attack": name, **options}
+             for name, cls in ATTACKS.items() if cls.search for label, options in SEARCH_OPTIONS.items()}
+    return {**found, **HOLD_OPTIONS}
+
+
+def toy_picker(candidates: int) -> Picker:
+    """A fixed small MLP (seeded): what it rates does not matter, only that it is the same every run."""
+    gen = torch.Generator().manual_seed(11)
+    net = torch.nn.Sequential(torch.nn.Linear(25, 8), torch.nn.Tanh(), torch.nn.Linear(8, 1))
+    with torch.no_grad():
+        for p in net.parameters():
+            p.copy_(torch.randn(p.shape, generator=gen))
+    return Picker(net, candidates=candidates, switch=0.2)
+
+
+def _update(digest: Any, result: AttackResult) -> None:
+    for name in ("x_adv", "success", "already", "iterations", "queries", "linf", "l2", "adv_outputs", "clean_outputs"):
+        value = np.ascontiguousarray(getattr(result, name))
+        digest.update(f"{name}{value.dtype}{value.shape}".encode())
+        digest.update(value.tobytes())
+    for record in result.trace:
+        for key in sorted(record):
+            digest.update(key.encode() + np.ascontiguousarray(record[key]).tobytes())
+
+
+@one_torch_thread  # the toys' tiny matmuls: threads only wait for each other on a busy machine
+def run(case: dict[str, Any], seed: int) -> str:
+    """The digest of `STEPS` consecutive attacked steps of `ROWS` rows (one seed per row)."""
+    options = dict(case)
+    kind, trace = options.pop("kind", "discrete"), options.pop("trace", False)
+    picker, check_below = options.pop("picker", None), options.pop("check_below", None)
+    # rows are never mixed in a victim call (no calibration copy): what one-row runs get, and no per-case
+    # calibration queries (the driver's logic is what is pinned here, not the oracle's batching)
+    victim = dataclasses.replace(linear_victim(seed=3, kind=kind), calibrate=None)
+    steps = {} if options["attack"] in ("vertex-hold", "vertex-check") else {"steps": 6, "n_directions": 4}
+    folder = {"adversary": blind_picker(0.1)} if options["attack"] == "vertex-check" else {}
+    spec = AttackSpec(**{"eps": 0.1, **steps, **options, **folder})
+    attack, objective, oracle = spec.build(victim, **context(kind))
+    if picker is not None:  # a picker held in memory (a folder's is an MLP fitted by picker-train)
+        attack.use_picker(toy_picker(picker), {"target": 3, "tol": None})
+    if check_below is not None:
+        attack.check_below = check_below
+    attack.reseed([seed * 100 + r for r in range(ROWS)])
+    digest = hashlib.sha256()
+    for t in range(STEPS):
+        x0 = observations(ROWS, seed=seed * 10 + t)
+        _update(digest, attack.perturb(x0, oracle, objective, trace=trace))
+    return digest.hexdigest()
+
+
+def _all() -> dict[str, str]:
+    return {f"{name}@{seed}": run(case, seed) for name, case in cases().items() for seed in SEEDS}
+
+
+@pytest.mark.parametrize("name", list(cases()))
+def test_perturb_returns_what_it_returned(name: str) -> None:
+    golden = json.loads(GOLDEN.read_text())
+    for seed in SEEDS:
+        assert run(cases()[name], seed) == golden[f"{name}@{seed}"], f"{name} seed {seed}"
+
+
+def test_every_registered_attack_has_golden_digests() -> None:
+    golden = json.loads(GOLDEN.read_text())
+    assert set(golden) == {f"{name}@{seed}" for name in cases() for seed in SEEDS}
+    assert {case["attack"] for case in cases().values()} == set(ATTACKS)
+
+
+if __name__ == "__main__":  # record the digests again (a meant change of behaviour only)
+    sys.path.insert(0, str(Path(__file__).parent))
+    GOLDEN.parent.mkdir(exist_ok=True)
+    GOLDEN.write_text(json.dumps(_all(), indent=1, sort_keys=True) + "\n")
+    print(f"wrote {GOLDEN}")

@@ -1,0 +1,124 @@
+"""Committed evaluations still match the key today's code builds for the same job, after attack
+options were removed (`zodrive.attacks.schema.REMOVED`): a key that records a removed option at
+the behaviour left resumes; one that records another value is refused in one line."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from zodrive.attacks.base import ENGINE_VERSION
+from zodrive.attacks.schema import REMOVED
+from zodrive.attacks.spec import AttackSpec
+from zodrive.errors import ZodriveError
+from zodrive.evaluation.evaluate import check_same_evaluation, same_evaluation
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = sorted(ROOT.glob("results/**/eval_key.json")) + sorted(ROOT.glob("models/**/eval_key.json"))
+REFUSED = {
+    "results/on-failure/eps0.05-clean": "on_failure",
+    "results/on-failure/eps0.1-clean": "on_failure",
+    "results/vertex-hold/cells/check-dqn-close-eps0.02": "vertex-check without a picker",
+    "results/vertex-hold/cells/check-dqn-close-eps0.05": "vertex-check without a picker",
+    "results/vertex-hold/cells/check-dqn-driver-eps0.2": "vertex-check without a picker",
+}
+"""The committed folders whose attack zodrive can no longer run, and the setting that says so."""
+
+
+def _attack_key(recorded: dict[str, Any]) -> dict[str, Any]:
+    """The attack part of the key today's code writes for the attack `recorded` describes."""
+    spec = AttackSpec.from_mapping({k: v for k, v in recorded.items() if k != "engine"}, "recorded attack")
+    return {**spec.to_dict(), "engine": ENGINE_VERSION}
+
+
+def test_every_committed_attack_key_matches_its_attack_today_or_is_refused() -> None:
+    attacked = [(p, json.loads(p.read_text())) for p in KEYS]
+    attacked = [(p, key) for p, key in attacked if isinstance(key.get("attack"), dict)]
+    assert len(attacked) > 400  # the committed attacked cells (491 when the first options were removed)
+    refused = {}
+    for path, key in attacked:
+        if key["attack"].get("engine") != ENGINE_VERSION:
+            continue  # made by another attack engine: never resumed
+        try:
+            wanted = {**key, "attack": _attack_key(key["attack"])}
+        except ZodriveError as exc:
+            assert "\n" not in str(exc) and "removed from zodrive" in str(exc), exc
+            refused[str(path.parent.relative_to(ROOT))] = str(exc)
+            continue
+        assert same_evaluation(key, wanted), path
+    assert {folder: _why(message) for folder, message in refused.items()} == REFUSED
+
+
+def _why(message: str) -> str:
+    """The removed option a refusal names."""
+    if "vertex-check needs a picker" in message:
+        return "vertex-check without a picker"
+    return next(name for name in REMOVED if f"{name}=" in message)
+
+
+CELLS = [  # (folder, its summary's `zodrive evaluate` command rebuilt with today's parser): one of each kind
+    "results/close-rules/attacked/random-search-eps0.02",
+    "results/close-rules/attacked/pgd-eps0.02",
+    "results/close-rules/attacked/amortized-eps0.02",  # learned:DIR
+    "results/close-rules/attacked/v5-shield@0.02-pgd-eps0.02",  # behind a defense
+    "results/robustness-100/dqn-driver-random-search-smooth-eps0.05",  # patience, warm start, max_change
+    "results/default-vs-saving/ddpg-driver-warm-patience",  # a continuous victim
+    "results/learned-adversary/cells/dqn-driver-uniform-noise-eps0.02",
+    "results/vertex-hold/cells/ddpg-driver-eps0.05",  # vertex hold
+    "results/vertex-hold/picker/cells/check-below0.998-dqn-close-rank-eps0.02-seed1",  # vertex-check:DIR, check_below
+]
+
+
+@pytest.mark.parametrize("cell", CELLS)
+def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What `zodrive evaluate` checks before it resumes a folder: the key of the job its command builds."""
+    from zodrive.cli import build_parser
+    from zodrive.cli.attack import attack_spec_from_args
+    from zodrive.cli.common import preset_of
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+    from zodrive.policies.resolve import policy_ref
+
+    monkeypatch.chdir(ROOT)  # the commands name repository paths
+    folder = ROOT / cell
+    command = json.loads((folder / "summary.json").read_text())["command"]
+    args = build_parser().parse_args(shlex.split(command)[1:])
+    spec = attack_spec_from_args(args)
+    job = EvalJob(model=policy_ref(args.model), preset=preset_of(args), attack=spec.to_dict(),
+                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
+    on_disk = json.loads((folder / "eval_key.json").read_text())
+    assert same_evaluation(on_disk, json.loads(json.dumps(job.key())))
+
+
+def test_a_removed_option_at_the_behaviour_left_resumes_and_at_another_value_is_refused(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Checked on a stand-in removed option (the mechanism does not depend on which options are removed)."""
+    from zodrive.attacks import schema
+
+    monkeypatch.setitem(schema.REMOVED, "gone", ("kept", "results/somewhere/"))
+    wanted = {"model": "m", "attack": {**AttackSpec(eps=0.05).to_dict(), "engine": ENGINE_VERSION}, "seed": 1}
+    assert same_evaluation({**wanted, "attack": {**wanted["attack"], "gone": "kept"}}, wanted)
+    stale = {**wanted, "attack": {**wanted["attack"], "gone": "other"}}
+    assert not same_evaluation(stale, wanted)
+    with pytest.raises(ZodriveError, match=r"gone=other \(its measurement: results/somewhere/\): removed from zodrive"):
+        check_same_evaluation(stale, wanted, tmp_path)
+    assert AttackSpec.from_mapping({"attack": "random-search", "gone": "kept"}) == AttackSpec(attack="random-search")
+    with pytest.raises(ZodriveError, match="gone=other"):
+        AttackSpec.from_mapping({"attack": "random-search", "gone": "other"})
+
+
+def test_a_committed_adversary_that_records_victim_action_false_still_loads(tmp_path: Path) -> None:
+    """`attack-train --victim-action` was removed: every committed adversary.json records it false (what is left)
+    and is read; one that records true is refused in one line."""
+    from zodrive.attacks.learned import META_FILE, read_meta
+
+    folder = ROOT / "results" / "learned-adversary" / "amortized-dqn-close-eps0.02"
+    meta = json.loads((folder / META_FILE).read_text())
+    assert meta["victim_action"] is False and read_meta(folder)["eps"] == 0.02
+    (tmp_path / META_FILE).write_text(json.dumps({**meta, "victim_action": True}))
+    (tmp_path / "model.zip").write_bytes(b"")
+    with pytest.raises(ZodriveError, match=r"clean action \(attack-train --victim-action\): removed from zodrive"):
+        read_meta(tmp_path)
