@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from zodrive.policies.loading import load_model, model_file
+from zodrive.policies.loading import load_model
 from zodrive.policies.resolve import load_victim
 from zodrive.policies.safe_load import sha256, shipped_sums
 from zodrive.policies.victims import sb3_victim

@@ -74,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not args.models_dir.is_dir():
                 raise ZodriveError(f"--models {args.models_dir}: not a folder")
             os.environ[MODELS_ENV] = str(args.models_dir)
-        check_out(getattr(args, "out", None), is_file=args.command == "export")
+        check_out(getattr(args, "out", None), is_file=args.command in ("export", "leaderboard"))
         check_plot(getattr(args, "plot", None))
         env_models = os.environ.get(MODELS_ENV)
         if env_models and not Path(env_models).is_dir():
