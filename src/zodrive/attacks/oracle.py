@@ -131,7 +131,7 @@ class QueryOracle:
         (FGSM, PGD) may call this; black-box attacks never do.
         """
         if self.victim.differentiable is None:
-            raise ZodriveError("this victim offers no gradients; white-box attacks need an SB3 model")
+            raise ZodriveError("this victim offers no gradients; white-box attacks need a torch network (an SB3 model or a torch module)")
         owners = self._owners(len(batch), owners)
         self._charge(owners)
         x = torch.tensor(np.asarray(batch, dtype=np.float32), requires_grad=True)

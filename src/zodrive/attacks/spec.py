@@ -159,7 +159,7 @@ class AttackSpec(AttackOptions):
         objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
         attack.check_objective(objective)
         if not attack.black_box and victim.differentiable is None:
-            raise ZodriveError(f"{self.attack} is a white-box baseline and needs an SB3 model as victim")
+            raise ZodriveError(f"{self.attack} is a white-box baseline: it needs a victim with gradients (an SB3 model or a torch module, in memory or from FILE.py:NAME), not one that only answers queries")
         return attack, objective, QueryOracle(victim, self.query_budget)
 
 
