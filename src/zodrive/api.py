@@ -22,7 +22,8 @@ import numpy as np
 
 from zodrive.attacks.base import AttackResult
 from zodrive.attacks.spec import AttackSpec, load_attack
-from zodrive.envs import Scenario, gym_preset, load_preset, scenario, scenario_of_env
+from zodrive.envs import Scenario, gym_preset, load_preset, scenario_of_env
+from zodrive.envs import scenario as scenario_of
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
 from zodrive.evaluation.rollout import run_episode, run_lockstep
@@ -79,7 +80,7 @@ class Result:
         return ax
 
 
-def _preset(policy: Policy, scenario_name: str | dict[str, Any] | None, env_id: str | None) -> dict[str, Any]:
+def _preset(scenario_name: str | dict[str, Any] | None, env_id: str | None) -> dict[str, Any]:
     if isinstance(scenario_name, dict):
         return scenario_name
     if env_id is not None:
@@ -133,8 +134,8 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     :returns: the `Result`.
     """
     resolved = resolve(policy)
-    preset = _preset(resolved, scenario, env_id)
-    spec = _spec(attack, globals()["scenario"](preset), options)
+    preset = _preset(scenario, env_id)
+    spec = _spec(attack, scenario_of(preset), options)
     if not isinstance(episodes, int) or episodes < 1:
         raise ZodriveError(f"episodes must be a positive integer, not {episodes!r}")
     attack_dict = spec.to_dict() if spec is not None else None
@@ -155,7 +156,7 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
 def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defense: str | None,
            episodes: int, seed: int, envs: int):
     """Episodes of an in-memory policy, in this process."""
-    max_return = scenario(preset).max_return
+    max_return = scenario_of(preset).max_return
     if envs > 1 and (defense is None or defense.startswith(("shield", "close-shield"))):
         from zodrive.envs import make_env
 
@@ -188,8 +189,8 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
     :returns: `AttackResult`: `x_adv` (what the policy would see), per-row `success`, `queries`, `linf`, ...
     """
     resolved = resolve(policy)
-    preset = _preset(resolved, scenario, env_id)
-    where = globals()["scenario"](preset)
+    preset = _preset(scenario, env_id)
+    where = scenario_of(preset)
     obs = np.asarray(observations, dtype=np.float32)
     if obs.shape == where.obs_shape:
         obs = obs[None]

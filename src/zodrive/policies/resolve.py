@@ -89,7 +89,7 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
         raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
     if preset is not None:
         return load_preset(preset, env_set)
-    said = None if bl.is_baseline(model) or is_factory(model) or _is_onnx(model) else _trained_with(model)
+    said = None if bl.is_baseline(model) or is_factory(model) or is_onnx(model) else _trained_with(model)
     if said is not None and said.preset is not None:
         log.info("scenario: %s, the preset its run folder records", said.preset)
         return load_preset(said.preset, env_set)
@@ -103,10 +103,6 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
                     default["name"], model)
     return default
 
-
-def _is_onnx(model: str) -> bool:
-
-    return is_onnx(model)
 
 
 def _trained_with(model: str) -> TrainedWith:

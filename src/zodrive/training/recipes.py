@@ -272,28 +272,30 @@ class SignedCheckpoints(CheckpointCallback):
 
 def sign_checkpoints(folder: Path, names: list[str]) -> None:
     """Sign the checkpoint files `names` in `folder`, just written by this process."""
+    signed = _signatures(folder)
+    for name in names:
+        if (folder / name).is_file():
+            signed[name] = signature(folder / name)
+    write_json(folder / SIGNATURES, signed)
+
+
+def _signatures(folder: Path) -> dict[str, str]:
+    """The signatures recorded beside the checkpoints in `folder` (none if the file is missing or damaged)."""
     path = folder / SIGNATURES
     try:
         signed = json.loads(path.read_text()) if path.is_file() else {}
     except (json.JSONDecodeError, UnicodeDecodeError):
-        signed = {}
-    for name in names:
-        if (folder / name).is_file():
-            signed[name] = signature(folder / name)
-    write_json(path, signed)
+        return {}
+    return signed if isinstance(signed, dict) else {}
 
 
 def check_signed(files: list[Path], trust: bool) -> None:
     """Refuse to unpickle checkpoint `files` that this machine did not write, unless `trust`."""
     if trust:
         return
-    path = files[0].parent / SIGNATURES
-    try:
-        signed = json.loads(path.read_text()) if path.is_file() else {}
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        signed = {}
+    signed = _signatures(files[0].parent)
     for file in files:
-        if not isinstance(signed, dict) or signed.get(file.name) != signature(file):
+        if signed.get(file.name) != signature(file):
             raise ZodriveError(f"{file} was not written by zodrive on this machine: resuming unpickles it, which can "
                                "run code from the file; pass --trust-model if the run folder is yours")
 
