@@ -1,7 +1,8 @@
-"""Human-readable summaries of evaluations."""
+"""Human-readable summaries of evaluations, and the pyplot setup every figure shares."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 
@@ -90,3 +91,22 @@ def plural(count: int, word: str) -> str:
 def or_dash(value: float | None, pattern: str) -> str:
     """`value` formatted with `pattern`, or a dash where it was not measured (None)."""
     return "–" if value is None else pattern.format(value)
+
+
+def headless_pyplot():
+    """matplotlib's pyplot on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: Path, dpi: float | str = 120) -> None:
+    """Lay `fig` out, write it to `path` (making its folder) and close it."""
+    plt = headless_pyplot()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)

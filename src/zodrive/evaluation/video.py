@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from zodrive.attacks.victim import Victim
+from zodrive.evaluation.report import headless_pyplot, save_figure
 from zodrive.evaluation.rollout import act, left_road
 
 X_RANGE, Y_RANGE = 100.0, 100.0  # [m] the paper's presets' features_range for x and y
@@ -130,17 +131,9 @@ def _car(x: float, y: float, **style):
 
 
 def save_png(frames: list[Frame], path: Path, *, title: str = "", index: int = -1) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=(12, 3.0), dpi=110)
+    fig = headless_pyplot().figure(figsize=(12, 3.0), dpi=110)
     draw(frames[index], fig, index % len(frames), title)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path, dpi="figure")
 
 
 def save_mp4(frames: list[Frame], path: Path, *, title: str = "") -> bool:
@@ -150,13 +143,10 @@ def save_mp4(frames: list[Frame], path: Path, *, title: str = "") -> bool:
         import imageio_ffmpeg
     except ImportError:
         return False
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = headless_pyplot()
     from matplotlib.animation import FFMpegWriter, FuncAnimation
 
-    matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
+    plt.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
     fig = plt.figure(figsize=(10, 2.6), dpi=80)
     anim = FuncAnimation(fig, lambda i: draw(frames[i], fig, i, title), frames=len(frames))
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -167,10 +157,7 @@ def save_mp4(frames: list[Frame], path: Path, *, title: str = "") -> bool:
 
 def save_gif(frames: list[Frame], path: Path, *, title: str = "", every: int = 3, last: int = 150) -> None:
     """An animated GIF of the last `last` decisions (every `every`-th), ending on the crash."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = headless_pyplot()
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     start = max(0, len(frames) - last)

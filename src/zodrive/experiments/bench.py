@@ -10,7 +10,7 @@ evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -214,7 +214,7 @@ def write_leaderboard(board: Path, out: Path, plot: Path | None = None) -> str:
 
 def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     """Return against ε per scenario (worst black-box attack), one line per policy."""
-    from zodrive.experiments.curves import headless_pyplot
+    from zodrive.evaluation.report import headless_pyplot
 
     plt = headless_pyplot()
     scenarios = sorted({r["scenario"] for r in rows})
@@ -232,19 +232,3 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
-
-def protocol_table() -> str:
-    """The protocols as a Markdown table (docs/bench.md includes it)."""
-    lines = ["| Protocol | Episodes (seeds) | ε (normalized) | ε in the scenario's units | Black-box ensemble | White-box |",
-             "|---|---|---|---|---|---|"]
-    for proto in PROTOCOLS.values():
-        units = "; ".join(f"{e}: " + ", ".join(f"{f} {v:g}" for f, v in u.items())
-                          for e, u in physical_eps(proto).items())
-        lines.append(f"| {proto.name()} | {proto.episodes} ({proto.seed}–{proto.seed + proto.episodes - 1}) | "
-                     f"{', '.join(f'{e:g}' for e in proto.eps)} | {units} | {', '.join(proto.black_box)} | "
-                     f"{proto.white_box} |")
-    return "\n".join(lines)
-
-
-def as_dict(proto: Protocol) -> dict[str, Any]:
-    return asdict(proto)

@@ -21,7 +21,7 @@ from zodrive.policies.resolve import check_policy, resolve_preset
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
-from zodrive.evaluation.report import or_dash
+from zodrive.evaluation.report import headless_pyplot, or_dash, save_figure
 from zodrive.experiments.cells import Cell, number_name, policy_names, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
@@ -212,11 +212,7 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
 def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
     """Mean return (95% CI band) against eps, each system under its strongest attack; a
     policy that ignores its input is a horizontal dashed line (the floor a defense must beat)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = headless_pyplot()
     fig, ax = plt.subplots(figsize=(8.5, 4.5))
     table = strongest(rows)
     ax.set_prop_cycle(color=plt.cm.tab20.colors if len(table) > 10 else plt.cm.tab10.colors)  # one colour each
@@ -235,20 +231,13 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
         ax.fill_between(eps, [cells[e]["ci95_low"] for e in eps], [cells[e]["ci95_high"] for e in eps], alpha=0.15)
     ax.set(xlabel="ε (L∞, normalized units)", ylabel="mean return", title="return under the strongest attack")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
     """Return (left) and step success (right) against queries spent per step, one line per
     model and attack; points are the cells of the grid (eps and budget)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = headless_pyplot()
     fig, (ax_r, ax_s) = plt.subplots(1, 2, figsize=(10, 4))
     for (model, attack), group in _groups(rows).items():
         group = sorted(group, key=lambda r: r["queries_per_step"])
@@ -267,10 +256,7 @@ def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
         ax.xaxis.set_major_formatter(ScalarFormatter())
         ax.xaxis.set_minor_formatter(NullFormatter())
     ax_s.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _groups(rows: list[dict[str, Any]]) -> dict[tuple[str, str], list[dict[str, Any]]]:

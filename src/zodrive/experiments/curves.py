@@ -15,16 +15,7 @@ import numpy as np
 
 from zodrive.config import read_text
 from zodrive.errors import ZodriveError
-
-
-def headless_pyplot():
-    """matplotlib's pyplot on the Agg backend (no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+from zodrive.evaluation.report import headless_pyplot, save_figure
 
 
 def read_monitor(run: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -95,10 +86,7 @@ def plot_curves(runs: list[Path], bin_steps: int, path: Path) -> None:
     ax.set_xlabel("training step")
     ax.set_ylabel(f"mean training return per {_kilo(bin_steps)} steps")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _kilo(steps: int) -> str:

@@ -11,8 +11,8 @@ from zodrive.policies.resolve import load_victim
 from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import make_env
 from zodrive.evaluation.rollout import clean_states
-
-from zodrive.experiments.curves import headless_pyplot, read_monitor_csv
+from zodrive.evaluation.report import headless_pyplot, save_figure
+from zodrive.experiments.curves import read_monitor_csv
 from zodrive.seeds import TUNING_SEED  # states come from seeds outside the evaluation range
 from zodrive.system import build_attacker
 
@@ -51,10 +51,7 @@ def plot_loss(traces: dict[str, dict[str, Any]], path: Path) -> None:
         ax.set_ylabel("loss")
         ax.set_title(f"{name}: ZO-SignSGD on one step")
         ax.legend()
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_training_rewards(monitor_csv: Path, path: Path, title: str) -> dict[str, float]:
@@ -72,9 +69,6 @@ def plot_training_rewards(monitor_csv: Path, path: Path, title: str) -> dict[str
     ax.set_ylabel("reward per episode")
     ax.set_title(title)
     ax.legend()
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"episodes": int(len(rewards)), "first_half": float(rewards[: len(rewards) // 2].mean()) if len(rewards) > 1 else float("nan"),
             "second_half": float(rewards[len(rewards) // 2 :].mean()) if len(rewards) > 1 else float("nan")}
