@@ -10,11 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.drivers.baselines import get_baseline
+from zodrive.evaluation.report import or_dash
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
-
-MAX_RETURN = 450.0
 
 
 def _returns(out: Path, algo: str, row: str) -> list[float]:
@@ -66,16 +65,12 @@ def _baseline_label(row: str) -> str:
     return f"Baseline: {baseline.label}"
 
 
-def _fmt(value: Any, pattern: str) -> str:
-    return "–" if value is None else pattern.format(value)
-
-
 def _success(r: dict[str, Any]) -> str:
     rate = r.get("attack_success_rate")
     if rate is None:
         return "–"
     shown = "n/a" if rate != rate else f"{rate:.1%}"  # NaN: the clean policy always chose the target
-    return f"{shown} ({_fmt(r['target_base_rate'], '{:.1%}')})"  # no base rate: the clean observation unasked
+    return f"{shown} ({or_dash(r['target_base_rate'], '{:.1%}')})"  # no base rate: the clean observation unasked
 
 
 def table_markdown(records: list[dict[str, Any]]) -> str:
@@ -88,10 +83,10 @@ def table_markdown(records: list[dict[str, Any]]) -> str:
         success = _success(r)
         lines.append(
             f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
-            f"{r['pct_of_max']:.2f}% | {_fmt(r['paper_return'], '{:.2f}')} | {_fmt(r['paper_pct'], '{:.2f}%')} | "
-            f"{r['collision_rate']:.0%} | {_fmt(r.get('offroad_rate'), '{:.0%}')} | {_fmt(r.get('mean_speed'), '{:.1f}')} | "
-            f"{_fmt(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | {_fmt(r['queries_per_step'], '{:.0f}')} | "
-            f"{_fmt(r['max_linf'], '{:.3f}')} |"
+            f"{r['pct_of_max']:.2f}% | {or_dash(r['paper_return'], '{:.2f}')} | {or_dash(r['paper_pct'], '{:.2f}%')} | "
+            f"{r['collision_rate']:.0%} | {or_dash(r.get('offroad_rate'), '{:.0%}')} | {or_dash(r.get('mean_speed'), '{:.1f}')} | "
+            f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | {or_dash(r['queries_per_step'], '{:.0f}')} | "
+            f"{or_dash(r['max_linf'], '{:.3f}')} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -179,10 +174,10 @@ def _html_table(records: list[dict[str, Any]]) -> str:
     rows = []
     for r in records:
         cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",
-                 f"{r['pct_of_max']:.2f}%", _fmt(r["paper_return"], "{:.2f}"), f"{r['collision_rate']:.0%}",
-                 _fmt(r.get("offroad_rate"), "{:.0%}"), _fmt(r.get("mean_speed"), "{:.1f}"),
-                 _fmt(r.get("lane_changes_per_episode"), "{:.1f}"),
+                 f"{r['pct_of_max']:.2f}%", or_dash(r["paper_return"], "{:.2f}"), f"{r['collision_rate']:.0%}",
+                 or_dash(r.get("offroad_rate"), "{:.0%}"), or_dash(r.get("mean_speed"), "{:.1f}"),
+                 or_dash(r.get("lane_changes_per_episode"), "{:.1f}"),
                  _success(r),
-                 _fmt(r["queries_per_step"], "{:.0f}"), _fmt(r["max_linf"], "{:.3f}")]
+                 or_dash(r["queries_per_step"], "{:.0f}"), or_dash(r["max_linf"], "{:.3f}")]
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")

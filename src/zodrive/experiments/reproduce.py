@@ -64,10 +64,6 @@ ROBUSTNESS_ATTACK_SET = ["patience=10"]  # a step stops after 10 iterations with
 ROBUSTNESS_EPS = (0.02, 0.05, 0.1, 0.2)
 
 
-def _done(path: Path) -> bool:
-    return path.is_file()
-
-
 def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> dict[str, Path]:
     """Paths of the four models: shipped, or retrained into out/models (resumable)."""
     if not retrain:
@@ -82,9 +78,9 @@ def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> 
     for algo in ("dqn", "ddpg"):
         base, adv = out / "models" / algo, out / "models" / f"{algo}-adv"
         overrides = ["total_timesteps=2000"] if quick else []
-        if not _done(base / "model.zip"):
+        if not (base / "model.zip").is_file():
             train(load_recipe(algo, overrides), base, progress_bar=progress)
-        if not _done(adv / "model.zip"):
+        if not (adv / "model.zip").is_file():
             adversarial_train(base, load_preset(PRESET_OF[algo]), load_attack("zo-signsgd"),
                               500 if quick else ADV_STEPS[algo], adv, progress_bar=progress,
                               trust=True)  # trained by this very run
@@ -119,7 +115,7 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
     if quick:
         episodes = min(episodes, 5)
     out.mkdir(parents=True, exist_ok=True)
-    timings: dict[str, float] = _load_timings(out)
+    timings: dict[str, float] = read_json(out / "timings.json", "timings") if (out / "timings.json").is_file() else {}
     start = time.perf_counter()
     models = prepare_models(out, retrain=retrain, quick=quick, progress=progress)
     spec = load_attack("zo-signsgd")
@@ -181,11 +177,6 @@ def robustness(out: Path, *, episodes: int, quick: bool, **run: Any) -> int:
     write_atomic(out / "robustness.md", robustness_markdown(rows))  # also with one eps (quick mode)
     plot_robustness(rows, out / "robustness.png")
     return episodes
-
-
-def _load_timings(out: Path) -> dict[str, float]:
-    path = out / "timings.json"
-    return read_json(path, "timings") if path.is_file() else {}
 
 
 def make_figures(out: Path, models: dict[str, Path], spec: AttackSpec, *, quick: bool) -> dict[str, Any]:
