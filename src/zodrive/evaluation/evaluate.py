@@ -20,20 +20,23 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import check_policy
-from zodrive.system import make_policy_env
 from zodrive.attacks.base import ENGINE_VERSION
+from zodrive.attacks.registry import ATTACKS
+from zodrive.attacks.schema import removed_message, removed_settings, without_removed
 from zodrive.attacks.spec import PICKER_ATTACKS, AttackSpec
 from zodrive.compute import torch_threads
-from zodrive.defense import defense_version
+from zodrive.defense import defense_version, keeps_state
+from zodrive.envs import make_env, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
-from zodrive.runinfo import LOCK_FILE, command_line, read_json, read_jsonl, run_lock, to_json, versions, write_json
+from zodrive.policies.policy import resolve
+from zodrive.policies.resolve import check_policy
+from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, sha256, to_json, versions,
+                             write_atomic, write_json)
 from zodrive.seeds import EVAL_SEED
-from zodrive.system import build_attacker
+from zodrive.system import build_attacker, load_policy, make_policy_env
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +60,6 @@ class EvalJob:
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
         not), the preset, the attack (with the version of the attack engine that ran it) and
         the first seed."""
-        from zodrive.runinfo import sha256
-
         model = resolve(self.model).key()
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
@@ -70,7 +71,6 @@ class EvalJob:
             else:
                 key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
-
             key["defense"] = self.defense
             if defense_version(self.defense) is not None:
                 key["defense_version"] = defense_version(self.defense)
@@ -87,8 +87,6 @@ _WORKER: dict[str, Any] = {}
 def lockstep_blocker(job: EvalJob) -> str | None:
     """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
     policy that reads nothing but the observation and keeps no state between steps."""
-    from zodrive.defense import keeps_state
-
     if job.defense is not None and keeps_state(job.defense):
         return f"the {job.defense} defense keeps its own state for one episode"
     if resolve(job.model).reads_simulator:
@@ -104,9 +102,6 @@ def _setup(job: EvalJob, envs: int = 1) -> None:
         victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
         _WORKER.update(job=job, victim=victim, env=env)
         return
-    from zodrive.system import load_policy
-    from zodrive.envs import make_env
-
     victim = load_policy(job.model, job.preset, job.defense, trust=job.trust)  # a defense here keeps no state
     attacker = build_attacker(spec, victim, job.preset) if spec is not None else None
     _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
@@ -161,8 +156,6 @@ def _lockstep_share(indices: list[int], done: Any) -> None:
 
 
 def _max_return(preset: dict[str, Any]) -> float | None:
-    from zodrive.envs import scenario
-
     return scenario(preset).max_return
 
 
@@ -363,9 +356,6 @@ def _with_later_defaults(key: dict[str, Any]) -> dict[str, Any]:
     default is the behaviour the folder was made with, so it counts as set to the default. One
     it records that zodrive removed since counts when it holds the behaviour left (`schema.REMOVED`)."""
     if isinstance(key.get("attack"), dict):
-        from zodrive.attacks.schema import without_removed
-        from zodrive.attacks.spec import AttackSpec
-
         key = {**key, "attack": {**AttackSpec().to_dict(), **without_removed(key["attack"])}}
     return key
 
@@ -380,8 +370,6 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     on_disk = _with_later_defaults(on_disk)
     if on_disk == wanted:
         return
-    from zodrive.attacks.schema import removed_message, removed_settings
-
     if isinstance(on_disk.get("attack"), dict) and removed_settings(on_disk["attack"]):
         raise ZodriveError(f"{out} holds an evaluation made with {removed_message(removed_settings(on_disk['attack']))}; "
                            "use --force to replace it, or choose another --out")
@@ -398,12 +386,8 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
 def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
     """Drop step records of episodes that never finished (the run was cut mid-episode)."""
     steps = [s for s in _read_jsonl(out / "steps.jsonl") if s["episode"] in done]
-    tmp = out / ".steps.jsonl.tmp"
-    tmp.write_text("".join(to_json(s) + "\n" for s in steps))
-    os.replace(tmp, out / "steps.jsonl")
-    tmp = out / ".episodes.jsonl.tmp"
-    tmp.write_text("".join(to_json(done[i]) + "\n" for i in sorted(done)))
-    os.replace(tmp, out / "episodes.jsonl")
+    write_atomic(out / "steps.jsonl", "".join(to_json(s) + "\n" for s in steps))
+    write_atomic(out / "episodes.jsonl", "".join(to_json(done[i]) + "\n" for i in sorted(done)))
 
 
 def _progress(total: int, enabled: bool, label: str):
@@ -454,8 +438,6 @@ def summarize(
         applicable = sum(r["applicable"] for r in records)
         successes = sum(r["successes"] for r in records)
         learned = job.attack["attack"] == "learned"  # no per-step goal: no success rate, no base rate
-        from zodrive.attacks.registry import ATTACKS
-
         blind = job.attack["attack"] in ATTACKS and not ATTACKS[job.attack["attack"]].queries_clean
         summary.update(
             attack=job.attack["attack"],
