@@ -24,6 +24,7 @@ import torch as th
 from stable_baselines3 import DQN
 from torch.nn import functional as F
 
+from zodrive.training.finetune import drive_into_buffer
 from zodrive.training.state_adversarial import SAMixin
 from zodrive.attacks.threat import worst_in_ball
 
@@ -135,18 +136,8 @@ class GuidedDQN(LossHookDQN):
         """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the guide and put
         every transition in the replay buffer, as DQfD's demonstration data (n-step returns are
         computed from it like from any other transitions). Returns the demonstrations' mean return."""
-        returns = []
-        for episode in range(episodes):
-            obs, _ = env.reset(seed=seed + episode)
-            total, done = 0.0, False
-            while not done:
-                action = int(np.asarray(self.guide(obs[None]))[0])
-                next_obs, reward, terminated, truncated, _ = env.step(action)
-                done = terminated or truncated
-                self.replay_buffer.add(obs[None], next_obs[None], np.array([[action]]), np.array([reward]),  # type: ignore[union-attr]
-                                       np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
-                obs, total = next_obs, total + float(reward)
-            returns.append(total)
+        returns = drive_into_buffer(self.replay_buffer, env, episodes, seed,
+                                    lambda obs: int(np.asarray(self.guide(obs[None]))[0]))
         return {"episodes": episodes, "transitions": int(self.replay_buffer.size()),  # type: ignore[union-attr]
                 "mean_return": float(np.mean(returns))}
 

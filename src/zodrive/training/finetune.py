@@ -113,6 +113,24 @@ def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> No
     network.load_state_dict({k: v.to(dtype=ours[k].dtype) for k, v in theirs.items()})
 
 
+def drive_into_buffer(buffer: Any, env: Any, episodes: int, seed: int, choose: Any) -> list[float]:
+    """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) acting with `choose(obs)`
+    and add every transition to the replay `buffer`; returns the episodes' returns."""
+    returns = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        total, done = 0.0, False
+        while not done:
+            action = choose(obs)
+            next_obs, reward, terminated, truncated, _ = env.step(action)
+            done = terminated or truncated
+            buffer.add(obs[None], next_obs[None], np.reshape(action, (1, -1)), np.array([reward]), np.array([done]),
+                       [{"TimeLimit.truncated": truncated and not terminated}])
+            obs, total = next_obs, total + float(reward)
+        returns.append(total)
+    return returns
+
+
 def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float = 0.0) -> dict[str, Any]:
     """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the model's own
     action and add every transition to its replay buffer. A DQN acts greedily, a uniform random
@@ -122,27 +140,21 @@ def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float = 0.0
     Returns counts and the mean return."""
     rng = np.random.default_rng(seed)
     discrete = hasattr(model.action_space, "n")
-    returns, random_actions = [], 0
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        total, done = 0.0, False
-        while not done:
-            if not discrete:  # the actor's [-1, 1] space is the preset's (checked by the recipe)
-                with th.no_grad():
-                    action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
-                if model.action_noise is not None:
-                    action = np.clip(action + model.action_noise(), -1.0, 1.0)
-            elif rng.random() < epsilon:
-                action, random_actions = int(rng.integers(model.action_space.n)), random_actions + 1
-            else:
-                with th.no_grad():
-                    action = int(model.q_net(th.as_tensor(obs[None], dtype=th.float32)).argmax(dim=1)[0])
-            next_obs, reward, terminated, truncated, _ = env.step(action)
-            done = terminated or truncated
-            model.replay_buffer.add(obs[None], next_obs[None], np.reshape(action, (1, -1)), np.array([reward]),
-                                    np.array([done]), [{"TimeLimit.truncated": truncated and not terminated}])
-            obs, total = next_obs, total + float(reward)
-        returns.append(total)
+    random_actions = 0
+
+    def choose(obs: np.ndarray) -> Any:
+        nonlocal random_actions
+        if not discrete:  # the actor's [-1, 1] space is the preset's (checked by the recipe)
+            with th.no_grad():
+                action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
+            return action if model.action_noise is None else np.clip(action + model.action_noise(), -1.0, 1.0)
+        if rng.random() < epsilon:
+            random_actions += 1
+            return int(rng.integers(model.action_space.n))
+        with th.no_grad():
+            return int(model.q_net(th.as_tensor(obs[None], dtype=th.float32)).argmax(dim=1)[0])
+
+    returns = drive_into_buffer(model.replay_buffer, env, episodes, seed, choose)
     return {"episodes": episodes, "seeds_from": seed,
             **({"epsilon": epsilon, "random_actions": random_actions} if discrete else {}),
             "transitions": int(model.replay_buffer.size()), "mean_return": round(float(np.mean(returns)), 3)}
