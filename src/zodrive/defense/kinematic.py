@@ -87,12 +87,8 @@ class KinematicFilter:
         self.state = self.peek(obs[None])[0]
         return self.state.copy()
 
-    def predict(self) -> np.ndarray:
-        """Every tracked row one step ahead under constant (relative) velocity."""
-        assert self._pred is not None
-        return self._pred
-
     def _predict(self, state: np.ndarray) -> np.ndarray:
+        """Every tracked row one step ahead under constant (relative) velocity."""
         pred = state.copy()
         pred[1:, 1] += self.k * pred[1:, 3]  # other vehicles: relative x, y move with relative velocity
         pred[:, 2] += self.k * pred[:, 4]    # the ego's absolute x is clipped; its y moves with its vy
@@ -103,7 +99,7 @@ class KinematicFilter:
         batch = np.asarray(batch, dtype=np.float32)
         if self.state is None:
             return batch.copy()
-        pred = self.predict()
+        pred = self._pred
         b, v = batch.shape[:2]
         present = batch[:, :, 0] > 0.5
         tracked = pred[:, 0] > 0.5

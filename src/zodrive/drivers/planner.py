@@ -27,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from zodrive.drivers.rules import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, ObservationRules
+
 HORIZON_S = 5.0       # [s] look-ahead (2 s crashed at 28 m/s on a tuning seed: results/finetune/planner-probe.md)
 CRASH_SCORE = -1000.0  # a crash in a rollout, plus the step it came at
 REACH_BEHIND = 100.0   # [m] vehicles further behind the ego are dropped from the copies
 REACH_AHEAD = 250.0    # [m] ... and further ahead
-LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 
 
 class LookAheadPlanner:
@@ -40,8 +41,6 @@ class LookAheadPlanner:
     behave deterministically once placed, so a rollout is the future under that action."""
 
     def __init__(self, env: Any, preset: dict[str, Any], horizon_s: float = HORIZON_S) -> None:
-        from zodrive.drivers.rules import ObservationRules
-
         self.env = env
         self.rules = ObservationRules(preset)
         self.steps = max(1, round(horizon_s * env.unwrapped.config["policy_frequency"]))

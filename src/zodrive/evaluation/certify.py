@@ -140,7 +140,8 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
         return Certificate(np.concatenate([p.certified for p in parts]), np.concatenate([p.bound for p in parts]))
     layers, post, owner = _layers(net)
     flat = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(len(x0), -1))
-    lo_np, hi_np = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
+    box = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
+    lo, hi = torch.as_tensor(box[0]), torch.as_tensor(box[1])
     with torch.no_grad():
         clean = net(flat.float()).double()
         if kind == "discrete":
@@ -155,11 +156,10 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
             action = clean.argmax(dim=1)
             affine = _relu_mlp(layers)
             if affine is not None:  # CROWN on the score differences, with the last layer folded as above
-                n_out = b.shape[0]
-                spec = torch.eye(n_out, dtype=torch.float64)[action][:, None, :] - torch.eye(n_out, dtype=torch.float64)[None]
-                lower = _crown(affine[:-1] + [(w, b)], spec, torch.as_tensor(lo_np), torch.as_tensor(hi_np))
+                eye = torch.eye(b.shape[0], dtype=torch.float64)
+                lower = _crown(affine[:-1] + [(w, b)], eye[action][:, None, :] - eye[None], lo, hi)
             else:
-                h_lo, h_hi = _interval(layers[:last], torch.as_tensor(lo_np), torch.as_tensor(hi_np))
+                h_lo, h_hi = _interval(layers[:last], lo, hi)
                 diff_w = w[action][:, None, :] - w[None]          # (N, k, hidden): score(a*) - score(j)
                 diff_b = b[action][:, None] - b[None]
                 mid, rad = (h_hi + h_lo) / 2, (h_hi - h_lo) / 2
@@ -170,14 +170,12 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
         squash = isinstance(layers[-1], nn.Tanh) and _relu_mlp(layers[:-1]) is not None
         affine = _relu_mlp(layers[:-1] if squash else layers)
         if affine is not None:  # CROWN on each output (before the final tanh, which is monotone)
-            n_out = affine[-1][1].shape[0]
-            eye = torch.eye(n_out, dtype=torch.float64).expand(len(lo_np), -1, -1)
-            box = (torch.as_tensor(lo_np), torch.as_tensor(hi_np))
-            out_lo, out_hi = _crown(affine, eye, *box), -_crown(affine, -eye, *box)
+            eye = torch.eye(affine[-1][1].shape[0], dtype=torch.float64).expand(len(lo), -1, -1)
+            out_lo, out_hi = _crown(affine, eye, lo, hi), -_crown(affine, -eye, lo, hi)
             if squash:
                 out_lo, out_hi = torch.tanh(out_lo), torch.tanh(out_hi)
         else:
-            out_lo, out_hi = _interval(layers, torch.as_tensor(lo_np), torch.as_tensor(hi_np))
+            out_lo, out_hi = _interval(layers, lo, hi)
         if post in ("unscale", "clip"):  # monotone in each output: the bounds map to bounds
             low_a, high_a = owner.low.double(), owner.high.double()
             if post == "unscale":

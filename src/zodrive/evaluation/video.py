@@ -85,16 +85,15 @@ def _action_label(env, action: Any) -> str:
 def draw(frame: Frame, fig, step: int, title: str = "") -> None:
     """Draw one frame on `fig`: simulator left, perception right."""
     fig.clear()
-    if not frame.panel:  # no ego-relative vehicles to draw: the simulator's image alone
-        left = fig.subplots(1, 1)
-        left.imshow(frame.image)
-        left.set_axis_off()
-        left.set_title(f"{title}step {step}: {frame.label}", fontsize=9)
-        return
-    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [2.2, 1]})
+    if frame.panel:
+        left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [2.2, 1]})
+    else:  # no ego-relative vehicles to draw: the simulator's image alone
+        left, right = fig.subplots(1, 1), None
     left.imshow(frame.image)
     left.set_axis_off()
     left.set_title(f"{title}step {step}: {frame.label}", fontsize=9)
+    if right is None:
+        return
     for obs, style, label in ((frame.clean, dict(facecolor="tab:green", alpha=0.5), "real"),
                               (frame.perceived, dict(facecolor="none", edgecolor="tab:red", lw=1.5, zorder=3), "perceived")):
         for i, row in enumerate(obs):

@@ -88,10 +88,9 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     if dagger is not None:
         return dagger_distill(model, preset, eps, steps, out, teacher=teacher, rounds=dagger, seed=seed,
                               kappa=kappa, pgd_steps=pgd_steps, epochs=epochs)
-    guide = load_victim(teacher, preset) if teacher else network_victim(source.net, "discrete", source.obs_shape)
+    guide, env = teacher_and_env(teacher, source, preset)
     start = time.perf_counter()
     torch.manual_seed(seed)
-    env = make_env(preset)
     states = clean_states(env, guide, seed, steps)
     env.close()
     context = attack_context(preset)
@@ -126,13 +125,20 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     method = {"name": "robust-distillation", "teacher": teacher or "the source model", "eps": eps, "kappa": kappa,
               "pgd_steps": pgd_steps, "epochs": epochs, "states": steps,
               "reference": "Rusu et al. 2016; Madry et al. 2018"}
-    write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
-    _write_zip(model_file(model), student, out / "model.zip")
+    return _save(out, model, preset, seed, method, student, "dqn", start, steps,
+                 {"loss_per_epoch": history, "clean_agreement": round(agree, 4)})
+
+
+def _save(out: Path, model: str, preset: dict[str, Any], seed: int, method: dict[str, Any],
+          student: torch.nn.Sequential, algo: str, start: float, total: int, record: dict[str, Any]) -> Path:
+    """Write the run's record, the student's zip (`_write_zip`) and train.json (with `record`); the zip's path."""
+    source = model_file(model)
+    write_run_info(out, {"source_model": str(source), "preset": preset, "method": method}, seed)
+    _write_zip(source, student, out / "model.zip", algo)
     wall = time.perf_counter() - start
     write_json(out / "train.json", {
-        "algo": "dqn", "kind": "distill", "source_model": str(model_file(model)), "method": method,
-        "total_timesteps": steps, "seed": seed, "loss_per_epoch": history, "clean_agreement": round(agree, 4),
-        "wall_time_s": round(wall, 1), "steps_per_s": round(steps / wall, 1)})
+        "algo": algo, "kind": "distill", "source_model": str(source), "method": method, "total_timesteps": total,
+        "seed": seed, **record, "wall_time_s": round(wall, 1), "steps_per_s": round(total / wall, 1)})
     return out / "model.zip"
 
 
@@ -529,15 +535,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
                       std_floor=DAGGER_STD_FLOOR, **({"ego_jitter": DAGGER_EGO_JITTER} if jittered else {}),
                       init="the source actor's architecture, freshly initialized",
                       loss=continuous_loss)
-    write_run_info(out, {"source_model": str(model_file(model)), "preset": preset, "method": method}, seed)
-    _write_zip(model_file(model), folded(student), out / "model.zip", source.algo)
-    wall = time.perf_counter() - start
-    total = (rounds + 1) * steps
     last = records[-1]
     summary = ({"clean_agreement": last["train"]["all"], "heldout_agreement": last["heldout_student_states"]["all"]}
                if kind == "discrete" else {"heldout_action_error": last["heldout_student_states"]})
-    write_json(out / "train.json", {
-        "algo": source.algo, "kind": "distill", "source_model": str(model_file(model)), "method": method,
-        "total_timesteps": total, "seed": seed, "heldout_seeds": [held_seed, held_seed + steps - 1],
-        **summary, "rounds": records, "wall_time_s": round(wall, 1), "steps_per_s": round(total / wall, 1)})
-    return out / "model.zip"
+    return _save(out, model, preset, seed, method, folded(student), source.algo, start, (rounds + 1) * steps,
+                 {"heldout_seeds": [held_seed, held_seed + steps - 1], **summary, "rounds": records})

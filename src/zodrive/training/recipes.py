@@ -300,15 +300,6 @@ def check_signed(files: list[Path], trust: bool) -> None:
                                "run code from the file; pass --trust-model if the run folder is yours")
 
 
-def latest_checkpoint(out: Path, algo: str) -> tuple[Path, int] | None:
-    """The newest `checkpoints/{algo}_{N}_steps.zip` in a run folder, and N."""
-    found = checkpoints(out, algo)
-    if not found:
-        return None
-    steps, path = found[-1]
-    return path, steps
-
-
 def _without_budget(recipe: Any) -> Any:
     return {k: v for k, v in recipe.items() if k != "total_timesteps"} if isinstance(recipe, dict) else recipe
 
@@ -383,7 +374,8 @@ def check_n_step_buffer(model: Any, recipe: dict[str, Any]) -> None:
 def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any], *, resume: bool,
            previous: dict[str, Any] | None, progress_bar: bool, tensorboard: bool, trust: bool = False) -> Path:
     algo = recipe["algo"]
-    checkpoint = latest_checkpoint(out, algo) if resume else None
+    found = checkpoints(out, algo) if resume else []
+    checkpoint = found[-1] if found else None  # the newest: (steps, path)
     if previous is None:
         write_run_info(out, {"recipe": recipe, "preset": preset}, seed)
     else:  # the run folder keeps the command that started it and lists those that continued it
@@ -392,7 +384,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         write_json(out / "run.json", run)
         write_atomic(out / "config.yaml", yaml.safe_dump({**previous, "recipe": recipe}, sort_keys=False))
 
-    env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[1], out,
+    env = make_training_env(preset, seed if checkpoint is None else seed + checkpoint[0], out,
                             append=checkpoint is not None)
     if checkpoint is None:
         kwargs = dict(recipe.get("hyperparameters") or {})
@@ -409,7 +401,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         )
         done = 0
     else:
-        path, done = checkpoint
+        done, path = checkpoint
         buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
         check_signed([path, *([buffer] if buffer.is_file() else [])], trust)
         with warnings.catch_warnings():  # SB3 says n_steps is ignored, wrongly on a load: `check_n_step_buffer`
