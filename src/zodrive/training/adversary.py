@@ -1,16 +1,9 @@
 """Train a learned optimal adversary (`zodrive attack-train`): SA-RL, Zhang et al., ICLR 2021.
 
-The attacker is an SB3 PPO agent in an environment of its own (`AdversaryEnv`): it observes
-the true observation, its action
-a in [-1, 1]^d becomes the perturbation eps * a on the d perturbable coordinates, projected
-by the same threat model as every attack (`zodrive.attacks.learned.apply_action`); the fixed
-victim acts on the perturbed observation, the real environment steps, and the adversary's
-reward is minus the victim's environment reward (`reward="minus"`: a crash ends the episode,
-so it is paid by the rewards the victim no longer collects) or the same objective over the
-fixed horizon with a crash credited at once (`reward="horizon"`). Every victim call goes through a
-`QueryOracle` and is counted in train.json. The folder it writes (model.zip, adversary.json,
-config.yaml, run.json, train.json, CARD.md) is read back by `--attack learned:DIR` through
-the safe loader (PPO's Gaussian mean, clipped to [-1, 1]; nothing unpickled).
+An SB3 PPO agent in an environment of its own (`AdversaryEnv`) perturbs the fixed victim's
+observation to lower its return; every victim call is counted. The folder it writes is read back by
+`--attack learned:DIR` through the safe loader (nothing unpickled). The MDP, the rewards, the
+exploration and the folder are described in docs/attacks.md ("The learned adversary").
 """
 
 from __future__ import annotations
@@ -38,18 +31,14 @@ log = logging.getLogger(__name__)
 
 PPO_DEFAULTS = {"n_steps": 1024, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
                 "gae_lambda": 0.95, "ent_coef": 0.0, "use_sde": True, "sde_sample_freq": 128}
-"""SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions) and gSDE
-exploration (Raffin et al., CoRL 2021) whose noise is redrawn every 128 steps: a perturbation
-that must be held for many steps to make the victim crash is tried as a whole, where
-independent per-step noise averages out."""
+"""SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions) and gSDE exploration
+(Raffin et al., CoRL 2021) redrawn every 128 steps: a perturbation held for many steps is tried as a whole."""
 REWARDS = ("minus", "horizon")
 """The adversary's reward (`AdversaryEnv._reward`): minus the victim's reward, or the same
 objective over the fixed horizon with a crash credited at once."""
 LOG_STD_INIT = -1.0
-"""Initial log std of gSDE's noise weights (SB3's default 0). With gSDE the action's std is
-|latent features| x exp(log std) summed over the 64 latent features: measured on the committed
-adversaries it is 1.3-1.9 per dimension of [-1, 1], so the samples sit near the box's corners
-whatever the mean. `explore_std` replaces it by a plain Gaussian of a stated std."""
+"""Initial log std of gSDE's noise weights (SB3's default 0); the samples still sit near the box's corners
+(docs/attacks.md). `explore_std` replaces it by a plain Gaussian of a stated std."""
 
 
 class AdversaryEnv(gym.Env):
@@ -201,11 +190,10 @@ def attack_train(
 
     from zodrive.policies.policy import resolve
     from zodrive.system import load_policy
-    from zodrive.runinfo import sha256
     from zodrive.training.recipes import check_run_folder
     from zodrive.attacks.spec import AttackSpec
     from zodrive.envs import attack_context, make_env
-    from zodrive.runinfo import write_atomic, write_json, write_run_info
+    from zodrive.runinfo import sha256, write_atomic, write_json, write_run_info
 
     if not (isinstance(steps, int) and steps >= (0 if pretrain else 1)):
         raise ZodriveError(f"steps must be an integer >= 1 (>= 0 with a pretrained start), not {steps}")

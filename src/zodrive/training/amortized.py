@@ -1,23 +1,11 @@
 """A learned adversary's start: an amortized transfer attack, fitted before PPO (`attack-train --pretrain-rounds`).
 
-SA-RL's adversary learns state -> perturbation from the victim's return alone; 100 000 steps
-did not make the DQN driver crash (`results/learned-adversary`), while per-step searches that
-push the victim toward one harmful action (FASTER) crash it in nearly every episode. This
-module gives the adversary that per-step skill up front, black-box and with no query at
-attack time:
-
-1. the victim drives under the current adversary; every visited state's perturbed
-   observation (the one query the victim's decision needs) and `probes` random points of the
-   eps-ball around it are sent to the victim through a counting `QueryOracle`;
-2. a surrogate network is fitted to those outputs (a substitute model, Papernot et al.,
-   "Practical Black-Box Attacks against Machine Learning", AsiaCCS 2017);
-3. the adversary's mean action is fitted so that, through the threat model's projection,
-   the surrogate takes the target action on the visited states by a margin (an adversarial
-   transformation network, Baluja & Fischer, AAAI 2018; the margin is `margin` times the
-   victim's median decision gap, so the attack survives the surrogate's error);
-repeated for `rounds` rounds (DAgger-style: later rounds visit the states the adversary
-itself leads to). Gradients flow through the surrogate only; the victim is only queried, and
-every query is counted (`queries` of the result).
+Why: SA-RL's adversary learns from the victim's return alone, and 100 000 steps did not make the DQN
+driver crash (`results/learned-adversary`), while per-step searches that push the victim toward one
+harmful action (FASTER) crash it in nearly every episode. Each round the victim drives under the current
+adversary; the points it is queried on train a surrogate (Papernot et al., AsiaCCS 2017), and the
+adversary's mean action is fitted through the surrogate so that it takes the target by a margin (Baluja &
+Fischer, AAAI 2018). Every victim query is counted. Details: docs/attacks.md ("A fitted start").
 """
 
 from __future__ import annotations

@@ -1,15 +1,9 @@
 """Fit a picker for vertex hold (`zodrive picker-train`; the attack side is `zodrive.attacks.picker`).
 
-The picker is a classifier of "the victim takes the target on this observation", fitted offline
-from counted queries. At attack time it ranks random vertices of the eps-ball, and vertex hold feeds
-the best one (one victim query per step, as without it). In each round the victim drives `episodes` training
-episodes under vertex hold, blind in round 0 and with the picker fitted so far after that. At every
-state it meets, `probes` random vertices are queried, and the MLP is refitted on the labels of all
-rounds. Refitting on the states the attack itself leads to is DAgger's remedy for a learner that
-changes its own inputs (Ross et al., AISTATS 2011). Every victim call goes through one `QueryOracle`
-and is counted in train.json. Training episodes use environment seeds 10000 * seed + 1000 * round +
-episode, below 50000 for seeds 0-4: zodrive's training range (`zodrive.seeds`), apart from tuning and
-evaluation seeds.
+The picker is a classifier of "the victim takes the target on this observation", fitted from counted
+queries in rounds on the states the attack itself leads to (DAgger's remedy; docs/attacks.md, "With a
+picker"). Training episodes use environment seeds 10000 * seed + 1000 * round + episode, below 50000 for
+seeds 0-4: zodrive's training range (`zodrive.seeds`), apart from tuning and evaluation seeds.
 """
 
 from __future__ import annotations
@@ -88,12 +82,11 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
     from zodrive.attacks.picker import FORMAT, META_FILE, WEIGHTS_FILE, Picker, network, objective_target
     from zodrive.policies.policy import resolve
     from zodrive.system import load_policy
-    from zodrive.runinfo import sha256
     from zodrive.training.recipes import check_run_folder
     from zodrive.attacks.spec import AttackSpec
     from zodrive.envs import attack_context, make_env
     from zodrive.evaluation.rollout import to_action
-    from zodrive.runinfo import write_atomic, write_json, write_run_info
+    from zodrive.runinfo import sha256, write_atomic, write_json, write_run_info
 
     fit.check()
     if not (isinstance(seed, int) and 0 <= seed <= 4):
