@@ -260,9 +260,12 @@ def test_compare_over_query_budgets_draws_the_budget_curve(tiny_dqn: Path, tmp_p
 
 def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "curve"
-    assert main(["compare", str(tiny_dqn), "baseline:slower", "baseline:rules", "--attacks", "uniform-noise", "pgd",
+    pgd = tmp_path / "configs" / "pgd.yaml"  # steps for PGD alone: uniform noise takes none (--attack-set would be refused)
+    pgd.parent.mkdir()
+    pgd.write_text("attack: pgd\nsteps: 3\n")
+    assert main(["compare", str(tiny_dqn), "baseline:slower", "baseline:rules", "--attacks", "uniform-noise", str(pgd),
                  "--eps", "0.05", "0.2", "--defense", "none", "kinematic", "--episodes", "2", "--out", str(out), "--no-progress",
-                 "--env-set", "max_episode_steps=40", "--attack-set", "steps=3",
+                 "--env-set", "max_episode_steps=40",
                  "--plot", str(out / "robustness.png")]) == 0
     rows = json.loads((out / "table.json").read_text())
     model = [r for r in rows if r["model"] == tiny_dqn.name]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from toys import CONTEXT, context, linear_victim, observations
+from toys import CONTEXT, context, linear_victim, observations, readable
 from zodrive.attacks import ATTACKS, AttackSpec, ThreatModel
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
@@ -29,7 +29,7 @@ def recording(victim: Victim, seen: list[np.ndarray]) -> Victim:
 
 
 def _attack(name: str, victim: Victim, x0: np.ndarray, **kw):
-    attack, objective, oracle = AttackSpec(attack=name, **kw).build(victim, **context(victim.kind))
+    attack, objective, oracle = AttackSpec(attack=name, **readable(name, **kw)).build(victim, **context(victim.kind))
     return attack.perturb(x0, oracle, objective), oracle, attack
 
 
@@ -216,8 +216,8 @@ def test_worst_action_target_aims_at_what_the_victim_values_least() -> None:
 @pytest.mark.parametrize("name", ["zo-signsgd", "random-search", "pgd", "uniform-noise"])
 def test_max_change_keeps_every_fed_perturbation_within_reach_of_the_last(name: str) -> None:
     victim = linear_victim(seed=2)
-    attack, objective, oracle = AttackSpec(attack=name, eps=0.3, max_change=0.02, steps=10,
-                                           n_directions=4).build(victim, **CONTEXT)
+    attack, objective, oracle = AttackSpec(attack=name, **readable(name, eps=0.3, max_change=0.02, steps=10,
+                                                                   n_directions=4)).build(victim, **CONTEXT)
     rng = np.random.default_rng(0)
     x0 = observations(8, seed=5)
     last = None

@@ -57,7 +57,7 @@ def _error(capsys, args: list[str]) -> str:
      "--kappa: expected a finite number >= 0"),
     (["train", "--algo", "dqn", "--out", "{tmp}/t", "--set", "hyperparameters.batch_size=-4"],
      "batch_size must be an integer >= 1"),
-    (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "--eps: expected a finite number > 0, got inf"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "inf"], "--eps: expected a finite number in (0, 1e+06], got inf"),
     # words
     (["export", str(ROOT / "README.md"), "--out", "{tmp}/m.onnx"], "not a stable-baselines3 model"),
     # plain cloning has no radius (issue 22)
@@ -73,6 +73,18 @@ def _error(capsys, args: list[str]) -> str:
     (["evaluate", DQN, "--envs", "0"], "--envs"),
     (["evaluate", DQN, "--attack", "zo-signsgd", "--patience", "3", "--no-patience"], "contradict each other"),
     (["evaluate", DQN, "--no-warm-start"], "no --attack was given"),
+    # limits at the edge and the option rule, generated from the attack schema (issue 47)
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--n-directions", "10000000000"],
+     "--n-directions: expected an integer in [1, 10000], got 10000000000"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--query-budget", str(10**30)], "--query-budget: expected an integer in [1, 1e+09]"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--eps", "1e300"], "--eps: expected a finite number in (0, 1e+06], got 1e300"),
+    (["evaluate", DQN, "--attack", "pgd", "--n-directions", "5"], "attack pgd: n_directions has no effect"),
+    (["evaluate", DQN, "--attack", "pgd", "--mu", "0.1"], "attack pgd: mu has no effect"),
+    (["evaluate", DQN, "--attack", "uniform-noise", "--steps", "5"], "attack uniform-noise: steps has no effect"),
+    (["evaluate", DQN, "--attack", "fgsm", "--steps", "50"], "attack fgsm: steps has no effect"),
+    (["evaluate", DQN, "--attack", "random-search", "--step-size", "0.1"], "attack random-search: step_size has no effect"),
+    (["compare", DQN, "--attacks", "fgsm", "pgd", "--attack-set", "steps=3", "--out", "{tmp}/c"],
+     "attack fgsm: steps has no effect"),
 ])
 def test_each_finding_is_one_clear_line(tmp_path: Path, capsys, args: list[str], message: str) -> None:
     err = _error(capsys, [a.replace("{tmp}", str(tmp_path)) for a in args])

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import torch
 
-from toys import blind_picker, context, linear_victim, observations
+from toys import blind_picker, context, linear_victim, observations, readable
 from zodrive.attacks import ATTACKS, AttackSpec
 from zodrive.attacks.base import AttackResult
 from zodrive.attacks.picker import Picker
@@ -90,7 +90,7 @@ def run(case: dict[str, Any], seed: int) -> str:
     victim = dataclasses.replace(linear_victim(seed=3, kind=kind), calibrate=None)
     steps = {} if options["attack"] in ("vertex-hold", "vertex-check") else {"steps": 6, "n_directions": 4}
     folder = {"adversary": blind_picker(0.1)} if options["attack"] == "vertex-check" else {}
-    spec = AttackSpec(**{"eps": 0.1, **steps, **options, **folder})
+    spec = AttackSpec(**{"eps": 0.1, **readable(options["attack"], **{**steps, **options}), **folder})
     attack, objective, oracle = spec.build(victim, **context(kind))
     if picker is not None:  # a picker held in memory (a folder's is an MLP fitted by picker-train)
         attack.use_picker(toy_picker(picker), {"target": 3, "tol": None})

@@ -21,6 +21,15 @@ def context(kind: str = "discrete") -> dict:
     return {**CONTEXT, "n_actions": 5 if kind == "discrete" else 2}
 
 
+def readable(name: str, **options):
+    """`options` without those attack `name` does not read (`Attack.reads`), which it would refuse: one set of
+    options for a test that runs every attack."""
+    from zodrive.attacks.base import TUNABLE
+    from zodrive.attacks.registry import ATTACKS
+
+    return {k: v for k, v in options.items() if k not in TUNABLE or k in ATTACKS[name].reads}
+
+
 def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Victim:
     """A small tanh MLP over (5, 5) observations: 5 Q-values or a 2-d action in [-1, 1]."""
     gen = torch.Generator().manual_seed(seed)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import abc
 import inspect
 from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Sequence
+from typing import Any, Callable, ClassVar, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -41,6 +41,16 @@ from zodrive.errors import ZodriveError
 
 DEFAULTS = AttackOptions()
 """The schema's defaults, which an attack built directly (not from an `AttackSpec`) shares."""
+TUNABLE = ("steps", "n_directions", "mu", "step_size", "l2_weight", "early_stop", "patience", "warm_start",
+           "max_change", "seed", "target", "loss", "weight", "kappa", "tol")
+"""The schema's options that some attacks read and others do not (each attack says which, `Attack.reads`);
+the others (the attack, the budget ball, the frozen features, the query budget) every attack reads."""
+
+
+def reads_all_but(*unread: str) -> frozenset[str]:
+    """The tunable options but `unread`: an attack's `reads`."""
+    assert set(unread) <= set(TUNABLE), unread
+    return frozenset(TUNABLE) - set(unread)
 
 ENGINE_VERSION = 2
 """Bumped whenever the driver's behaviour changes what an attack returns (results on disk
@@ -86,7 +96,7 @@ class Attack(abc.ABC):
     search: ClassVar[bool] = True  # runs the driver below (T iterations of q proposals); False: its own perturb
     queries_clean: ClassVar[bool] = True  # asks the victim about the clean observation (so a base rate is known)
     no_search: ClassVar[str] = ""  # an attack that is no search (`search = False`): why the search options do nothing
-    unread: ClassVar[tuple[str, ...]] = ()  # `AttackSpec` objective options it never reads (giving one is an error)
+    reads: ClassVar[frozenset[str]] = frozenset(TUNABLE)  # the tunable options it reads; another one given is an error
     reference: ClassVar[str] = ""
 
     def __init__(
@@ -119,18 +129,12 @@ class Attack(abc.ABC):
         self.warm_start = bool(warm_start)
         self.max_change = None if max_change is None else float(max_change)
         self.seed = seed
+        refuse_unread(type(self), {name: getattr(self, name) for name in ENGINE_OPTIONS})
         self._rngs = [np.random.default_rng(seed)]  # one random stream per row
         # per row, the last step's best perturbation (warm start) and fed perturbation
         # (max_change); a row of NaN has none (its episode has just begun)
         self._carry: np.ndarray | None = None
         self._fed: np.ndarray | None = None
-
-    def refuse_search_options(self, reads: tuple[str, ...] = ()) -> None:
-        """An attack that is no search (its own `perturb`) reads none of the search options but
-        `reads`: one given anyway would be ignored, which is an error."""
-        for option, default in SEARCH_DEFAULTS.items():
-            if option not in reads and getattr(self, option) != default:
-                raise ZodriveError(f"attack {self.name}: {option} has no effect ({self.no_search})")
 
     @classmethod
     def check_objective(cls, objective: Objective) -> None:
@@ -463,9 +467,16 @@ def needs_fixed_target(name: str) -> str:
 ENGINE_OPTIONS = tuple(name for name, p in inspect.signature(Attack.__init__).parameters.items()
                        if p.kind is p.KEYWORD_ONLY)
 """The schema's options every attack takes (`AttackSpec` passes them to `make_attack`)."""
-# the search options and their defaults (mu and step_size are read by the searches that use them
-# only, so they are not checked)
-SEARCH_DEFAULTS = {name: getattr(DEFAULTS, name) for name in ENGINE_OPTIONS if name not in ("mu", "step_size")}
+
+
+def refuse_unread(cls: type[Attack], values: Mapping[str, Any]) -> None:
+    """The option rule: a tunable option (`TUNABLE`) that attack `cls` does not read (`Attack.reads`),
+    given at a value other than the schema's default, would be ignored (and recorded as if it ran):
+    an error."""
+    for option in TUNABLE:
+        if option in values and option not in cls.reads and values[option] != getattr(DEFAULTS, option):
+            why = cls.no_search or f"{cls.name} reads only {', '.join(o for o in TUNABLE if o in cls.reads)}"
+            raise ZodriveError(f"attack {cls.name}: {option} has no effect ({why})")
 
 
 class GradientEstimateAttack(Attack):

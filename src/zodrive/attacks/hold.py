@@ -49,14 +49,13 @@ class VertexHold(Attack):
     search = False
     queries_clean = False
     no_search = "vertex hold queries one point per step and only asks whether the victim took the target"
-    unread = ("loss", "weight", "kappa", "mu", "step_size")  # (`tol` it reads: a continuous target's tolerance)
+    reads = frozenset({"seed", "target", "tol"})  # (`tol`: a continuous target's tolerance)
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         """`adversary`: a picker's folder (`vertex-hold:DIR`), else vertices are drawn blind."""
         super().__init__(threat, **kwargs)
-        self.refuse_search_options(reads=("seed",))
         if threat.norm != "linf":
             raise ZodriveError("attack vertex-hold draws vertices of the L-inf ball: use norm linf")
         self.picker: Picker | None = None

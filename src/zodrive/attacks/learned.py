@@ -122,7 +122,7 @@ class LearnedAdversary(Attack):
     name = NAME
     search = False
     no_search = "the adversary was trained to lower the victim's return; it has no per-step objective or search"
-    unread = ("target", "loss", "weight", "kappa", "tol", "mu", "step_size")
+    reads: frozenset[str] = frozenset()
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None,
@@ -131,7 +131,6 @@ class LearnedAdversary(Attack):
         safe loader, `zodrive.policies.loading.load_network`); without it only the folder's
         description is checked (an options check before any episode)."""
         super().__init__(threat, **kwargs)
-        self.refuse_search_options()
         if adversary is None:
             raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR "
                                "(a folder written by `zodrive attack-train`)")

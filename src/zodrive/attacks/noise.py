@@ -12,16 +12,18 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.attacks.base import Attack
+from zodrive.attacks.base import reads_all_but, Attack
 
 
 class UniformNoise(Attack):
     name = "uniform-noise"
     reference = "baseline (no paper): uniform noise in the threat model"
 
+    reads = reads_all_but("steps", "n_directions", "mu", "step_size", "patience")
+
     def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
-        kwargs["steps"] = 1  # one draw, queried once
         super().__init__(threat, **kwargs)
+        self.steps = 1  # one draw, queried once
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 2

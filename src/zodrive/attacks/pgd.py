@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.attacks.base import Attack, AttackResult
+from zodrive.attacks.base import reads_all_but, Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 
@@ -27,6 +27,7 @@ from zodrive.attacks.oracle import QueryOracle
 class PGD(Attack):
     name = "pgd"
     black_box = False
+    reads = reads_all_but("n_directions", "mu")
     reference = "Madry et al., ICLR 2018 (white-box)"
     _unstick = False  # set per call from the objective (`Objective.flat_at_clean`)
 
@@ -60,11 +61,12 @@ class FGSM(PGD):
     """One signed-gradient step of size eps (PGD with T = 2 and step = eps)."""
 
     name = "fgsm"
+    reads = reads_all_but("steps", "n_directions", "mu", "step_size", "patience")
     reference = "Goodfellow et al., ICLR 2015 (white-box)"
 
     def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
-        kwargs["steps"] = 2  # gradient at x0, then evaluate x0 - eps * sign(grad)
         super().__init__(threat, **kwargs)
+        self.steps = 2  # gradient at x0, then evaluate x0 - eps * sign(grad)
 
     def _step(self) -> float:
         return self.threat.eps

@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from zodrive.attacks.base import Attack
+from zodrive.attacks.base import reads_all_but, Attack
 
 
 class RandomSearch(Attack):
     name = "random-search"
+    reads = reads_all_but("mu", "step_size")  # it moves between vertices: no finite differences, no step
     reference = "Andriushchenko et al., Square Attack, ECCV 2020"
     p_init: float = 0.3  # initial fraction of coordinates re-drawn per proposal
 

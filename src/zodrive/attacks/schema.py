@@ -23,6 +23,12 @@ from zodrive.validation import Strict
 DEFAULT_MU = 0.005         # smoothing radius of finite differences [normalized units]
 DEFAULT_STEP_SIZE = 0.02   # per-iteration step; chosen by measurement (studies/tune-attack/tune_attack.py)
 DEFAULT_FROZEN = ("presence",)
+MAX_NUMBER = 1e6
+"""The largest value of a real option (eps, mu, step, weights): observations are normalized to about [-1, 1],
+and 1e300 would overflow float32 into inf and NaN halfway through a run; a bound refuses it at the edge."""
+MAX_ITERATIONS = 100_000    # T, patience: 100,000 iterations of one environment step is already days
+MAX_DIRECTIONS = 10_000     # q: 10,000 probes of a 35-feature observation on 8 rows are 22 MB a batch
+MAX_QUERIES = 10**9         # a query budget per step (10**30 overflowed the int64 counters)
 
 
 def option(default: Any, description: str, *, flag: str | None = None, off: str | None = None,
@@ -44,38 +50,38 @@ class AttackOptions(Strict):
         "zo-signsgd", "the attack: a registry name; on the command line also an attack config (name or YAML), "
         "learned:DIR (an adversary trained by attack-train), vertex-hold:DIR or vertex-check:DIR (a picker fitted by "
         "picker-train)", flag="--attack", metavar="NAME")
-    eps: float = option(0.2, "budget radius of the perturbation [normalized units]", gt=0)
+    eps: float = option(0.2, "budget radius of the perturbation [normalized units]", gt=0, le=MAX_NUMBER)
     norm: Literal["linf", "l2"] = option("linf", "the norm of the budget ball")
     mode: Literal["budgeted", "paper"] = option(
         "budgeted", "budgeted: projected onto the eps-ball; paper: unconstrained as published (eps only scales the "
         "reported distortion)")
     frozen: tuple[str, ...] = option(DEFAULT_FROZEN, "features the attacker may not touch (none: every feature may "
                                      "change)", metavar="FEATURE")
-    steps: StrictInt = option(100, "T, iterations per environment step", ge=1, metavar="T")
-    n_directions: StrictInt = option(20, "q, random directions per iteration", ge=1, metavar="Q")
-    mu: float = option(DEFAULT_MU, "smoothing radius of the finite differences", gt=0)
-    step_size: float = option(DEFAULT_STEP_SIZE, "delta, the per-iteration step", gt=0, metavar="DELTA")
-    l2_weight: float = option(0.0, "weight of L2 = ||x' - x||^2 in the objective", ge=0, metavar="W")
+    steps: StrictInt = option(100, "T, iterations per environment step", ge=1, le=MAX_ITERATIONS, metavar="T")
+    n_directions: StrictInt = option(20, "q, random directions per iteration", ge=1, le=MAX_DIRECTIONS, metavar="Q")
+    mu: float = option(DEFAULT_MU, "smoothing radius of the finite differences", gt=0, le=MAX_NUMBER)
+    step_size: float = option(DEFAULT_STEP_SIZE, "delta, the per-iteration step", gt=0, le=MAX_NUMBER, metavar="DELTA")
+    l2_weight: float = option(0.0, "weight of L2 = ||x' - x||^2 in the objective", ge=0, le=MAX_NUMBER, metavar="W")
     target: Union[str, StrictInt, tuple[float, ...]] = option(
         "auto", "FASTER, an action index, '1,0.5', auto (the paper's: FASTER / [1, 0.5]), none (untargeted), worst, "
         "not:ACTION (discrete: any action but that one, e.g. not:SLOWER) or ACTION,not:ACTION (the action, else at "
         "least not the other: FASTER,not:SLOWER)")
     loss: Literal["margin", "paper"] = option(
         "margin", "the objective of a targeted attack on a discrete policy: margin (C&W) or paper (the literal Eq. 5)")
-    weight: float = option(1.0, "the paper's constant a in front of L1", gt=0, metavar="A")
-    kappa: float = option(0.01, "margin confidence (discrete)", ge=0)
-    tol: float = option(0.2, "success tolerance on continuous actions", gt=0)
+    weight: float = option(1.0, "the paper's constant a in front of L1", gt=0, le=MAX_NUMBER, metavar="A")
+    kappa: float = option(0.01, "margin confidence (discrete)", ge=0, le=MAX_NUMBER)
+    tol: float = option(0.2, "success tolerance on continuous actions", gt=0, le=MAX_NUMBER)
     early_stop: StrictBool = option(True, "stop a step's iterations once the goal is met",
                                     off="run all T iterations of every step")
     patience: Optional[StrictInt] = option(
-        None, "give up a step after N iterations without progress", ge=1, metavar="N",
+        None, "give up a step after N iterations without progress", ge=1, le=MAX_ITERATIONS, metavar="N",
         clear="run every step until its goal is met or T iterations are spent")
     warm_start: StrictBool = option(False, "start each step's search from the previous step's perturbation",
                                     off="start each step's search at the clean observation")
     max_change: Optional[float] = option(
-        None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0,
+        None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0, le=MAX_NUMBER,
         metavar="D")
-    query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1,
+    query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1, le=MAX_QUERIES,
                                                 metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
     adversary: Optional[str] = option(

@@ -8,7 +8,7 @@ from typing import Any, Sequence
 from pydantic import ValidationError
 
 from zodrive.attacks.victim import Victim
-from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target
+from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target, refuse_unread
 from zodrive.attacks.hold import PLAIN_CHECK, VertexCheck
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
@@ -112,20 +112,17 @@ class AttackSpec(AttackOptions):
         self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=())))  # type: ignore[arg-type]
 
     def _check_unread(self) -> None:
-        """An objective option the attack never reads is an error, and so is a goal defined by the
-        clean observation for an attack that never queries it (`Attack.unread`, `queries_clean`)."""
+        """An option the attack never reads is an error (`Attack.reads`), and so is a goal defined by the
+        clean observation for an attack that never queries it (`queries_clean`)."""
         from zodrive.attacks.learned import LearnedAdversary
 
         cls = LearnedAdversary if self.attack == LEARNED else ATTACKS.get(self.attack)
         if cls is None:
             return  # an unknown attack: building it says so
-        default = AttackSpec()
-        for option in cls.unread:
-            if getattr(self, option) != getattr(default, option):
-                raise ZodriveError(f"attack {cls.name}: {option} has no effect ({cls.no_search})")
+        refuse_unread(cls, self.model_dump())
         if not cls.queries_clean and target_reads_clean(self.target):
             raise ZodriveError(needs_fixed_target(cls.name))
-        if "loss" in cls.unread and target_has_fallback(self.target):
+        if "loss" not in cls.reads and target_has_fallback(self.target):
             raise ZodriveError(f"attack {cls.name} reads no loss, so the fallback of target {self.target} would be "
                                "ignored: give the target alone")
 

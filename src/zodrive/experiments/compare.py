@@ -65,12 +65,13 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
-                                              + f"-{attack}" + ("" if eps is None else f"-eps{number_name(eps)}")
+                                              + f"-{attack_name(attack).replace(':', '-')}"
+                                              + ("" if eps is None else f"-eps{number_name(eps)}")
                                               + ("" if budget is None else f"-qb{budget}"))
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
                                   defense=defense)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
-                                 "attack": _label(attack), "eps": eps, "query_budget": budget})
+                                 "attack": _label(attack, spec and spec.attack), "eps": eps, "query_budget": budget})
                     cells.append(Cell(job, episodes, folder, force=force))
     if claim:  # `zodrive compare` owns its folder; `reproduce` composes several grids in one
         _claim(out, grid, force)
@@ -133,12 +134,23 @@ def _black_box(attack: str, attack_set: list[str] | None) -> bool:
     return name not in ATTACKS or ATTACKS[name].black_box  # the learned adversary only sees observations
 
 
-def _label(attack: str) -> str:
+def attack_name(attack: str) -> str:
+    """What a cell and a table call an attack given as a registry name, a config name, a config file (its stem)
+    or NAME:DIR (NAME and the folder's name): never a path, which would nest the cell's folder."""
+    head, colon, folder = attack.partition(":")
+    if colon and "/" not in head:
+        return f"{head}:{Path(folder).name}"
+    return Path(attack).stem if attack.endswith((".yaml", ".yml")) or "/" in attack else attack
+
+
+def _label(attack: str, runs: str | None = None) -> str:
+    """The table's name of `attack`, which runs the registry's attack `runs` (white-box ones say so)."""
     from zodrive.attacks.registry import ATTACKS
 
-    if attack in ATTACKS and not ATTACKS[attack].black_box:
-        return f"{attack} (white-box)"
-    return attack
+    name, runs = attack_name(attack), runs or attack
+    if runs in ATTACKS and not ATTACKS[runs].black_box:
+        return f"{name} (white-box)"
+    return name
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
