@@ -1,33 +1,20 @@
 """Reinforcement learning that starts from a cloned driver (issue 22, item 2).
 
 A behaviour-cloned network (`models/dqn-imitation`) outputs *logits*: their argmax drives well,
-their values mean nothing to a TD target. Three steps turn it into a DQN starting point:
+their values mean nothing to a TD target. So the clone goes into the online and target Q-networks
+(`init_from_model`), drives into the replay buffer (`collect`), and its values are fitted to its own
+returns by LSTD-Q (`calibrate`; Lagoudakis & Parr, JMLR 2003) in a family that a positive scale and a
+per-state shift keep argmax-preserving at *every* state, folded into the last Linear layer: the greedy
+policy stays exactly the clone's, and RL changes it only where the TD errors show a better action
+(cf. DQfD's pre-training, Hester et al., AAAI 2018, from demonstrations instead of a trained policy).
+`evaluate_td` (recipe `calibrate.td_steps`) optionally continues that policy evaluation with TD updates
+of the whole network (the linear fit on frozen features leaves large TD errors, whose gradients would
+reshape the hidden layers once RL starts) and DQfD's large-margin loss on the clone's actions.
 
-1. `init_from_model`: the clone's weights, read without unpickling (`safe_load.read_plain`),
-   go into both the online and the target Q-network (their shapes must match the recipe's).
-2. `collect`: the clone drives `episodes` episodes (a uniformly random action with probability
-   `epsilon`, so that the data also holds the actions it would not take); every transition
-   goes into the replay buffer, where it stays for the RL phase.
-3. `calibrate`: policy evaluation of the frozen clone by least-squares TD (LSTD-Q, Lagoudakis &
-   Parr, JMLR 2003) in the restricted family Q(s, a) = alpha * logit(s, a) + u . h(s) + c, with
-   h(s) the clone's last hidden layer, alpha > 0. The target action at s' is the clone's argmax.
-   The fit is folded into the last Linear layer (W' = alpha W + 1 u^T, b' = alpha b + c 1), so the
-   network keeps its shape, and a positive scale plus a per-state shift leaves the argmax
-   unchanged at *every* state: the greedy policy is exactly the clone's, while its values become
-   those of its own returns. The first DQN targets, max_a Q(s', a) = Q(s', clone(s')), are then
-   those of the calibration, and the RL updates change the policy only where the TD errors show
-   an action better than the clone's (cf. DQfD's pre-training, Hester et al., AAAI 2018, which
-   starts from demonstrations instead of a trained policy).
-4. `evaluate_td` (optional, recipe `calibrate.td_steps`): the linear fit on frozen features
-   leaves large TD errors, whose gradients reshape the hidden layers once RL starts. A few
-   thousand TD updates of the whole network then continue the policy evaluation (next action:
-   the frozen clone's argmax) with DQfD's large-margin loss on the clone's own actions, so the
-   values fit better while the greedy policy stays the clone's.
-
-A cloned DDPG / TD3 actor (`models/ddpg-imitation`) keeps its outputs as they are: the actor goes
-into the actor and target actor (`init_actor_from_model`), drives into the buffer with the recipe's
-exploration noise (`collect`), and the fresh critics are fitted to its returns by critic-only TD
-updates (`evaluate_critic`) before the first actor update (then `GuidedTD3`, TD3+BC).
+A cloned DDPG / TD3 actor (`models/ddpg-imitation`) keeps its outputs as they are: it goes into the
+actor and target actor (`init_actor_from_model`), drives into the buffer with the recipe's exploration
+noise (`collect`), and the fresh critics are fitted to its returns by critic-only TD updates
+(`evaluate_critic`) before the first actor update (then `GuidedTD3`, TD3+BC).
 """
 
 from __future__ import annotations
