@@ -119,7 +119,7 @@ def test_a_ppo_saved_by_plain_sb3_is_evaluated_and_attacked(tmp_path: Path, caps
 def test_any_gymnasium_environment_by_id(tmp_path: Path, algo: str, env_id: str, capsys) -> None:
     path, _ = _saved(tmp_path, algo, env_id)
     out = tmp_path / "eval"
-    assert main(["evaluate", str(path), "--env-id", env_id, "--obs-bounds=-10,10", "--episodes", "1",
+    assert main(["evaluate", str(path), "--env-id", env_id, "--episodes", "1",
                  "--attack", "random-search", "--target", "none", "--eps", "0.1", "--steps", "3",
                  "--out", str(out), "--no-progress"]) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())

@@ -10,6 +10,7 @@ import pytest
 from highway_env.envs.common.observation import KinematicObservation
 
 from zodrive.cli import main
+from zodrive.errors import ZodriveError
 from zodrive.envs import load_preset, make_env, preset_names, scenario
 from zodrive.envs.fast_kinematics import FastKinematicObservation
 
@@ -91,7 +92,7 @@ def _policy_file(tmp_path: Path) -> Path:
 def test_a_torch_module_or_a_callable_from_a_python_file_is_a_victim(tmp_path: Path, capsys) -> None:
     path = _policy_file(tmp_path)
     out = tmp_path / "eval"
-    assert main(["evaluate", f"{path}:make_policy", "--env-id", "CartPole-v1", "--obs-bounds=-5,5",
+    assert main(["evaluate", f"{path}:make_policy", "--env-id", "CartPole-v1",
                  "--episodes", "2", "--attack", "random-search", "--eps", "0.5", "--target", "none", "--steps", "5",
                  "--out", str(out), "--no-progress"]) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
@@ -116,3 +117,50 @@ def test_env_id_flags_are_checked(tmp_path: Path, capsys) -> None:
     assert "target auto" in _error(capsys, ["evaluate", f"{path}:make_policy", "--env-id", "CartPole-v1",
                                             "--attack", "random-search"])
     assert "applies to stable-baselines3 zips" in _error(capsys, ["evaluate", "baseline:slower", "--trust-model"])
+
+
+def test_a_box_per_dimension_and_a_feature_axis_come_from_the_environment() -> None:
+    """Pendulum's box is per dimension (cos, sin in [-1, 1], the speed in [-8, 8]): every queried point keeps
+    cos and sin in [-1, 1]; OccupancyGrid names its features along the first axis: presence stays frozen
+    (issue 46). A range wider than the declared box is refused, not used."""
+    import gymnasium as gym
+    import numpy as np
+
+    import zodrive
+    from zodrive.envs import gym_preset, scenario_of_env
+
+    pendulum = scenario_of_env(gym.make("Pendulum-v1"))
+    assert pendulum.bounds == ((-1.0, -1.0, -8.0), (1.0, 1.0, 8.0))
+    seen: list[np.ndarray] = []
+
+    def still(obs: np.ndarray) -> np.ndarray:
+        seen.append(np.asarray(obs).reshape(-1, 3))
+        return np.zeros((len(seen[-1]), 1), dtype=np.float32)
+
+    env = zodrive.AttackWrapper(gym.make("Pendulum-v1"), still, attack="random-search", eps=0.5, target="none",
+                                steps=5)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(1, dtype=np.float32))
+    rows = np.concatenate(seen)
+    assert np.abs(rows[:, :2]).max() <= 1.0 and np.abs(rows[:, 2]).max() <= 8.0
+    assert np.ptp(rows[:, 2]) > 0.5  # the speed was attacked (eps 0.5 is inside its wider range)
+
+    grid = gym.make("racetrack-v0")  # OccupancyGrid: (presence, on_road) x 12 x 12
+    assert scenario_of_env(grid).feature_axis == 0
+    grids: list[np.ndarray] = []
+
+    def straight(obs: np.ndarray) -> np.ndarray:
+        grids.append(np.asarray(obs).reshape(-1, 2, 12, 12))
+        return np.zeros((len(grids[-1]), 1), dtype=np.float32)
+
+    env = zodrive.AttackWrapper(grid, straight, attack="random-search", eps=0.2, target="none", steps=3)
+    env.reset(seed=0)
+    env.step(np.zeros(1, dtype=np.float32))
+    queried = np.concatenate(grids)
+    assert (queried[:, 0] == queried[:1, 0]).all() and not (queried[:, 1] == queried[:1, 1]).all()
+
+    with pytest.raises(ZodriveError, match="reach beyond the observation space's box on 2 of its 3"):
+        from zodrive.envs import scenario
+
+        scenario(gym_preset("Pendulum-v1", obs_bounds=(-8.0, 8.0)))

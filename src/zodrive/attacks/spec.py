@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from typing import Any, Sequence
 
+import numpy as np
 from pydantic import ValidationError
 
 from zodrive.attacks.victim import Victim
@@ -92,14 +93,16 @@ class AttackSpec(AttackOptions):
                               loss=self.loss, weight=self.weight, kappa=self.kappa, tol=self.tol,
                               n_actions=n_actions, action_names=action_names, action_bounds=action_bounds)
 
-    def threat(self, features: tuple[str, ...], bounds: tuple[float, float]) -> ThreatModel:
-        """The threat model on these features; the default mask freezes `presence` where the
-        observation has such a feature (an unnamed observation has none to freeze)."""
+    def threat(self, features: tuple[str, ...], bounds: tuple[Any, Any], feature_axis: int = -1) -> ThreatModel:
+        """The threat model on these features (named along `feature_axis`) in the box `bounds` (two numbers,
+        or two flattened per-dimension bounds); the default mask freezes `presence` where the observation has
+        such a feature (an unnamed observation has none to freeze)."""
         frozen = self.frozen
         if frozen == DEFAULT_FROZEN and "presence" not in features:
             frozen = ()
+        low, high = (float(b) if np.ndim(b) == 0 else tuple(map(float, np.ravel(b))) for b in bounds)
         return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,  # type: ignore[arg-type]
-                           features=features, low=float(bounds[0]), high=float(bounds[1]))
+                           features=features, low=low, high=high, feature_axis=feature_axis)
 
     def _make(self, threat: ThreatModel, load_network: Any = None) -> Attack:
         return make_attack(self.attack, threat, **{name: getattr(self, name) for name in ENGINE_OPTIONS},
@@ -135,20 +138,21 @@ class AttackSpec(AttackOptions):
     def build(
         self, victim: Victim, features: tuple[str, ...], bounds: tuple[float, float], n_actions: int,
         action_names: tuple[str, ...] | None = None, action_bounds: tuple[Any, Any] | None = None,
-        load_network: Any = None,
+        load_network: Any = None, feature_axis: int = -1,
     ) -> tuple[Attack, Objective, QueryOracle]:
         """The attack, its objective for this victim, and the oracle that counts queries.
 
         `features`, `bounds` (the observation box) and `n_actions` describe the preset
         (`zodrive.envs.attack_context`); `action_names` name the discrete actions (targets by
         name) and `action_bounds` the continuous action box (targets inside it); `load_network`
-        reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader)."""
+        reads a learned adversary's network (`zodrive.system.build_attacker` passes the safe loader);
+        `feature_axis` is the axis the features are named along."""
         self._check_unread()
-        threat = self.threat(features, bounds)
-        width = threat.high - threat.low
+        threat = self.threat(features, bounds, feature_axis)
+        width = np.min(np.asarray(threat.high) - np.asarray(threat.low))
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
-            log.warning("eps=%g covers the whole observation box [%g, %g]: the budget constrains nothing, "
-                        "only the box clips the perturbation", self.eps, threat.low, threat.high)
+            log.warning("eps=%g covers the whole observation box (its narrowest side is %g wide): the budget "
+                        "constrains nothing, only the box clips the perturbation", self.eps, width)
         attack = self._make(threat, load_network)
         if self.attack == LEARNED:
             attack.check_mask(threat)  # type: ignore[attr-defined]

@@ -21,7 +21,9 @@ class ThreatModel:
     `mode="paper"` leaves the perturbation unconstrained, as published, and only reports
     its size. Either way every point the attacker queries or feeds is kept inside the
     observation box [low, high] (the values a real sensor can produce: the preset's
-    normalization range, or unbounded), masked features (by default `presence`) are never
+    normalization range, the observation space's box per dimension, or unbounded; `low` and
+    `high` are numbers or, per dimension, the flattened box), the features are named along
+    `feature_axis` (the last for Kinematics, the first for OccupancyGrid), masked features (by default `presence`) are never
     changed, and a clean coordinate is never moved by the box: a clean value outside it
     stays reachable. Where a guarantee cannot hold (a frozen feature the observation does
     not have), `mask` raises instead of skipping it.
@@ -32,8 +34,9 @@ class ThreatModel:
     mode: Mode = "budgeted"
     frozen: tuple[str, ...] = ("presence",)
     features: tuple[str, ...] = ("presence", "x", "y", "vx", "vy")
-    low: float = -1.0                     # observation box (the preset's range)
-    high: float = 1.0
+    low: float | tuple[float, ...] = -1.0  # observation box (the preset's range, or per dimension)
+    high: float | tuple[float, ...] = 1.0
+    feature_axis: int = -1                 # the observation axis the features are named along
     _mask_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -46,21 +49,32 @@ class ThreatModel:
         unknown = set(self.frozen) - set(self.features)
         if unknown:
             raise ZodriveError(f"frozen features {sorted(unknown)} are not observation features")
-        if not self.low < self.high:
+        low, high = np.asarray(self.low, dtype=np.float64), np.asarray(self.high, dtype=np.float64)
+        if low.shape != high.shape or not np.all(low < high):
             raise ZodriveError(f"observation box [{self.low}, {self.high}] is empty")
 
+    def box(self, dim: int) -> tuple[np.ndarray, np.ndarray]:
+        """The observation box as two (dim,) arrays for flattened observations of `dim` values."""
+        low, high = np.asarray(self.low, dtype=np.float32), np.asarray(self.high, dtype=np.float32)
+        if low.ndim and low.size != dim:
+            raise ZodriveError(f"the observation box has {low.size} values per bound, the observation {dim}")
+        return np.broadcast_to(low.reshape(-1), (dim,)), np.broadcast_to(high.reshape(-1), (dim,))
+
     def mask(self, obs_shape: Sequence[int]) -> np.ndarray:
-        """1.0 where the attacker may write, 0.0 on frozen features (last axis)."""
+        """1.0 where the attacker may write, 0.0 on frozen features (along `feature_axis`)."""
         key = tuple(obs_shape)
         if key not in self._mask_cache:
             mask = np.ones(key, dtype=np.float32)
-            if self.frozen and (len(key) < 1 or key[-1] != len(self.features)):
+            axis = self.feature_axis
+            if self.frozen and not (-len(key) <= axis < len(key) and key[axis] == len(self.features)):
                 raise ZodriveError(
-                    f"cannot freeze {', '.join(self.frozen)}: observations of shape {key} do not end in the "
-                    f"{len(self.features)} features {', '.join(self.features)}"
+                    f"cannot freeze {', '.join(self.frozen)}: observations of shape {key} do not have the "
+                    f"{len(self.features)} features {', '.join(self.features)} along axis {axis}"
                 )
             for name in self.frozen:
-                mask[..., self.features.index(name)] = 0.0
+                index = [slice(None)] * len(key)
+                index[axis] = self.features.index(name)
+                mask[tuple(index)] = 0.0
             self._mask_cache[key] = mask
         return self._mask_cache[key]
 
@@ -95,7 +109,8 @@ class Projector:
 
     def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray) -> None:
         self.threat, self.x0, self.mask = threat, x0, mask
-        self.low, self.high = np.minimum(threat.low, x0), np.maximum(threat.high, x0)  # never move a clean value
+        low, high = threat.box(x0.shape[1])
+        self.low, self.high = np.minimum(low, x0), np.maximum(high, x0)  # never move a clean value
 
     def __call__(self, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
         t = self.threat

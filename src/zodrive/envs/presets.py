@@ -40,8 +40,9 @@ class Scenario:
     name: str
     kind: str                          # discrete | continuous
     obs_shape: tuple[int, ...]
-    features: tuple[str, ...]          # names along the observation's last axis (() if unnamed)
-    bounds: tuple[float, float]        # range of a clean observation value
+    features: tuple[str, ...]          # names along `feature_axis` of the observation (() if unnamed)
+    bounds: tuple[Any, Any]            # range of a clean observation value: two numbers, or per dimension
+    #                                    (the space's box, flattened) where it is not one range
     n_actions: int                     # discrete actions, or action dimensions
     action_names: tuple[str, ...]      # meta-action names by index, or the action's dimensions
     action_low: tuple[float, ...]      # continuous: the action space's box (() for discrete)
@@ -54,10 +55,12 @@ class Scenario:
     lanes: int | None = None           # lanes of a highway-env road
     space_low: tuple[float, ...] = ()  # the observation space's declared box, flattened
     space_high: tuple[float, ...] = ()
+    feature_axis: int = -1             # the axis the features are named along (OccupancyGrid: the first)
 
     def attack_context(self) -> dict[str, Any]:
         """What an attack needs to know about these observations and actions (`AttackSpec.build`)."""
-        return {"features": self.features, "bounds": self.bounds, "n_actions": self.n_actions,
+        return {"features": self.features, "bounds": self.bounds, "feature_axis": self.feature_axis,
+                "n_actions": self.n_actions,
                 "action_names": self.action_names,
                 "action_bounds": (self.action_low, self.action_high) if self.kind == "continuous" else None}
 
@@ -214,20 +217,31 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
     core = env.unwrapped
     road = hasattr(core, "road") and hasattr(core, "observation_type")
     features: tuple[str, ...] = ()
-    bounds = (float("-inf"), float("inf"))
+    bounds: tuple[Any, Any] = (float("-inf"), float("inf"))
+    axis = -1
     observer = getattr(core, "observation_type", None)
     kinematic = road and hasattr(observer, "features") and hasattr(observer, "normalize")
     if kinematic:
         env.reset(seed=0)  # highway-env fills in its default feature ranges at the first observation
         features = tuple(observer.features)
+        if space.shape and space.shape[-1] != len(features) and space.shape[0] == len(features):
+            axis = 0  # OccupancyGrid: one (H, W) grid per feature
         if observer.normalize and getattr(observer, "clip", False):
             bounds = (-1.0, 1.0)  # highway-env declares (-inf, inf) for a normalized, clipped observation
     else:
         low, high = np.unique(space.low), np.unique(space.high)
-        if len(low) == 1 and len(high) == 1 and np.isfinite(low[0]) and np.isfinite(high[0]):
+        if len(low) == 1 and len(high) == 1:
             bounds = (float(low[0]), float(high[0]))
+        else:  # a box per dimension (Pendulum: cos, sin in [-1, 1], the speed in [-8, 8])
+            bounds = (tuple(map(float, space.low.ravel())), tuple(map(float, space.high.ravel())))
     if config.get("obs_bounds") is not None:
         bounds = (float(config["obs_bounds"][0]), float(config["obs_bounds"][1]))
+        wider = np.flatnonzero((bounds[0] < space.low.ravel()) | (bounds[1] > space.high.ravel()))
+        if wider.size:  # the declared box holds every observation the environment makes: a wider range is not a sensor's
+            raise ZodriveError(f"{name}: obs_bounds [{bounds[0]:g}, {bounds[1]:g}] reach beyond the observation space's "
+                               f"box on {wider.size} of its {space.low.size} values (value {wider[0]}: "
+                               f"[{space.low.ravel()[wider[0]]:g}, {space.high.ravel()[wider[0]]:g}]); without "
+                               "obs_bounds zodrive keeps each value in its own range")
     if isinstance(actions, gym.spaces.Discrete):
         kind, n = "discrete", int(actions.n)
         names = tuple(core.action_type.actions[i] for i in range(n)) if road and hasattr(
@@ -250,7 +264,7 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
                     "relative": not observer.absolute, "normalized": bool(observer.normalize),
                     "lanes": core.config.get("lanes_count")}
     return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
-                    n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
+                    feature_axis=axis, n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
                     max_return=_max_return(config, core),
                     space_low=tuple(map(float, np.asarray(space.low).ravel())),
                     space_high=tuple(map(float, np.asarray(space.high).ravel())), **observed)
@@ -283,10 +297,9 @@ def feature_names(config: dict[str, Any]) -> list[str]:
     return list(scenario(config).features)
 
 
-def observation_bounds(config: dict[str, Any]) -> tuple[float, float]:
+def observation_bounds(config: dict[str, Any]) -> tuple[Any, Any]:
     """The range of a clean observation value: [-1, 1] when highway-env normalizes and clips,
-    the observation space's box when it is one interval, `obs_bounds` when the preset says so,
-    otherwise unbounded."""
+    the observation space's box (one interval, or per dimension), `obs_bounds` when the preset says so."""
     return scenario(config).bounds
 
 
