@@ -191,8 +191,13 @@ def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: P
     assert not [w for w in recwarn if "is ignored" in str(w.message)]  # SB3's n_steps warning on a load is wrong
     train = json.loads((out / "train.json").read_text())
     assert train["resumed_from"] == 200 and train["total_timesteps"] == 300
+    (out / "notes.txt").write_text("mine")
     assert main(base + ["--steps", "200", "--force"]) == 0
     assert json.loads((out / "train.json").read_text())["resumed_from"] is None
+    # --force cleared the old run: no checkpoint of the 300-step run is left to be taken for this one's
+    assert sorted(p.name for p in (out / "checkpoints").glob("dqn_*_steps.zip")) == [
+        "dqn_100_steps.zip", "dqn_200_steps.zip"]
+    assert (out / "notes.txt").read_text() == "mine"  # what train did not write is kept
 
 
 def test_evaluation_is_keyed_on_the_model_content(tiny_dqn: Path, tmp_path: Path, capsys) -> None:

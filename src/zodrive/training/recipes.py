@@ -312,6 +312,28 @@ def check_run_folder(out: Path, *, resume: bool, force: bool, resumable: bool = 
     raise ZodriveError(f"{out} already holds a run; {how}, or choose another --out")
 
 
+RUN_FILES = ("checkpoints", "tb", "model.zip", "train.json", "config.yaml", "run.json", "monitor.monitor.csv",
+             "progress.csv", "selected.json")
+"""What a training run (and `select`, which picks among its checkpoints) writes into its folder."""
+
+
+def clear_run(out: Path) -> None:
+    """`--force`: remove the old run's files, so that none of its later checkpoints is taken for this run's;
+    what `train` did not write (a card, an evaluation of the old model) is kept, and named."""
+    if not out.is_dir():
+        return
+    for name in RUN_FILES:
+        path = out / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+    kept = sorted(p.name for p in out.iterdir())
+    if kept:
+        log.warning("%s: --force removed the old run; kept what train did not write (it may describe the old "
+                    "model): %s", out, ", ".join(kept))
+
+
 @one_torch_thread  # small MLPs: one thread is fastest and lets runs share cores
 def train(
     recipe: dict[str, Any],
@@ -345,6 +367,8 @@ def train(
     preset = load_preset(recipe.get("preset", KIND_OF_ALGO[algo]), preset_overrides)
     if action_kind(preset) != KIND_OF_ALGO[algo]:
         raise ZodriveError(f"{algo} needs a {KIND_OF_ALGO[algo]} preset, not {preset['name']!r}")
+    if force and not resume:
+        clear_run(out)
     fresh = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     try:
