@@ -1,6 +1,9 @@
 """A property of the whole command line: whatever argument vector a user types, zodrive ends
 with exit code 0, 2 (one line on stderr) or 130, never a traceback.
 
+The values include hostile files (`_hostile_files`): crafted model zips, YAML bombs, recursive
+aliases, non-UTF-8 configs and damaged run folders, as models, presets, attacks, outputs and runs.
+
 Argument vectors are drawn by hypothesis from each subcommand's flags with good and bad
 values. Commands that would run for minutes once their arguments pass (training, the
 reproduction, grids, checkpoint selection, the demo) are stubbed *after* validation: the
@@ -10,6 +13,8 @@ Evaluations and renders run for real on two-step episodes.
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -22,19 +27,80 @@ from hypothesis import strategies as st  # noqa: E402
 from zodrive.errors import ZodriveError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _hostile_files() -> dict[str, str]:
+    """Files a stranger may hand zodrive, written once into a folder of their own: crafted model zips (a
+    string or null where a number belongs, weights that are no tensors, a zip that is no zip), YAML bombs
+    and non-UTF-8 configs, and damaged run folders."""
+    import json
+    import zipfile
+
+    folder = Path(tempfile.mkdtemp(prefix="zodrive-hostile-"))
+    atexit.register(shutil.rmtree, folder, True)
+    source = ROOT / "models" / "dqn" / "model.zip"
+
+    def crafted(name: str, edit) -> str:  # noqa: ANN001
+        path = folder / name
+        with zipfile.ZipFile(source) as src, zipfile.ZipFile(path, "w") as dst:
+            for item in src.infolist():
+                dst.writestr(item, edit(item.filename, src.read(item.filename)))
+        return str(path)
+
+    def data(change):  # noqa: ANN001, ANN202
+        def edit(name: str, raw: bytes) -> bytes:
+            if name != "data":
+                return raw
+            loaded = json.loads(raw)
+            change(loaded)
+            return json.dumps(loaded).encode()
+        return edit
+
+    laughs = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{c}: &{c} [{', '.join(['*' + p] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    files = {
+        "shape-text.zip": crafted("shape-text.zip", data(lambda d: d["observation_space"].update(_shape="abc"))),
+        "arch-null.zip": crafted("arch-null.zip", data(lambda d: d["policy_kwargs"].update(net_arch=None))),
+        "weights-text.zip": crafted("weights-text.zip",
+                                    lambda name, raw: b"not a tensor" if name == "policy.pth" else raw),
+        "data-latin.zip": crafted("data-latin.zip", lambda name, raw: b"\xff\xfe{" if name == "data" else raw),
+    }
+    (folder / "nozip.zip").write_bytes(b"PK\x03\x04 broken")
+    files["nozip.zip"] = str(folder / "nozip.zip")
+    for name, text in (("bomb.yaml", laughs),
+                       ("latin.yaml", b"# caf\xe9\nattack: random-search\n"), ("alias.yaml", "a: &a [*a]\n")):
+        path = folder / name
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+        files[name] = str(path)
+    for name, damage in (("bad-key", {"eval_key.json": b"{not json"}), ("bad-run", {"run.json": b"\xff\xfe"}),
+                         ("bad-summary", {"summary.json": b'{"episodes": 10, "mean_ret'}),
+                         ("bad-episodes", {"episodes.jsonl": b'{"return": 1.0}\n'})):
+        (folder / name).mkdir()
+        for file, raw in damage.items():
+            (folder / name / file).write_bytes(raw)
+        files[name] = str(folder / name)
+    return files
+
+
+HOSTILE = _hostile_files()
 MODELS = [str(ROOT / "models" / "dqn"), str(ROOT / "models" / "ddpg"), "baseline:slower", "baseline:rules",
-          "baseline:nope", "missing.zip", str(ROOT / "README.md"), "x.py:make"]
+          "baseline:nope", "missing.zip", str(ROOT / "README.md"), "x.py:make",
+          *(HOSTILE[n] for n in ("shape-text.zip", "arch-null.zip", "weights-text.zip", "data-latin.zip", "nozip.zip",
+                                 "bad-run"))]
+CONFIGS = [HOSTILE["bomb.yaml"], HOSTILE["latin.yaml"], HOSTILE["alias.yaml"]]
+RUNS = [HOSTILE[n] for n in ("bad-key", "bad-run", "bad-summary", "bad-episodes")]
 NUMBERS = ["1", "2", "0", "-1", "abc", "0.05", "inf", "nan", "1e9"]
 EPS = ["0.05", "0.2", "0", "-1", "inf", "x"]
 COMMON = {
-    "--preset": ["discrete", "continuous", "merge", "intersection", "nope"],
+    "--preset": ["discrete", "continuous", "merge", "intersection", "nope", *CONFIGS],
     "--env-id": ["CartPole-v1", "Nope-v0"], "--obs-bounds": ["-1,1", "1,0", "a"],
     "--env-set": ["highway.duration=abc", "highway.lanes_count=0", "highway.nope=1", "max_episode_steps=2",
                   "highway.observation.vehicles_count=x"],
     "--seed": NUMBERS, "--episodes": ["1", "2", "0", "-3", "x"],
 }
 ATTACK = {
-    "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise", "learned", "learned:{tmp}"],
+    "--attack": ["random-search", "zo-signsgd", "pgd", "nope", "uniform-noise", "learned", "learned:{tmp}", *CONFIGS,
+                 *(f"learned:{run}" for run in RUNS)],
     "--eps": EPS,
     "--norm": ["linf", "l2", "l3"], "--mode": ["budgeted", "paper", "x"], "--steps": ["1", "2", "0", "x"],
     "--n-directions": ["1", "2", "0"], "--target": ["FASTER", "none", "worst", "1,0.5", "nope", "9", "not:SLOWER", "not:x", "FASTER,not:SLOWER", "FASTER,SLOWER"],
@@ -46,7 +112,7 @@ ATTACK = {
     "--defense": ["kinematic", "nope"],
 }
 COMMANDS = {
-    "evaluate": ({**COMMON, **ATTACK, "--out": ["{tmp}/e", "/proc/x"], "--workers": ["1", "0"]}, True),
+    "evaluate": ({**COMMON, **ATTACK, "--out": ["{tmp}/e", "/proc/x", *RUNS], "--workers": ["1", "0"]}, True),
     "render": ({**COMMON, **ATTACK, "--out": ["{tmp}/r", "/proc/x"], "--until-crash": ["1", "0"], "--force": [None]},
                True),
     "compare": ({**COMMON, "--attacks": ["random-search", "nope"], "--eps": EPS, "--out": ["{tmp}/c", "/proc/c"],
@@ -78,8 +144,9 @@ COMMANDS = {
     "certify": ({"--eps": EPS, "--episodes": ["1", "0", "x"], "--preset": COMMON["--preset"], "--tol": EPS,
                  "--out": ["{tmp}/ce", "/proc/ce"], "--force": [None]}, True),
 }
-POSITIONAL = {"select": [str(ROOT / "models" / "dqn-driver"), "missing"], "card": ["{tmp}", "missing"],
-              "curves": [str(ROOT / "models" / "dqn"), "missing"], "env": ["list", "show discrete", "show nope"]}
+POSITIONAL = {"select": [str(ROOT / "models" / "dqn-driver"), "missing", *RUNS], "card": ["{tmp}", "missing", *RUNS],
+              "curves": [str(ROOT / "models" / "dqn"), "missing", *RUNS],
+              "env": ["list", "show discrete", "show nope", *(f"show {c}" for c in CONFIGS)]}
 
 
 def _stub(*args, **kwargs):  # noqa: ANN002, ANN003

@@ -53,7 +53,10 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
             f"{path} is a {info.get('sb3_class', info['algo'].upper())} policy with {info['kind']} actions; "
             f"preset {preset['name']!r} has {env.kind} actions"
         )
-    if tuple(info["obs_shape"] or ()) != env.obs_shape:
+    if info["obs_shape"] is None:
+        raise ZodriveError(f"{path} records no readable observation shape (its observation_space is damaged); "
+                           "zodrive cannot tell which scenario it was trained on")
+    if tuple(info["obs_shape"]) != env.obs_shape:
         raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset "
                            f"{preset['name']!r} gives {env.obs_shape}")
     for which, declared in (("low", env.space_low), ("high", env.space_high)):
