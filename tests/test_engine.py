@@ -271,3 +271,29 @@ def test_white_box_attacks_leave_a_zero_gradient(name: str) -> None:
     x0 = observations(8)
     result, _, _ = _attack(name, linear_victim(kind="continuous"), x0, eps=0.2, target="none", tol=0.01, steps=20)
     assert result.linf.min() > 0 and result.success.mean() > 0.5
+
+
+@pytest.mark.parametrize("name", ["random-search", "zo-signsgd", "uniform-noise", "nes"])
+def test_integer_observations_are_attacked_with_integers_inside_the_ball(name: str) -> None:
+    """Pixels (uint8): every queried point is whole, inside the eps-ball and [0, 255], and the fed
+    observation is the queried one, not a wrapped or rounded copy (a float cast to uint8 wrapped -3 to 253)."""
+    seen: list[np.ndarray] = []
+    inner = linear_victim(seed=2)
+
+    def query(x: np.ndarray) -> np.ndarray:
+        seen.append(np.asarray(x, dtype=np.float64).copy())
+        return inner.query(np.asarray(x, dtype=np.float32) / 255.0)
+
+    victim = Victim(query=query, kind="discrete", obs_shape=(5, 5))
+    x0 = np.random.default_rng(0).integers(0, 256, size=(6, 5, 5)).astype(np.uint8)
+    x0[:, :, 1] = np.array([0, 1, 254, 255, 3], dtype=np.uint8)  # at the box's edges
+    spec = AttackSpec(attack=name, **readable(name, eps=3.5, steps=4, n_directions=3, step_size=2.0, mu=1.0,
+                                                    frozen=[]))
+    attack, objective, oracle = spec.build(victim, features=("presence", "x", "y", "vx", "vy"), bounds=(0.0, 255.0),
+                                           n_actions=5)
+    result = attack.perturb(x0, oracle, objective)
+    assert result.x_adv.dtype == np.uint8
+    delta = result.x_adv.astype(np.float64) - x0
+    assert np.abs(delta).max() <= 3.5 and result.linf.max() <= 3.5
+    points = np.concatenate([s.reshape(len(s), -1) for s in seen])
+    assert np.array_equal(points, np.round(points)) and points.min() >= 0 and points.max() <= 255

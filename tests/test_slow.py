@@ -120,3 +120,24 @@ def test_attack_train_with_a_fitted_start_on_highway(tmp_path: Path) -> None:
     assert fitted["queries"] == 5 * steps > 0 and "fitted before PPO" in (adv / "CARD.md").read_text()
     assert main(["evaluate", str(ROOT / "models" / "dqn-driver"), "--attack", f"learned:{adv}", "--eps", "0.05",
                  "--episodes", "2", "--out", str(tmp_path / "cell"), "--no-progress", *short]) == 0
+
+
+def test_a_cnn_policy_on_pixels_is_attacked_with_pixels_inside_the_ball(tmp_path: Path) -> None:
+    """An SB3 CnnPolicy on GrayscaleObservation (uint8 frames), loaded under --trust-model (its learned feature
+    extractor is not rebuilt safely): every fed frame is whole pixels within eps of the clean one (issue 46)."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401
+    from stable_baselines3 import PPO
+
+    observation = {"type": "GrayscaleObservation", "observation_shape": [128, 64], "stack_size": 4,
+                   "weights": [0.2989, 0.587, 0.114], "scaling": 1.75}
+    env = gym.make("highway-fast-v0", config={"observation": {**observation, "observation_shape": (128, 64)}})
+    PPO("CnnPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").learn(32).save(tmp_path / "cnn")
+    args = ["evaluate", str(tmp_path / "cnn.zip"), "--preset", "highway-fast", "--episodes", "1", "--no-progress",
+            "--env-set", "highway.observation=" + json.dumps(observation), "--env-set", "max_episode_steps=3"]
+    assert main(args + ["--out", str(tmp_path / "refused")]) == 2  # no safe rebuild of a CNN: says --trust-model
+    out = tmp_path / "attacked"
+    assert main(args + ["--trust-model", "--attack", "random-search", "--eps", "8", "--steps", "3",
+                        "--target", "none", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert 0 < summary["max_linf"] <= 8 and summary["max_linf"] == int(summary["max_linf"])

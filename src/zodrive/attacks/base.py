@@ -274,6 +274,10 @@ class Search:
         self.dim = int(np.prod(self.shape))
         self.mask = attack.threat.mask(self.shape).reshape(-1)
         self.flat0 = np.asarray(x0, dtype=np.float32).reshape(self.n, self.dim)
+        self.integer = np.issubdtype(np.asarray(x0).dtype, np.integer)
+        if self.integer and attack.max_change is not None:
+            raise ZodriveError("max_change on integer observations (pixels) is not supported: rounding a point toward the "
+                               "clean one may leave the max_change box")
         oracle.begin_step(rows=self.n)
         self.box = attack.smooth_box(self.flat0.reshape(self.n, *self.shape))
         self.around = attack.threat.around(self.flat0, self.shape)
@@ -296,6 +300,10 @@ class Search:
             # idempotent, so a step onto a queried point is recognised and not queried again)
             snap = (np.abs(inside - cand) <= 1e-6) & has[rows, None, None]
             inside = np.where(snap, cand, inside)
+        if self.integer:  # a sensor of integers (pixels): each change rounded toward the clean value stays in the
+            # ball and the box, and the point queried is the point fed (no rounding after the search)
+            clean = self.flat0[rows, None]
+            inside = clean + np.trunc(inside - clean)
         return inside
 
     def values(self, cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:

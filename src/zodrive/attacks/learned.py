@@ -51,7 +51,7 @@ def apply_action(threat: ThreatModel, x0: np.ndarray, action: np.ndarray, free: 
     flat0 = np.asarray(x0, dtype=np.float32).reshape(n, -1)
     delta = np.zeros_like(flat0)
     delta[:, free] = np.float32(threat.eps) * np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)
-    return threat.project((flat0 + delta).reshape(x0.shape), np.asarray(x0, dtype=np.float32)).astype(x0.dtype)
+    return threat.project((flat0 + delta).reshape(x0.shape), np.asarray(x0))
 
 
 def read_description(folder: str | Path, files: tuple[str, str], keys: tuple[str, ...], fmt: int, *, kind: str,

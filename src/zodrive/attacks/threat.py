@@ -81,8 +81,10 @@ class ThreatModel:
     def project(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
         """Map candidates `x` (B, *obs) around clean `x0` (B, *obs) into the threat model."""
         n = len(x0)
-        inside = self.around(x0.reshape(n, -1), x0.shape[1:])(x.reshape(n, 1, -1), np.arange(n))
-        return inside.reshape(x0.shape).astype(x0.dtype, copy=False)
+        inside = self.around(x0.reshape(n, -1), x0.shape[1:])(x.reshape(n, 1, -1), np.arange(n)).reshape(x0.shape)
+        if np.issubdtype(x0.dtype, np.integer):  # pixels: each change rounded toward the clean value, so that the
+            inside = x0 + np.trunc(inside - x0)  # integer fed is still inside the ball and the box
+        return inside.astype(x0.dtype, copy=False)
 
     def around(self, x0: np.ndarray, obs_shape: Sequence[int]) -> Projector:
         """`project` around the flattened clean rows `x0` (N, dim) of observations of
@@ -132,6 +134,8 @@ class Projector:
 
 def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row L-inf and L2 size of `x - x0`."""
+    if np.issubdtype(np.asarray(x).dtype, np.integer):  # pixels: subtracted as integers, -3 would wrap to 253
+        x, x0 = np.asarray(x, dtype=np.float64), np.asarray(x0, dtype=np.float64)
     flat = (x - x0).reshape(len(x), -1).astype(np.float64)
     return np.abs(flat).max(axis=1), np.linalg.norm(flat, axis=1)
 
