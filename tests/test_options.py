@@ -74,6 +74,10 @@ def _error(capsys, args: list[str]) -> str:
     (["evaluate", DQN, "--attack", "zo-signsgd", "--patience", "3", "--no-patience"], "contradict each other"),
     (["evaluate", DQN, "--no-warm-start"], "no --attack was given"),
     # limits at the edge and the option rule, generated from the attack schema (issue 47)
+    (["evaluate", "baseline:slower", "--preset", "highway-fast", "--env-set", "highway.observation.vehicle_count=7"],
+     "highway.observation.vehicle_count is not an option of FastKinematics"),
+    (["evaluate", "baseline:slower", "--preset", "highway-fast", "--env-set",
+      "highway.observation={type:GrayscaleObservation}"], "is not an option of FastKinematics"),  # no space: one key
     (["evaluate", DQN, "--attack", "zo-signsgd", "--n-directions", "10000000000"],
      "--n-directions: expected an integer in [1, 10000], got 10000000000"),
     (["evaluate", DQN, "--attack", "zo-signsgd", "--query-budget", str(10**30)], "--query-budget: expected an integer in [1, 1e+09]"),

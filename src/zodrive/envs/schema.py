@@ -80,6 +80,7 @@ def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: 
             _OBSERVATION.model_validate(observation)
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, context, set(OBSERVATION_FIELDS), "highway.observation.")) from None
+        _check_observer_keys(observation, defaults.get("observation") or {}, context)
         features = observation.get("features") or []
         twice = sorted({f for f in features if features.count(f) > 1})
         if twice:
@@ -93,6 +94,43 @@ def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: 
         for key in ("acceleration_range", "steering_range", "speed_range"):
             if key in action:
                 _check_range(action[key], f"highway.action.{key}", context, strict=False)
+
+
+def observer_options(kind: str) -> set[str] | None:
+    """The options highway-env's observer `kind` reads: its constructors' parameters (None: a type zodrive
+    does not know, which `validate_preset` refuses)."""
+    import inspect
+
+    from highway_env.envs.common import observation as hw
+
+    from zodrive.envs.fast_kinematics import FastKinematicObservation
+
+    cls = {"Kinematics": hw.KinematicObservation, "FastKinematics": FastKinematicObservation,
+           "ExitObservation": hw.ExitObservation, "OccupancyGrid": hw.OccupancyGridObservation,
+           "GrayscaleObservation": hw.GrayscaleObservation, "TimeToCollision": hw.TimeToCollisionObservation,
+           "LidarObservation": hw.LidarObservation}.get(kind)
+    if cls is None:
+        return None
+    return {p.name for c in cls.__mro__ if "__init__" in c.__dict__
+            for p in inspect.signature(c.__init__).parameters.values()
+            if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL) and p.name not in ("self", "env")}
+
+
+def _check_observer_keys(observation: dict[str, Any], default: dict[str, Any], context: str) -> None:
+    """highway-env's observers take **kwargs and drop what they do not read: a key the observer ignores (a typo,
+    a Kinematics option left beside `type: GrayscaleObservation`) would run silently, so it is an error. Keys of
+    the scenario's own default observation are allowed (intersection's defaults carry `flatten`)."""
+    kind = observation.get("type", default.get("type", "Kinematics"))
+    reads = observer_options(kind)
+    if reads is None:
+        return
+    kinematics = {"Kinematics", "FastKinematics", "ExitObservation"}  # one observer, three implementations
+    same = kind == default.get("type", "Kinematics") or {kind, default.get("type", "Kinematics")} <= kinematics
+    ignored = sorted(k for k in observation if k != "type" and k not in reads and not (same and k in default))
+    if ignored:
+        raise ZodriveError(f"{context}: highway.observation.{ignored[0]} is not an option of {kind}, which would ignore "
+                           f"it (it reads {', '.join(sorted(reads))}); to change the observation type, give the whole "
+                           "mapping in a preset file")
 
 
 def _check_range(value: Any, where: str, context: str, strict: bool) -> None:
