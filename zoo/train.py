@@ -35,8 +35,9 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=2_000, help="checkpoint interval in steps")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
-    if (args.out / "model.zip").exists():
-        print(f"{args.out / 'model.zip'} exists: skipped")
+    done = [p for p in (args.out / "model.zip", args.out / "final.zip") if p.exists()]  # final.zip: a chosen run
+    if done:
+        print(f"{done[0]} exists: skipped")
         return
     args.out.mkdir(parents=True, exist_ok=True)
     env = Monitor(gym.make(ENV_IDS[args.scenario]), str(args.out / "monitor"))
