@@ -7,6 +7,7 @@ builds these parsers without loading it.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +53,7 @@ def add_parsers(sub: Any) -> None:
     render.add_argument("--until-crash", type=positive_int, default=1, metavar="N",
                         help="try up to N seeds until an episode ends in a collision")
     add_attack_flags(render)
+    progress_flag(render)
 
     demo = sub.add_parser("demo", help="attack the shipped DQN driver for a few episodes and print the result")
     demo.add_argument("--episodes", type=episode_count, default=3, help="episodes, clean and attacked")
@@ -144,12 +146,14 @@ def cmd_render(args: argparse.Namespace) -> int:
                                   trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
-        frames, info = record_episode(env, victim, seed)
+        frames, info = record_episode(env, victim, seed, progress=not args.no_progress)
         if info["crashed"]:
             break
     if float(np.asarray(frames[0].image).max()) == 0:
         raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
     title = (f"{spec.attack} eps={spec.eps} | " if spec else "clean | ") + (f"+{args.defense} | " if args.defense else "")
+    if not args.no_progress:
+        print(f"drawing {len(frames)} frames (PNG, GIF, MP4)", file=sys.stderr, flush=True)
     save_png(frames, args.out / "episode.png", title=title)
     save_gif(frames, args.out / "episode.gif", title=title)
     mp4 = save_mp4(frames, args.out / "episode.mp4", title=title)

@@ -223,26 +223,46 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
 
 def plot_robustness(rows: list[dict[str, Any]], path: Path) -> None:
     """Mean return (95% CI band) against eps, each system under its strongest attack; a
-    policy that ignores its input is a horizontal dashed line (the floor a defense must beat)."""
+    policy that ignores its input is a horizontal dashed line (the floor a defense must beat).
+    More than six systems get one panel each (the others faint behind it), so no line hides another."""
     plt = headless_pyplot()
-    fig, ax = plt.subplots(figsize=(8.5, 4.5))
     table = strongest(rows)
-    ax.set_prop_cycle(color=plt.cm.tab20.colors if len(table) > 10 else plt.cm.tab10.colors)  # one colour each
+    floors = {s: c[0.0]["mean_return"] for s, c in table.items() if _ignores_input(c[0.0])}
+    curves = {s: c for s, c in table.items() if s not in floors}
     top = max((float(r["eps"]) for r in rows if r["eps"] is not None), default=1.0)
-    floors = 0
-    for system, cells in table.items():
-        if _ignores_input(cells[0.0]):
-            ax.axhline(cells[0.0]["mean_return"], ls="--", lw=1, color="grey")
-            left = floors % 2 == 0  # floors often coincide: their labels alternate sides
-            ax.annotate(system, (0 if left else top, cells[0.0]["mean_return"]), fontsize=7, color="grey",
-                        xytext=(2 if left else -2, 2), textcoords="offset points", ha="left" if left else "right")
-            floors += 1
-            continue
-        eps = sorted(cells)
-        ax.plot(eps, [cells[e]["mean_return"] for e in eps], marker="o", label=system)
-        ax.fill_between(eps, [cells[e]["ci95_low"] for e in eps], [cells[e]["ci95_high"] for e in eps], alpha=0.15)
-    ax.set(xlabel="ε (L∞, normalized units)", ylabel="mean return", title="return under the strongest attack")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    colors = plt.cm.tab20.colors if len(curves) > 10 else plt.cm.tab10.colors
+    panels = list(curves) if len(curves) > 6 else [None]
+    cols = min(len(panels), 4)
+    fig, axes = plt.subplots((len(panels) + cols - 1) // cols, cols, figsize=(8.5 if cols == 1 else 3.2 * cols,
+                             4.5 if cols == 1 else 2.8 * ((len(panels) + cols - 1) // cols)),
+                             sharex=True, sharey=True, squeeze=False)
+    for ax, focus in zip(axes.flat, panels):
+        for k, (value, system) in enumerate(sorted((v, s) for s, v in floors.items())):
+            ax.axhline(value, ls="--", lw=1, color="grey")
+            left = k % 2 == 0  # floors often coincide: their labels alternate sides
+            ax.annotate(system, (0 if left else top, value), fontsize=6, color="grey", xytext=(2 if left else -2, 2),
+                        textcoords="offset points", ha="left" if left else "right")
+        for color, (system, cells) in zip(colors * 2, curves.items()):
+            eps = sorted(cells)
+            faint = focus is not None and system != focus
+            ax.plot(eps, [cells[e]["mean_return"] for e in eps], marker="" if faint else "o", lw=0.8 if faint else 1.5,
+                    color="lightgrey" if faint else color, label=None if faint else system, zorder=1 if faint else 3)
+            if not faint:
+                ax.fill_between(eps, [cells[e]["ci95_low"] for e in eps], [cells[e]["ci95_high"] for e in eps],
+                                alpha=0.15, color=color)
+        if focus is not None:
+            ax.set_title(focus, fontsize=8)
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("ε (L∞, normalized units)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("mean return")
+    if panels == [None]:
+        axes[0, 0].set_title("return under the strongest attack")
+        axes[0, 0].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    else:
+        fig.suptitle("return under the strongest attack (each panel one system; the others in grey)")
     save_figure(fig, path)
 
 

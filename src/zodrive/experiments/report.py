@@ -14,6 +14,7 @@ from zodrive.evaluation.report import or_dash
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
+from zodrive.seeds import EVAL_SEED
 
 
 def _returns(out: Path, algo: str, row: str) -> list[float]:
@@ -105,8 +106,7 @@ def robustness_section(out: Path, episodes: int) -> tuple[str, str, Path | None]
     folder = out / "robustness"
     if not episodes or not (folder / "robustness.md").is_file():
         return "", "", None
-    intro = (f"Return under the strongest attack per ε ({episodes} episodes per cell, seeds 100000–"
-             f"{100000 + episodes - 1}, the same in every cell): black-box random search, its defense-aware form that "
+    intro = (f"Return under the strongest attack per ε ({_episodes(episodes)}): black-box random search, its defense-aware form that "
              "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box PGD "
              "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most, and the "
              "speed. dqn-robust and ddpg-robust are the defended agents, dqn-sa (SA-DQN) and dqn-at (Algorithm 2) the "
@@ -123,14 +123,13 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
     md_table = table_markdown(table["rows"])
     rob_intro, rob_table, rob_figure = robustness_section(out, robustness_episodes)
     intro = (
-        f"Reproduction of Table 1 with {episodes} episodes per cell (seeds 100000–{100000 + episodes - 1}, the same "
-        f"in every cell), {'models retrained by this run' if retrain else 'the shipped models in models/'}"
+        f"Reproduction of Table 1 with {_episodes(episodes)}, {'models retrained by this run' if retrain else 'the shipped models in models/'}"
         f"{' (quick mode: not the full study)' if quick else ''}. Attack: ZO-SignSGD, L∞ ε = 0.2, budgeted, "
         "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in table1.json. "
         "The baseline rows are policies that ignore their observation (one constant action; no observation attack can "
         "change them) or read the simulator (IDM + MOBIL): a number that one of them also reaches is not a result."
     )
-    timing_lines = "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
+    timing_lines = TIMINGS + "\n\n" + "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
     md = ["# zodrive reproduction of Table 1", "", intro, "", md_table]
     if rob_table:
         md += ["## Robustness: return against ε under the strongest attack", "", rob_intro, "", rob_table]
@@ -146,7 +145,7 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
     parts = [f"<h1>zodrive reproduction of Table 1</h1><p>{html.escape(intro)}</p>", _html_table(table["rows"])]
     if rob_table:
         parts += ["<h2>Robustness: return against ε under the strongest attack</h2>", f"<p>{html.escape(rob_intro)}</p>",
-                  f"<pre>{html.escape(rob_table)}</pre>"]
+                  _html_from_markdown_table(rob_table)]
         if rob_figure is not None:
             parts.append(f'<figure><img src="data:image/png;base64,{base64.b64encode(rob_figure.read_bytes()).decode()}" '
                          'style="max-width:100%"></figure>')
@@ -158,13 +157,38 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
             data = base64.b64encode(path.read_bytes()).decode()
             parts.append(f'<figure><img src="data:{mime};base64,{data}" style="max-width:100%">'
                          f"<figcaption>{html.escape(caption)}</figcaption></figure>")
-    parts.append("<h2>Timings</h2><ul>" + "".join(f"<li>{html.escape(k)}: {v:.0f} s</li>" for k, v in timings.items()) + "</ul>")
+    parts.append(f"<h2>Timings</h2><p>{html.escape(TIMINGS)}</p><ul>" + "".join(f"<li>{html.escape(k)}: {v:.0f} s</li>" for k, v in timings.items()) + "</ul>")
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>zodrive: Table 1</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
             "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}"
             "td:nth-child(-n+2),th{text-align:left}figure{margin:1.5em 0}</style></head><body>"
             + "".join(parts) + "</body></html>\n")
     write_atomic(out / "report.html", page)
+
+
+TIMINGS = ("Seconds, as each invocation recorded them (an older invocation's cells may count from its grid's start). "
+           "A cell's time runs from the previous cell's end to its own (cells run one after another, so "
+           "it is the cell's own time; on Ray, where cells overlap, it is not); an invocation's total is its wall time.")
+
+
+def _episodes(n: int) -> str:
+    """'N episodes per cell (seeds ...)', in words that fit one episode too."""
+    if n == 1:
+        return f"1 episode per cell, seed {EVAL_SEED}, the same in every cell"
+    return f"{n} episodes per cell, seeds {EVAL_SEED}–{EVAL_SEED + n - 1}, the same in every cell"
+
+
+def _html_from_markdown_table(text: str) -> str:
+    """A Markdown pipe table (what `compare` writes) as an HTML table; other lines as paragraphs."""
+    lines = [line.strip() for line in text.strip().splitlines()]
+    rows = [[html.escape(c.strip()) for c in line.strip("|").split("|")] for line in lines
+            if line.startswith("|") and not set(line) <= set("|-: ")]
+    rest = "".join(f"<p>{html.escape(line)}</p>" for line in lines if line and not line.startswith("|"))
+    if not rows:
+        return rest
+    head = "<tr>" + "".join(f"<th>{c}</th>" for c in rows[0]) + "</tr>"
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows[1:])
+    return f"<div style='overflow-x:auto'><table>{head}{body}</table></div>{rest}"
 
 
 def _html_table(records: list[dict[str, Any]]) -> str:

@@ -136,12 +136,14 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
         if progress:
             print(f"cell {algo}-{row}: {episodes} episodes of {model}" + (" under attack" if attack else ""),
                   file=sys.stderr)
-    t0 = time.perf_counter()
+    last = [time.perf_counter()]
 
     def done(i: int, summary: dict[str, Any]) -> None:
         algo, row, _ = todo[i]
         summaries[algo][row] = summary
-        timings[f"cell {algo}-{row}"] = round(time.perf_counter() - t0, 1)  # since the grid started
+        now = time.perf_counter()
+        timings[f"cell {algo}-{row}"] = round(now - last[0], 1)  # since the previous cell ended (report.TIMINGS)
+        last[0] = now
         write_json(out / "timings.json", timings)
 
     run_cells([cell for _, _, cell in todo], backend=backend, workers=workers, progress=progress,
