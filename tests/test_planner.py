@@ -65,9 +65,24 @@ def test_only_actions_that_differ_are_tried() -> None:
 @pytest.mark.parametrize(("args", "message"), [
     (["evaluate", "baseline:planner", "--preset", "continuous"], "drives discrete presets"),
     (["evaluate", "baseline:planner", "--attack", "random-search"], "reads the simulator"),
-    (["evaluate", "baseline:planner", "--preset", "merge"], "straight highway"),
+    (["evaluate", "baseline:planner", "--env-id", "CartPole-v1"], "on a highway-env road"),
 ])
 def test_planner_refuses_what_it_cannot_do(args: list[str], message: str, capsys) -> None:
     assert main(args) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_off_the_straight_highway_it_holds_idle_after_each_first_action() -> None:
+    """Intersection (three longitudinal meta-actions, a route): every available action is tried, then IDLE
+    held; what it picks scores best in a copy, and the real episode is driven without a crash."""
+    preset = load_preset("intersection")
+    env = make_env(preset)
+    env.reset(seed=50_000)
+    planner = LookAheadPlanner(env, preset, horizon_s=2.0, straight=False)
+    base = env.unwrapped
+    idle = base.action_type.actions_indexes["IDLE"]
+    scores = {int(a): planner._rollout(base, int(a)) for a in base.action_type.get_available_actions()}
+    choice = planner()
+    assert scores[choice] == max(scores.values()) and (choice == idle or scores[choice] > scores[idle])
+    assert len(scores) >= 2 and set(base.action_type.actions.values()) == {"SLOWER", "IDLE", "FASTER"}

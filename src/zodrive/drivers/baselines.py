@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from zodrive.attacks.victim import Victim
-from zodrive.envs.presets import ACTION_NAMES, CONTINUOUS_NAMES
+from zodrive.envs.presets import ACTION_NAMES, CONTINUOUS_NAMES, scenario
 from zodrive.errors import ZodriveError
 
 PREFIX = "baseline:"
@@ -70,8 +70,8 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
              "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
              "IDM + MOBIL driver (reads the simulator)"),
     Baseline("planner", ("discrete",), "simulator",
-             "look-ahead planner: each meta-action then the rules for 5 s in a copy of the simulator "
-             "(zodrive.drivers.planner); reads the simulator, about 0.5 s per decision",
+             "look-ahead planner: each meta-action then the rules (straight highway) or IDLE (any other road) for "
+             "5 s in a copy of the simulator (zodrive.drivers.planner); reads the simulator, 0.1-0.5 s per decision",
              "look-ahead planner (reads the simulator)"),
 )}
 
@@ -127,15 +127,17 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
                       "highway-fast")
         raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
                            f"issues {kinds}")
+    if baseline.name == "planner":
+        if not env.road or env.kind != "discrete" or "IDLE" not in env.action_names:
+            raise ZodriveError(f"{name} looks ahead with highway-env's meta-actions (IDLE among them) on a "
+                               "highway-env road")
+        return
     if baseline.reads == "simulator" and (preset.get("env_id") not in RULES_ENVS
                                           or (env.kind == "discrete" and env.action_names != ACTION_NAMES)
                                           or (env.kind == "continuous" and env.action_names != CONTINUOUS_NAMES)):
         raise ZodriveError(f"{name} drives a straight highway (it plans no route: no merge, exit or turn) with the "
                            "five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
                            "highway-fast")
-    if baseline.name == "planner" and env.features != RULES_FEATURES:
-        raise ZodriveError(f"{name} looks ahead with the rules, which read a Kinematics observation of presence x y "
-                           "vx vy: presets discrete, highway, highway-fast")
 
 
 def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int,
@@ -272,7 +274,8 @@ def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind:
     if baseline.name == "planner":
         from zodrive.drivers.planner import LookAheadPlanner
 
-        return LookAheadPlanner(env, preset)
+        straight = preset.get("env_id") in RULES_ENVS and scenario(preset).features == RULES_FEATURES
+        return LookAheadPlanner(env, preset, straight=straight)
     return IdmMobilDriver(env, kind, replan=replan)
 
 

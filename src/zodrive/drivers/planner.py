@@ -14,7 +14,12 @@ go to the rules' own action, so where looking ahead changes nothing the planner 
 rules. Cost: five rollouts of 75 steps per decision (15 Hz), about 0.3-0.5 s on one core after the
 pruning below (`benchmarks/` has no claim on it: it is a teacher, not a product path).
 
-Pruning (exact where it matters): the copy keeps only vehicles within [-`REACH_BEHIND`,
+On any other highway-env road with meta-actions (merge, roundabout, intersection) there are no
+rules to follow: each available meta-action is taken and then IDLE held for the horizon (keep the
+target speed and lane), on the whole road (no pruning: these roads hold few vehicles). It plans no
+route beyond the horizon; the scenario's own route-following does the steering.
+
+Pruning on the straight highway (exact where it matters): the copy keeps only vehicles within [-`REACH_BEHIND`,
 +`REACH_AHEAD`] m of the ego along the road. In 5 s no vehicle closes more than ~75 m on the ego
 (speeds 20-30 m/s), and the observation reads at most 200 m ahead, so the rollouts see the same
 neighbours; highway-env's cost per step is quadratic in the vehicles.
@@ -40,13 +45,19 @@ class LookAheadPlanner:
     for the action at the environment's current state. Deterministic: highway-env's vehicles
     behave deterministically once placed, so a rollout is the future under that action."""
 
-    def __init__(self, env: Any, preset: dict[str, Any], horizon_s: float = HORIZON_S) -> None:
+    def __init__(self, env: Any, preset: dict[str, Any], horizon_s: float = HORIZON_S, *, straight: bool = True) -> None:
+        """`straight`: the paper's straight highway, where the rules follow each first action and the
+        copies are pruned; otherwise IDLE follows on the whole road."""
         self.env = env
-        self.rules = ObservationRules(preset)
+        self.rules = ObservationRules(preset) if straight else None
         self.steps = max(1, round(horizon_s * env.unwrapped.config["policy_frequency"]))
 
     def __call__(self) -> int:
         base = self.env.unwrapped
+        if self.rules is None:
+            idle = base.action_type.actions_indexes["IDLE"]
+            scores = {int(a): self._rollout(base, int(a)) for a in base.action_type.get_available_actions()}
+            return idle if scores.get(idle, -np.inf) >= max(scores.values()) else max(scores, key=lambda a: scores[a])
         obs = base.observation_type.observe()
         own = int(self.rules.actions(np.asarray(obs, dtype=np.float32)[None])[0])
         scores = {a: self._rollout(base, a) for a in self.candidates(base)}
@@ -76,9 +87,10 @@ class LookAheadPlanner:
     def _rollout(self, base: Any, action: int) -> float:
         sim = copy.deepcopy(base)
         ego = sim.vehicle
-        x = ego.position[0]
-        sim.road.vehicles = [v for v in sim.road.vehicles
-                             if v is ego or -REACH_BEHIND <= v.position[0] - x <= REACH_AHEAD]
+        if self.rules is not None:
+            x = ego.position[0]
+            sim.road.vehicles = [v for v in sim.road.vehicles
+                                 if v is ego or -REACH_BEHIND <= v.position[0] - x <= REACH_AHEAD]
         total = 0.0
         for k in range(self.steps):
             obs, reward, terminated, truncated, info = sim.step(action)
@@ -87,5 +99,6 @@ class LookAheadPlanner:
                 return CRASH_SCORE + k
             if terminated or truncated:
                 break
-            action = int(self.rules.actions(np.asarray(obs, dtype=np.float32)[None])[0])
+            action = (int(self.rules.actions(np.asarray(obs, dtype=np.float32)[None])[0]) if self.rules is not None
+                      else sim.action_type.actions_indexes["IDLE"])
         return total
