@@ -324,3 +324,13 @@ def test_an_eps_that_covers_the_whole_box_is_reported(caplog) -> None:
     with caplog.at_level("WARNING"):
         AttackSpec(eps=1e6).build(linear_victim(), **CONTEXT)  # the schema's largest eps
     assert "covers the whole observation box" in caplog.text
+
+
+def test_an_unbounded_observation_box_is_reported(caplog) -> None:
+    with caplog.at_level("WARNING"):
+        AttackSpec(eps=0.1).build(linear_victim(), **{**CONTEXT, "bounds": (float("-inf"), float("inf"))})
+    assert "the observation box is unbounded" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        AttackSpec(eps=0.1).build(linear_victim(), **CONTEXT)
+    assert "unbounded" not in caplog.text

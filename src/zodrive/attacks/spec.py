@@ -149,6 +149,10 @@ class AttackSpec(AttackOptions):
         `feature_axis` is the axis the features are named along."""
         self._check_unread()
         threat = self.threat(features, bounds, feature_axis)
+        if not np.isfinite(np.asarray(threat.low)).any() and not np.isfinite(np.asarray(threat.high)).any():
+            log.warning("the observation box is unbounded (the environment declares none): eps alone bounds the "
+                        "perturbation, and a perturbed value may be one the sensor never produces; pass --obs-bounds "
+                        "LOW,HIGH if the observations have a range")
         width = np.min(np.asarray(threat.high) - np.asarray(threat.low))
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box (its narrowest side is %g wide): the budget "
