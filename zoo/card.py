@@ -16,38 +16,56 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def card(run: Path) -> str:
+    """A DQN trained from scratch by zoo/train.py (a checkpoint chosen on tuning seeds)."""
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario, seed = train["scenario"], train["seed"]
-    name = f"dqn-{run.name}"
-    row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`), trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "
-             f"(`python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}`), copied to `model.zip`.", "",
-             f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
-    if row_path.is_file():
-        row = json.loads(row_path.read_text())
-        c = row["clean"]
-        lines += [f"Bench row ({row['protocol']}, `zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
-                  f"--name {name}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
-                  f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
-                  f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions). Under the "
-                  "strongest black-box attack: " + ", ".join(
-                      f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
-                  + ".", ""]
-    else:
-        lines += ["No bench row yet: `bash zoo/bench_all.sh`.", ""]
-    return "\n".join(lines)
+             f"(`python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}`), copied to `model.zip`.", ""]
+    return "\n".join(lines + _bench(run, scenario, f"dqn-{run.name}"))
+
+
+def imitation_card(run: Path) -> str:
+    """A student cloned from the look-ahead planner by zoo/imitate_all.sh (zodrive robust-train, DAgger)."""
+    train = json.loads((run / "train.json").read_text())
+    command = json.loads((run / "run.json").read_text())["command"]
+    scenario = run.parent.name.removesuffix("-imitation")
+    method = train["method"]
+    lines = [f"# {run.parent.name} / {run.name}", "",
+             f"An MLP policy (the zoo DQN's architecture, a stable-baselines3 DQN zip) for `{scenario}`, cloned from "
+             f"`{method['teacher']}` — a look-ahead planner that **reads the simulator**, a privileged teacher — by "
+             f"behaviour cloning with DAgger ({method['states']:,} teacher states, then {method['rounds']} rounds of "
+             f"{method['states']:,} states the student drives into, labelled by the teacher; {method['epochs']} epochs "
+             f"per refit; seed {train['seed']}), by `zoo/imitate_all.sh`:", "", f"`{command}`", "",
+             "No checkpoint is chosen: the student after the last DAgger round is the model.", ""]
+    return "\n".join(lines + _bench(run, scenario, f"imitation-{run.name}"))
+
+
+def _bench(run: Path, scenario: str, name: str) -> list[str]:
+    lines = [f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
+    row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
+    if not row_path.is_file():
+        return lines + ["No bench row yet: `bash zoo/bench_all.sh`.", ""]
+    row = json.loads(row_path.read_text())
+    c = row["clean"]
+    return lines + [f"Bench row ({row['protocol']}, `zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
+                    f"--name {name}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
+                    f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
+                    f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions). Under the "
+                    "strongest black-box attack: " + ", ".join(
+                        f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
+                    + ".", ""]
 
 
 def main() -> None:
     for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
-        if (run / "selection.json").is_file():
-            (run / "CARD.md").write_text(card(run))
+        if (run / "selection.json").is_file() or (run.parent.name.endswith("-imitation") and (run / "model.zip").is_file()):
+            (run / "CARD.md").write_text(imitation_card(run) if run.parent.name.endswith("-imitation") else card(run))
             print(f"wrote {run / 'CARD.md'}")
 
 
