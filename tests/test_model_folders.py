@@ -4,6 +4,7 @@ normalization file that would run code is refused without running it."""
 
 from __future__ import annotations
 
+import json
 import os
 import pickle
 import shutil
@@ -89,6 +90,12 @@ def test_rl_zoo3_and_hugging_face_folders(trained, tmp_path: Path) -> None:
     shutil.copy(folder / "model.zip", hub / "best_model.zip")
     with pytest.raises(ZodriveError, match="holds 2 models .*best_model.zip, ppo-CartPole-v1.zip"):
         zodrive.resolve(str(hub))
+    # another model's statistics in a subfolder that is not this zip's rl-zoo3 folder are not this model's
+    plain = tmp_path / "plain"
+    (plain / "other").mkdir(parents=True)
+    shutil.copy(folder / "model.zip", plain / "ppo.zip")
+    shutil.copy(folder / "vecnormalize.pkl", plain / "other" / "vecnormalize.pkl")
+    assert "vecnormalize" not in zodrive.resolve(str(plain / "ppo.zip")).key()
 
 
 class _Payload:
@@ -150,3 +157,15 @@ def test_the_scenario_comes_from_the_folder_or_is_said_to_be_a_default(caplog, t
         shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
         resolve_preset(str(tmp_path / "model.zip"), None)  # a bare zip says nothing: the default, said
     assert "scenario: discrete, a default" in caplog.text
+
+
+def test_summary_json_says_where_an_unnamed_scenario_came_from(tmp_path: Path) -> None:
+    from zodrive.cli import main
+
+    root = Path(__file__).resolve().parents[1] / "models"
+    shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
+    args = ["--episodes", "1", "--env-set", "max_episode_steps=2", "--no-progress"]
+    assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--out", str(tmp_path / "a")]) == 0
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["scenario_source"].startswith("a default")
+    assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--preset", "discrete", "--out", str(tmp_path / "b")]) == 0
+    assert "scenario_source" not in json.loads((tmp_path / "b" / "summary.json").read_text())  # named by the user

@@ -252,10 +252,15 @@ def check_model_paths(args: argparse.Namespace) -> None:
 
 def preset_of(args: argparse.Namespace) -> dict[str, Any]:
     """Where `args.model` drives: --preset, --env-id (with --obs-bounds) or its action kind's preset."""
-    from zodrive.policies.resolve import resolve_preset
+    return scenario_of(args)[0]
 
-    return resolve_preset(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
-                          getattr(args, "obs_bounds", None))
+
+def scenario_of(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
+    """`preset_of` and where a scenario the user did not name came from (`resolve_scenario`)."""
+    from zodrive.policies.resolve import resolve_scenario
+
+    return resolve_scenario(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
+                            getattr(args, "obs_bounds", None))
 
 
 def check_trust(args: argparse.Namespace) -> None:

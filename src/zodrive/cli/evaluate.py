@@ -14,7 +14,7 @@ from typing import Any
 from zodrive.cli.attack import add_attack_flags, attack_spec_from_args, option_type
 from zodrive.cli.common import (
     episode_count,
-    MODEL_HELP, check_trust, defense_name, envs_flag, envs_of, positive_int, preset_of, progress_flag,
+    MODEL_HELP, check_trust, defense_name, envs_flag, envs_of, positive_int, preset_of, progress_flag, scenario_of,
     refuse_nonempty, scenario_flags, seed_number, workers_flag,
 )
 from zodrive.defense import DEFENSE_NAMES
@@ -99,7 +99,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.system import build_attacker
 
     spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
-    preset = preset_of(args)
+    preset, source = scenario_of(args)
     check_trust(args)
     _check_loss(args, spec, preset)
     check_policy(args.model, preset, attacked=spec is not None)
@@ -113,6 +113,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         model=policy_ref(args.model), preset=preset,
         attack=spec.to_dict() if spec else None,
         seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
+        scenario_source=source,
     )
     if args.force and args.out is None:
         raise ZodriveError("--force replaces an evaluation in --out: give --out")

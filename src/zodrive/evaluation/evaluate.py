@@ -54,6 +54,7 @@ class EvalJob:
     record_steps: bool = True
     defense: str | None = None  # e.g. "kinematic": a filter between the (attacked) sensor and the policy
     trust: bool = False         # read an SB3 zip with SB3's loader (same outputs; not part of the key)
+    scenario_source: str | None = None  # where a scenario the user did not name came from (summary; not the key)
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
@@ -409,6 +410,7 @@ def summarize(
     summary: dict[str, Any] = {
         "model": job.model,
         "preset": job.preset.get("name"),
+        **({"scenario_source": job.scenario_source} if job.scenario_source else {}),
         "episodes": len(records),
         "seed": job.seed,
         "mean_return": float(returns.mean()),

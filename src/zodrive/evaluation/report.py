@@ -10,7 +10,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     """A few lines a person reads: return with CI, collisions, and the attack's numbers."""
     low, high = summary["ci95"]
     lines = [
-        f"episodes: {summary['episodes']} (seed{'' if summary['episodes'] == 1 else 's'} {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})",
+        f"episodes: {summary['episodes']} " + (f"(seed {summary['seed']})" if summary['episodes'] == 1 else
+                                               f"(seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})"),
         f"mean return: {summary['mean_return']:.2f}  "
         + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
         + (f"({summary['pct_of_max']:.2f}% of max)" if summary.get("pct_of_max") is not None else ""),

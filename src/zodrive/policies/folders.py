@@ -102,7 +102,7 @@ def trained_with(model: Path) -> TrainedWith:
         env_id = _env_id_from_name(model.stem)
         if env_id is not None:
             said.append(str(model))
-    norm = find_normalization(folder)
+    norm = find_normalization(model)
     return TrainedWith(env_id=env_id, env_kwargs=env_kwargs, preset=preset, normalization=norm, said_by=tuple(said))
 
 

@@ -125,10 +125,11 @@ def read_normalization(path: Path) -> ObsNormalization | None:
     return ObsNormalization(mean, var, epsilon, clip, str(path))
 
 
-def find_normalization(folder: Path) -> Path | None:
-    """The VecNormalize file beside a model (its folder, or rl-zoo3's `<env id>/` subfolder)."""
-    found = [folder / name for name in FILE_NAMES if (folder / name).is_file()]
-    found += [p for name in FILE_NAMES for p in sorted(folder.glob(f"*/{name}"))]
+def find_normalization(model: Path) -> Path | None:
+    """The VecNormalize file of the model file `model`: beside it, or in rl-zoo3's `<zip stem>/` folder
+    (`<env id>.zip` beside `<env id>/vecnormalize.pkl`); another model's folder is never read."""
+    folder = model.parent
+    found = [base / name for base in (folder, folder / model.stem) for name in FILE_NAMES if (base / name).is_file()]
     if len(found) > 1:
         raise ZodriveError(f"{folder} holds {len(found)} normalization files ({', '.join(str(p) for p in found)}): "
                            "keep the one the model was trained with")

@@ -77,32 +77,38 @@ def policy_label(model: str) -> str:
 
 def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
                    obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Where `model` drives (`resolve_scenario` without the source)."""
+    return resolve_scenario(model, preset, env_set, env_id, obs_bounds)[0]
+
+
+def resolve_scenario(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
+                     obs_bounds: tuple[float, float] | None = None) -> tuple[dict[str, Any], str | None]:
     """Where `model` drives: `preset`, `env_id` (any gymnasium id), where the model's folder says
     it was trained (rl-zoo3 / Hugging Face files, `<env id>.zip`), or else the paper's preset of
-    its action kind (discrete / continuous), said in a warning: a default is never silent."""
-
+    its action kind (discrete / continuous), said in a warning: a default is never silent. The
+    second value says where a scenario the user did not name came from (for `summary.json`), else None."""
     if env_id is not None:
         if preset is not None:
             raise ZodriveError("--preset and --env-id both say where the policy drives: give one")
-        return gym_preset(env_id, env_set, obs_bounds)
+        return gym_preset(env_id, env_set, obs_bounds), None
     if obs_bounds is not None:
         raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
     if preset is not None:
-        return load_preset(preset, env_set)
+        return load_preset(preset, env_set), None
     said = None if bl.is_baseline(model) or is_factory(model) or is_onnx(model) else _trained_with(model)
     if said is not None and said.preset is not None:
         log.info("scenario: %s, the preset its run folder records", said.preset)
-        return load_preset(said.preset, env_set)
+        return load_preset(said.preset, env_set), f"the preset its run folder records ({', '.join(said.said_by)})"
     if said is not None and said.env_id is not None:
         found = preset_for_env(said.env_id, said.env_kwargs, env_set)
         log.warning("scenario: %s, where %s says the model was trained", found["name"], ", ".join(said.said_by))
-        return found
+        return found, f"where {', '.join(said.said_by)} says the model was trained"
     default = load_preset(policy_kind(model), env_set)
-    if not bl.is_baseline(model):
-        log.warning("scenario: %s, a default (%s does not say where it was trained): pass --preset or --env-id",
-                    default["name"], model)
-    return default
-
+    if bl.is_baseline(model):
+        return default, None
+    log.warning("scenario: %s, a default (%s does not say where it was trained): pass --preset or --env-id",
+                default["name"], model)
+    return default, f"a default: the paper's preset of its action kind ({model} does not say where it was trained)"
 
 
 def _trained_with(model: str) -> TrainedWith:
