@@ -73,6 +73,18 @@ def _error(capsys, args: list[str]) -> str:
     (["evaluate", DQN, "--envs", "0"], "--envs"),
     (["evaluate", DQN, "--attack", "zo-signsgd", "--patience", "3", "--no-patience"], "contradict each other"),
     (["evaluate", DQN, "--no-warm-start"], "no --attack was given"),
+    # found again by studies/input-trial/rerun.py
+    (["train", "--algo", "dqn", "--steps", "100", "--set", "hyperparameters.buffer_size=10000000000", "--out", "{tmp}/t"],
+     "buffer_size must be at most 10,000,000"),
+    (["train", "--algo", "dqn", "--steps", "100", "--set", "hyperparameters.policy_kwargs.net_arch=[-1]", "--out",
+      "{tmp}/t"], "net_arch must list layer widths"),
+    (["train", "--algo", "dqn", "--steps", "100", "--set", "total_timesteps=abc", "--out", "{tmp}/t"],
+     "--steps and --set total_timesteps=... both set the step budget"),
+    (["train", "--algo", "dqn", "--set", "checkpoint_every=-5", "--out", "{tmp}/t"], "checkpoint_every must be an integer >= 0"),
+    (["evaluate", str(ROOT / "tests" / "golden" / "cart_policy.py") + ":make", "--env-id", "CartPole-v1", "--defense",
+      "kinematic"], "is not a highway-env preset"),
+    (["compare", "baseline:slower", "--out", "{tmp}/c", "--plot", str(ROOT / "docs" / "leaderboard.png")],
+     "already holds a figure"),
     # limits at the edge and the option rule, generated from the attack schema (issue 47)
     (["evaluate", "baseline:slower", "--preset", "highway-fast", "--env-set", "highway.observation.vehicle_count=7"],
      "highway.observation.vehicle_count is not an option of FastKinematics"),

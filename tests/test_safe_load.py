@@ -135,3 +135,34 @@ def test_a_model_is_loaded_once_per_process_until_the_file_changes(tmp_path: Pat
     assert load_network(copy) is first  # validation and episodes share one load
     shutil.copy("models/dqn-driver/model.zip", copy)  # a swapped file is read again
     assert load_network(copy) is not first
+
+
+@pytest.mark.parametrize(("where", "message"), [
+    ("shape", "records no readable observation shape"),
+    ("n", "the action space's n is 'five', not a number of actions"),
+    ("tensors", "policy.pth holds str where the tensor"),
+])
+def test_a_crafted_zip_with_text_for_numbers_is_one_line(tmp_path: Path, where: str, message: str, capsys) -> None:
+    import io
+
+    import torch
+
+    crafted = tmp_path / "crafted.zip"
+    with zipfile.ZipFile(ROOT / "models" / "dqn" / "model.zip") as src, zipfile.ZipFile(crafted, "w") as dst:
+        for item in src.infolist():
+            raw = src.read(item.filename)
+            if item.filename == "data" and where in ("shape", "n"):
+                data = json.loads(raw)
+                if where == "shape":
+                    data["observation_space"]["_shape"] = ["five", 5]
+                else:
+                    data["action_space"]["n"] = "five"
+                raw = json.dumps(data).encode()
+            if item.filename == "policy.pth" and where == "tensors":
+                buffer = io.BytesIO()
+                torch.save({k: "tensor" for k in torch.load(io.BytesIO(raw), weights_only=True)}, buffer)
+                raw = buffer.getvalue()
+            dst.writestr(item, raw)
+    assert main(["evaluate", str(crafted), "--preset", "discrete", "--episodes", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1

@@ -164,3 +164,16 @@ def test_a_box_per_dimension_and_a_feature_axis_come_from_the_environment() -> N
         from zodrive.envs import scenario
 
         scenario(gym_preset("Pendulum-v1", obs_bounds=(-8.0, 8.0)))
+
+
+def test_a_policy_file_that_exits_or_returns_nan_is_one_line(tmp_path: Path, capsys) -> None:
+    """sys.exit(0) while loading ended zodrive with exit 0 and no output; NaN scores drove as action 0."""
+    (tmp_path / "exits.py").write_text("import sys\nsys.exit(0)\n")
+    (tmp_path / "nan.py").write_text("import numpy as np\n\ndef make():\n"
+                                     "    return lambda obs: np.full((len(obs), 5), np.nan, np.float32)\n")
+    args = ["--preset", "highway-fast", "--episodes", "1", "--env-set", "max_episode_steps=3", "--no-progress"]
+    for name, message in (("exits.py:make", "called sys.exit(0) while being loaded"),
+                          ("nan.py:make", "returned NaN or infinite outputs")):
+        assert main(["evaluate", str(tmp_path / name), *args]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1

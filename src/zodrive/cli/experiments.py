@@ -96,6 +96,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from zodrive.experiments.compare import compare, default_attacks, markdown, plot_budget_curves, plot_robustness
 
     defenses = [None if d == "none" else d for d in args.defense or ["none"]]
+    if args.plot and args.out.resolve() not in args.plot.resolve().parents:  # inside --out it is the grid's own
+        refuse_nonempty(args.plot, args.force, "a figure", "")
     attacks = args.attacks
     if not attacks:  # every attack that takes the --attack-set options; the others are named
         attacks, left_out = default_attacks(args.attack_set)

@@ -176,6 +176,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise ZodriveError("--trust-model applies with --resume (a new run unpickles nothing)")
     overrides = list(args.set)
     if args.steps:
+        if any(o.strip().startswith("total_timesteps=") for o in overrides):
+            raise ZodriveError("--steps and --set total_timesteps=... both set the step budget: give one")
         overrides.append(f"total_timesteps={args.steps}")
     recipe = load_recipe(args.recipe or args.algo, overrides)
     if recipe["algo"] != args.algo:

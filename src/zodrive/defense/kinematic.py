@@ -54,7 +54,10 @@ class KinematicFilter:
     black-box attacker of the defended system may query)."""
 
     def __init__(self, preset: dict[str, Any], tol: Tolerances | None = None) -> None:
-        obs = preset["highway"]["observation"]
+        obs = (preset.get("highway") or {}).get("observation")
+        if not isinstance(obs, dict):
+            raise ZodriveError(f"the kinematic filter reads highway-env's Kinematics observation; {preset.get('name')} "
+                               "is not a highway-env preset")
         features = tuple(obs.get("features", FEATURES))
         if features != FEATURES or obs.get("absolute", False) or not obs.get("normalize", True):
             raise ZodriveError("the kinematic filter needs the relative, normalized Kinematics observation "

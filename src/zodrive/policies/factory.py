@@ -57,6 +57,8 @@ def build(model: str) -> Any:
         return factory()
     except ZodriveError:
         raise
+    except SystemExit as exc:  # sys.exit() in the user's file would end zodrive with its code and no word
+        raise ZodriveError(f"{model}: the policy code called sys.exit({exc.code!r}) while being loaded") from None
     except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
         raise ZodriveError(f"{model}: the policy code raised {type(exc).__name__}: {exc}") from exc
 

@@ -116,6 +116,9 @@ def read_plain(path: Path) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
         raise ZodriveError(f"{path} is corrupt or not a plain stable-baselines3 model ({type(exc).__name__})") from exc
     if not isinstance(data, dict) or not isinstance(weights, dict):
         raise ZodriveError(f"{path} is not a stable-baselines3 model (unexpected contents)")
+    odd = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
+    if odd is not None:
+        raise ZodriveError(f"{path}: policy.pth holds {type(weights[odd]).__name__} where the tensor {odd!r} belongs")
     return data, weights
 
 
@@ -137,7 +140,18 @@ def _space_shape(space: Any) -> tuple[int, ...] | None:
     shape = space.get("_shape") if isinstance(space, dict) else None
     if isinstance(shape, str):  # SB3 writes some readable fields as their repr
         shape = json.loads(shape) if re.fullmatch(r"\[[\d, ]*\]", shape.strip()) else None
-    return tuple(int(v) for v in shape) if isinstance(shape, list) else None
+    if not isinstance(shape, list) or not all(_count(v) is not None for v in shape):
+        return None  # absent or damaged (text or a negative where a size belongs)
+    return tuple(_count(v) for v in shape)  # type: ignore[misc]
+
+
+def _count(value: Any) -> int | None:
+    """A size or count as the zip writes it (an integer, or its digits), else None."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value if value >= 0 else None
+    return int(value) if isinstance(value, str) and value.strip().isdigit() else None
 
 
 def _space_type(space: Any) -> str:
@@ -172,7 +186,10 @@ def describe(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path)
     if space == "Discrete" or "n" in action:
         if str(action.get("start", "0")) not in ("0", "[0]"):
             raise ZodriveError(f"{path}: a Discrete action space that does not start at 0 is not supported")
-        info = {"kind": "discrete", "n_actions": int(action["n"]), "action_low": None, "action_high": None}
+        n = _count(action.get("n"))
+        if not n:
+            raise ZodriveError(f"{path}: the action space's n is {action.get('n')!r}, not a number of actions")
+        info = {"kind": "discrete", "n_actions": n, "action_low": None, "action_high": None}
     elif space in ("Box", ""):
         shape = _space_shape(action)
         if shape is None or len(shape) != 1:

@@ -147,7 +147,7 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
             out = inner.query(obs)
         except ZodriveError:
             raise
-        except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - the user's code may raise anything, exit included
             raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
                                f"{tuple(np.shape(obs))}: {type(exc).__name__}: {exc}") from exc
         if env.kind == "discrete" and out.shape[1:] in ((), (1,)):  # actions, not scores: one-hot scores
@@ -156,6 +156,9 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
             raise ZodriveError(f"{label} returns outputs of shape {out.shape[1:]} per observation; "
                                f"{env.name!r} needs {env.n_actions} "
                                f"({'scores' if env.kind == 'discrete' else 'action dims'})")
+        if not np.all(np.isfinite(out)):  # an argmax of NaN scores is action 0: a decision nobody made
+            raise ZodriveError(f"{label} returned NaN or infinite outputs on {int((~np.isfinite(out)).any(axis=1).sum())} "
+                               f"of {len(obs)} observations")
         return out
 
     return Victim(query=query, kind=inner.kind, obs_shape=inner.obs_shape, differentiable=inner.differentiable)

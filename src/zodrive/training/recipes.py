@@ -74,6 +74,10 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
     steps = recipe.get("total_timesteps")
     if not isinstance(steps, int) or steps < 1:
         raise ZodriveError(f"recipe {name!r}: total_timesteps must be a positive integer")
+    every = recipe.get("checkpoint_every")
+    if every is not None and (isinstance(every, bool) or not isinstance(every, int) or every < 0):
+        raise ZodriveError(f"recipe {name!r}: checkpoint_every must be an integer >= 0 (0: no checkpoints), "
+                           f"not {every!r}")
     check_init(recipe, f"recipe {name!r}")
     return recipe
 
