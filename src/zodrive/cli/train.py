@@ -191,8 +191,10 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_adv_train(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
+    from zodrive.policies.loading import require_trust
     from zodrive.training.adversarial import adversarial_train
 
+    require_trust(args.model, args.trust_model)  # continued training unpickles: refused before anything is said
     preset = preset_of(args)
     if args.no_attack and (args.attack_set or args.attack):
         raise ZodriveError(f"{'--attack-set' if args.attack_set else '--attack'} has no effect with --no-attack")

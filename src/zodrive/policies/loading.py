@@ -110,6 +110,15 @@ def is_shipped(file: Path) -> bool:
     return sha256(file) in set(shipped_sums(TRUSTED_SUMS.parent).values())
 
 
+def require_trust(path: str | Path, trust: bool) -> None:
+    """Refuse to unpickle `path` unless the user trusts it or it is a shipped model (checked first by
+    the commands that must unpickle, before anything else is read or said)."""
+    file = model_file(path)
+    if not (trust or is_shipped(file)):
+        raise ZodriveError(f"loading {file} with stable-baselines3 would unpickle it, which can run code from "
+                           "the file; pass --trust-model if you trust where it came from")
+
+
 def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust: bool = False,
                cls: type[BaseAlgorithm] | None = None) -> BaseAlgorithm:
     """Load a DQN/DDPG zip as an SB3 object (unpickles: needs `trust` unless it is a shipped model);
@@ -118,9 +127,7 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
     info = inspect_model(file)
     if preset is not None:
         check_fits(info, preset, file)
-    if not (trust or is_shipped(file)):
-        raise ZodriveError(f"loading {file} with stable-baselines3 would unpickle it, which can run code from "
-                           "the file; pass --trust-model if you trust where it came from")
+    require_trust(file, trust)
     try:
         with warnings.catch_warnings():  # SB3 warns that saved n-step settings are not re-applied
             warnings.filterwarnings("ignore", message=".*n_steps.*ignored.*")
