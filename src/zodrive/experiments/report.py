@@ -204,4 +204,5 @@ def _html_table(records: list[dict[str, Any]]) -> str:
                  _success(r),
                  or_dash(r["queries_per_step"], "{:.0f}"), or_dash(r["max_linf"], "{:.3f}")]
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
-    return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")
+    return ("<div style='overflow-x:auto'><table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"
+            + "".join(rows) + "</table></div>")  # a narrow window scrolls the table instead of cutting it
