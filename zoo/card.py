@@ -30,22 +30,6 @@ def card(run: Path) -> str:
     return "\n".join(lines + _bench(run, scenario, f"dqn-{run.name}"))
 
 
-def imitation_card(run: Path) -> str:
-    """A student cloned from the look-ahead planner by zoo/imitate_all.sh (zodrive robust-train, DAgger)."""
-    train = json.loads((run / "train.json").read_text())
-    command = json.loads((run / "run.json").read_text())["command"]
-    scenario = run.parent.name.removesuffix("-imitation")
-    method = train["method"]
-    lines = [f"# {run.parent.name} / {run.name}", "",
-             f"An MLP policy (the zoo DQN's architecture, a stable-baselines3 DQN zip) for `{scenario}`, cloned from "
-             f"`{method['teacher']}` — a look-ahead planner that **reads the simulator**, a privileged teacher — by "
-             f"behaviour cloning with DAgger ({method['states']:,} teacher states, then {method['rounds']} rounds of "
-             f"{method['states']:,} states the student drives into, labelled by the teacher; {method['epochs']} epochs "
-             f"per refit; seed {train['seed']}), by `zoo/imitate_all.sh`:", "", f"`{command}`", "",
-             "No checkpoint is chosen: the student after the last DAgger round is the model.", ""]
-    return "\n".join(lines + _bench(run, scenario, f"imitation-{run.name}"))
-
-
 def _bench(run: Path, scenario: str, name: str) -> list[str]:
     lines = [f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
     row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
@@ -64,8 +48,8 @@ def _bench(run: Path, scenario: str, name: str) -> list[str]:
 
 def main() -> None:
     for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
-        if (run / "selection.json").is_file() or (run.parent.name.endswith("-imitation") and (run / "model.zip").is_file()):
-            (run / "CARD.md").write_text(imitation_card(run) if run.parent.name.endswith("-imitation") else card(run))
+        if (run / "selection.json").is_file():
+            (run / "CARD.md").write_text(card(run))
             print(f"wrote {run / 'CARD.md'}")
 
 
