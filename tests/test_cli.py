@@ -222,7 +222,7 @@ def test_evaluation_is_keyed_on_the_model_content(tiny_dqn: Path, tmp_path: Path
 
 
 def test_adv_train_refuses_to_overwrite_a_run(tiny_dqn: Path, capsys) -> None:
-    assert main(["adv-train", str(tiny_dqn), "--steps", "10", "--out", str(tiny_dqn)]) == 2
+    assert main(["adv-train", str(tiny_dqn), "--steps", "10", "--out", str(tiny_dqn), "--trust-model"]) == 2
     assert "--force" in capsys.readouterr().err
     assert (tiny_dqn / "model.zip").is_file()
 
