@@ -56,3 +56,14 @@ def test_the_committed_leaderboard_is_generated_from_the_committed_rows() -> Non
     root = Path(__file__).resolve().parents[1]
     text = (root / "docs" / "leaderboard.md").read_text()
     assert text == leaderboard_markdown(read_rows(root / "results" / "bench"))  # never typed
+
+
+def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
+    """Δ brake is computed from the row folder's clean and brake episodes, seed by seed: the brake's own row is
+    exactly 0, and the committed highway-fast DQN (seed 0) beats the brake by a margin its CI shows."""
+    from zodrive.experiments.bench import brake_margin
+
+    board = Path(__file__).resolve().parents[1] / "results" / "bench" / "highway-fast"
+    assert brake_margin(board / "baseline-slower") == [0.0, 0.0, 0.0]
+    mean, low, high = brake_margin(board / "dqn-seed-0")
+    assert 0 < low < mean < high

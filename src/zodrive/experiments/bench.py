@@ -135,8 +135,25 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
                   "offroad_rate": clean.get("offroad_rate")},
         "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
-        "eps_units": physical_eps(proto),
+        "vs_brake": brake_margin(out), "eps_units": physical_eps(proto),
     }
+
+
+def brake_margin(folder: Path) -> list[float] | None:
+    """The clean return minus the constant brake's, paired on the protocol's seeds (episode by episode),
+    with its bootstrap 95% CI: [mean, low, high]. A policy beats the brake by a margin its CI shows when
+    low > 0. None where a cell's episodes are missing or not on the same seeds."""
+    from zodrive.evaluation.stats import paired_difference_ci
+
+    clean, brake = sorted((folder / "cells").glob("*-none")), sorted((folder / "brake" / "cells").glob("*-none"))
+    if len(clean) != 1 or len(brake) != 1:
+        return None
+    mine, theirs = ({r["episode"]: r["return"] for r in read_jsonl(cell / "episodes.jsonl", needs=("episode", "return"))}
+                    for cell in (clean[0], brake[0]))
+    if not mine or set(mine) != set(theirs):
+        return None
+    seeds = sorted(mine)
+    return list(paired_difference_ci([mine[k] for k in seeds], [theirs[k] for k in seeds]))
 
 
 def _attack(cell: dict[str, Any]) -> str:
@@ -159,9 +176,12 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
     rows = []
     for path in sorted(board.glob("*/*/row.json")):
         try:
-            rows.append(json.loads(path.read_text(encoding="utf-8")))
+            row = json.loads(path.read_text(encoding="utf-8"))
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
+        if "vs_brake" not in row:  # a row written before the column: from its own cells
+            row["vs_brake"] = brake_margin(path.parent)
+        rows.append(row)
     return rows
 
 
@@ -174,25 +194,29 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "([docs/bench.md](bench.md)). Return under attack is the worst black-box attack of the ensemble per ε;",
              "PGD (white-box, needs gradients) is a separate column. Ranked by the return at the largest ε.",
              "ε past brake: the smallest ε at which the policy collides more often than the constant brake does",
-             "clean (0: already clean). Unofficial rows (fewer episodes) are marked *.", ""]
+             "clean (0: already clean). Δ brake: clean return minus the constant brake's, paired on the same seeds",
+             "(95% CI; above 0 where the CI excludes it, the policy beats the brake). Unofficial rows (fewer episodes)",
+             "are marked *.", ""]
     for scenario_name in sorted({r["scenario"] for r in rows}):
         group = sorted((r for r in rows if r["scenario"] == scenario_name),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
         proto = group[0]["protocol"]
         eps = [p["eps"] for p in group[0]["attacked"]]
         lines += [f"## {scenario_name} (protocol {proto})", "",
-                  "| Policy | Clean return (95% CI) | Collisions | Speed (m/s) | "
+                  "| Policy | Clean return (95% CI) | Δ brake (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
-                  "|---" * (8 + len(eps)) + "|"]
+                  "|---" * (9 + len(eps)) + "|"]
         for r in group:
             c = r["clean"]
             cells = [f"{p['return']:.2f} / {100 * p['collision_rate']:.0f}%" for p in r["attacked"]]
             last = r["attacked"][-1]
             pgd = "–" if last["pgd_return"] is None else f"{last['pgd_return']:.2f}"
             q = next((p["queries_to_crash"] for p in r["attacked"] if p["queries_to_crash"] is not None), None)
+            margin = r.get("vs_brake")
+            delta = "–" if margin is None else f"{margin[0]:+.2f} ({margin[1]:+.2f} to {margin[2]:+.2f})"
             lines.append(f"| {r['policy']}{'' if r['official'] else '*'} | {c['return']:.2f} "
-                         f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {100 * c['collision_rate']:.0f}% | "
+                         f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
                          f"{c['speed']:.1f} | " + " | ".join(cells) + f" | {pgd} | "
                          f"{'–' if r['robustness_area'] is None else format(r['robustness_area'], '.2f')} | "
                          f"{'–' if r['eps_collisions_pass_brake'] is None else format(r['eps_collisions_pass_brake'], 'g')} | "
