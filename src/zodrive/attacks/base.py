@@ -280,7 +280,7 @@ class Search:
                                "clean one may leave the max_change box")
         oracle.begin_step(rows=self.n)
         self.box = attack.smooth_box(self.flat0.reshape(self.n, *self.shape))
-        self.around = attack.threat.around(self.flat0, self.shape)
+        self.around = attack.threat.around(self.flat0, self.shape, integer=self.integer)
         self.everyone = np.arange(self.n)
         self.free = int(np.argmax(self.mask))  # a coordinate the attacker may change (any, if none)
         self.iterations = np.zeros(self.n, dtype=np.int64)
@@ -300,10 +300,6 @@ class Search:
             # idempotent, so a step onto a queried point is recognised and not queried again)
             snap = (np.abs(inside - cand) <= 1e-6) & has[rows, None, None]
             inside = np.where(snap, cand, inside)
-        if self.integer:  # a sensor of integers (pixels): each change rounded toward the clean value stays in the
-            # ball and the box, and the point queried is the point fed (no rounding after the search)
-            clean = self.flat0[rows, None]
-            inside = clean + np.trunc(inside - clean)
         return inside
 
     def values(self, cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:

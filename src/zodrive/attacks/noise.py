@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.attacks.base import reads_all_but, Attack
+from zodrive.attacks.base import Attack, reads_all_but
 
 
 class UniformNoise(Attack):

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.attacks.base import reads_all_but, Attack, AttackResult
+from zodrive.attacks.base import Attack, AttackResult, reads_all_but
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from zodrive.attacks.base import reads_all_but, Attack
+from zodrive.attacks.base import Attack, reads_all_but
 
 
 class RandomSearch(Attack):

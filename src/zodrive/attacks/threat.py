@@ -81,15 +81,14 @@ class ThreatModel:
     def project(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
         """Map candidates `x` (B, *obs) around clean `x0` (B, *obs) into the threat model."""
         n = len(x0)
-        inside = self.around(x0.reshape(n, -1), x0.shape[1:])(x.reshape(n, 1, -1), np.arange(n)).reshape(x0.shape)
-        if np.issubdtype(x0.dtype, np.integer):  # pixels: each change rounded toward the clean value, so that the
-            inside = x0 + np.trunc(inside - x0)  # integer fed is still inside the ball and the box
-        return inside.astype(x0.dtype, copy=False)
+        around = self.around(x0.reshape(n, -1), x0.shape[1:], integer=np.issubdtype(x0.dtype, np.integer))
+        return around(x.reshape(n, 1, -1), np.arange(n)).reshape(x0.shape).astype(x0.dtype, copy=False)
 
-    def around(self, x0: np.ndarray, obs_shape: Sequence[int]) -> Projector:
+    def around(self, x0: np.ndarray, obs_shape: Sequence[int], integer: bool = False) -> Projector:
         """`project` around the flattened clean rows `x0` (N, dim) of observations of
-        `obs_shape`, their box computed once (an attack projects around them every iteration)."""
-        return Projector(self, x0, self.mask(obs_shape).reshape(-1))
+        `obs_shape`, their box computed once (an attack projects around them every iteration);
+        `integer`: the sensor gives integers (pixels), so every projected point is whole."""
+        return Projector(self, x0, self.mask(obs_shape).reshape(-1), integer)
 
     def random_delta(self, shape: tuple[int, ...], mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Uniform draws (shape = (N, dim)) from the budget set (L-inf box or L2 ball) on the
@@ -109,8 +108,8 @@ class Projector:
     """`ThreatModel.project` around fixed clean rows: candidates (A, M, dim) of rows `rows`
     into the threat model, by the same arithmetic as `project` (broadcast, not repeated)."""
 
-    def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray) -> None:
-        self.threat, self.x0, self.mask = threat, x0, mask
+    def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray, integer: bool = False) -> None:
+        self.threat, self.x0, self.mask, self.integer = threat, x0, mask, integer
         low, high = threat.box(x0.shape[1])
         self.low, self.high = np.minimum(low, x0), np.maximum(high, x0)  # never move a clean value
 
@@ -129,7 +128,12 @@ class Projector:
                 norms = np.linalg.norm(delta, axis=-1, keepdims=True)
                 delta = delta * np.minimum(1.0, t.eps / np.maximum(norms, 1e-12))
         delta += x0
-        return np.clip(delta, low[:, None], high[:, None], out=delta)
+        inside = np.clip(delta, low[:, None], high[:, None], out=delta)
+        if self.integer:  # pixels: each change rounded toward the clean value stays in the ball and the box,
+            inside -= x0  # and the point queried is the point fed (nothing is rounded after the search)
+            np.trunc(inside, out=inside)
+            inside += x0
+        return inside
 
 
 def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

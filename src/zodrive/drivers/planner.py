@@ -54,16 +54,15 @@ class LookAheadPlanner:
 
     def __call__(self) -> int:
         base = self.env.unwrapped
-        if self.rules is None:
-            idle = base.action_type.actions_indexes["IDLE"]
-            scores = {int(a): self._rollout(base, int(a)) for a in base.action_type.get_available_actions()}
-            return idle if scores.get(idle, -np.inf) >= max(scores.values()) else max(scores, key=lambda a: scores[a])
-        obs = base.observation_type.observe()
-        own = int(self.rules.actions(np.asarray(obs, dtype=np.float32)[None])[0])
-        scores = {a: self._rollout(base, a) for a in self.candidates(base)}
-        best = max(scores.values())
-        own_score = scores.get(own, scores[IDLE])  # an action with no effect here is IDLE
-        return own if own_score >= best else max(scores, key=lambda a: scores[a])
+        idle = base.action_type.actions_indexes["IDLE"]
+        if self.rules is None:  # any road: every available action, and IDLE's on a tie
+            own, actions = idle, [int(a) for a in base.action_type.get_available_actions()]
+        else:  # the straight highway: the actions that differ here, and the rules' own on a tie
+            obs = base.observation_type.observe()
+            own, actions = int(self.rules.actions(np.asarray(obs, dtype=np.float32)[None])[0]), self.candidates(base)
+        scores = {a: self._rollout(base, a) for a in actions}
+        own_score = scores.get(own, scores[idle])  # an action with no effect here is IDLE
+        return own if own_score >= max(scores.values()) else max(scores, key=lambda a: scores[a])
 
     @staticmethod
     def candidates(base: Any) -> list[int]:

@@ -5,6 +5,7 @@ list, a feature range it divides by zero with)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Annotated, Any, Literal, Optional, Union
 
@@ -96,7 +97,8 @@ def validate_highway(config: dict[str, Any], defaults: dict[str, Any], context: 
                 _check_range(action[key], f"highway.action.{key}", context, strict=False)
 
 
-def observer_options(kind: str) -> set[str] | None:
+@functools.cache
+def observer_options(kind: str) -> frozenset[str] | None:
     """The options highway-env's observer `kind` reads: its constructors' parameters (None: a type zodrive
     does not know, which `validate_preset` refuses)."""
     import inspect
@@ -111,9 +113,9 @@ def observer_options(kind: str) -> set[str] | None:
            "LidarObservation": hw.LidarObservation}.get(kind)
     if cls is None:
         return None
-    return {p.name for c in cls.__mro__ if "__init__" in c.__dict__
-            for p in inspect.signature(c.__init__).parameters.values()
-            if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL) and p.name not in ("self", "env")}
+    return frozenset(p.name for c in cls.__mro__ if "__init__" in c.__dict__
+                     for p in inspect.signature(c.__init__).parameters.values()
+                     if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL) and p.name not in ("self", "env"))
 
 
 def _check_observer_keys(observation: dict[str, Any], default: dict[str, Any], context: str) -> None:
