@@ -170,10 +170,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.config import demo_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary, plural
+    from zodrive.envs import load_preset
     from zodrive.policies.resolve import policy_label, policy_ref, resolve_preset
 
     model = args.model or str(demo_model())
-    preset = resolve_preset(model, None, [])
+    # the shipped driver was trained on the paper's discrete preset (its zip in the package has no folder to say so)
+    preset = load_preset("discrete") if args.model is None else resolve_preset(model, None, [])
     ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
     spec = load_attack("zo-signsgd")
     results = {}
