@@ -19,6 +19,7 @@ noise (`collect`), and the fresh critics are fitted to its returns by critic-onl
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ import torch as th
 from torch.nn import functional as F
 
 from zodrive.errors import ZodriveError
+from zodrive.runinfo import sha256
 
 Q_PREFIX = "q_net.q_net."  # SB3 DQN: the online Q-network's MLP in policy.pth
 ACTOR_PREFIX = "actor.mu."  # SB3 DDPG / TD3: the actor's MLP in policy.pth
@@ -38,10 +40,7 @@ def init_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     """Copy the Q-network weights of the DQN zip at `path` (file or model folder) into `model`'s
     online and target networks. Nothing is unpickled; a missing, non-DQN or differently shaped
     model is a one-line ZodriveError. Returns the file and its SHA-256."""
-    from zodrive.runinfo import sha256
-
-    file, theirs = _read_network(path, Q_PREFIX, "q_net.", "DQN (no Q-network weights)")
-    _load_matching(model.q_net, theirs, file)
+    file = _load_network(model.q_net, path, Q_PREFIX, "q_net.", "DQN (no Q-network weights)")
     model.q_net_target.load_state_dict(model.q_net.state_dict())
     return {"model": str(file), "sha256": sha256(file)}
 
@@ -50,10 +49,7 @@ def init_actor_from_model(model: Any, path: str | Path) -> dict[str, Any]:
     """Copy the actor of the DDPG / TD3 zip at `path` (file or model folder) into `model`'s actor
     and target actor; the critics stay freshly initialized (`evaluate_critic` fits them). Read
     without unpickling; a missing, non-DDPG/TD3 or differently shaped model is a one-line error."""
-    from zodrive.runinfo import sha256
-
-    file, theirs = _read_network(path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
-    _load_matching(model.actor, theirs, file)
+    file = _load_network(model.actor, path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
     model.actor_target.load_state_dict(model.actor.state_dict())
     return {"model": str(file), "sha256": sha256(file), "part": "actor"}
 
@@ -62,11 +58,8 @@ def frozen_actor(model: Any, path: str | Path) -> Any:
     """The actor of the DDPG / TD3 zip at `path` as a frozen function (B, ...) observations -> (B, dims)
     actions: a copy of `model`'s actor with those weights (read without unpickling). A guide that keeps
     the learner near the policy it started from (a behaviour-regularized objective), the same on resume."""
-    import copy
-
-    file, theirs = _read_network(path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
     actor = copy.deepcopy(model.actor).requires_grad_(False)
-    _load_matching(actor, theirs, file)
+    _load_network(actor, path, ACTOR_PREFIX, "actor.", ACTOR_KIND)
 
     def act(observations: np.ndarray) -> np.ndarray:
         with th.no_grad():
@@ -75,9 +68,10 @@ def frozen_actor(model: Any, path: str | Path) -> Any:
     return act
 
 
-def _read_network(path: str | Path, prefix: str, strip: str, kind: str) -> tuple[Path, dict[str, th.Tensor]]:
-    """The weights under `prefix` in the zip at `path` (file or model folder), keys without `strip`,
-    read without unpickling; a missing file or a zip without them is a one-line ZodriveError."""
+def _load_network(network: Any, path: str | Path, prefix: str, strip: str, kind: str) -> Path:
+    """Load into `network` the weights under `prefix` in the zip at `path` (file or model folder),
+    keys without `strip`, read without unpickling; returns the zip's path. A missing file, a zip
+    without them or layers of other names or shapes are one-line ZodriveErrors."""
     from zodrive.policies.loading import model_file
     from zodrive.policies.safe_load import read_plain
 
@@ -86,10 +80,6 @@ def _read_network(path: str | Path, prefix: str, strip: str, kind: str) -> tuple
     theirs = {k[len(strip):]: v for k, v in weights.items() if k.startswith(prefix)}
     if not theirs:
         raise ZodriveError(f"init model {file} is not a {kind}; init needs one")
-    return file, theirs
-
-
-def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> None:
     ours = network.state_dict()
     if set(theirs) != set(ours):
         raise ZodriveError(f"init model {file} has layers {sorted(theirs)}; the recipe's network has {sorted(ours)}")
@@ -98,6 +88,7 @@ def _load_matching(network: Any, theirs: dict[str, th.Tensor], file: Path) -> No
             raise ZodriveError(f"init model {file}: {key} has shape {tuple(theirs[key].shape)}, the recipe's "
                                f"network {tuple(value.shape)} (policy_kwargs.net_arch and the preset must match)")
     network.load_state_dict({k: v.to(dtype=ours[k].dtype) for k, v in theirs.items()})
+    return file
 
 
 def drive_into_buffer(buffer: Any, env: Any, episodes: int, seed: int, choose: Any) -> list[float]:
@@ -214,8 +205,7 @@ def calibrate(model: Any, ridge: float = 1e-3, min_scale: float = 0.1) -> dict[s
         phi2 = th.cat([nxt.double()[:, None], h2.double(), ones], dim=1)
 
         def td_errors(alpha: float, u: th.Tensor, c: float) -> th.Tensor:
-            q = alpha * phi[:, 0] + phi[:, 1:-1] @ u + c
-            q2 = alpha * phi2[:, 0] + phi2[:, 1:-1] @ u + c
+            q, q2 = (alpha * p[:, 0] + p[:, 1:-1] @ u + c for p in (phi, phi2))
             return reward + cont * q2 - q
 
         before = float(td_errors(1.0, th.zeros(h.shape[1], dtype=th.float64), 0.0).abs().mean())
@@ -257,8 +247,6 @@ def evaluate_td(model: Any, steps: int, batch_size: int, margin: float = 0.8, we
     the large-margin loss (Hester et al. 2018) on pi's actions; the target network copies the online
     one every `sync_every` updates and at the end. Uses the model's optimizer, learning rate and
     gradient clipping. Returns the losses and the greedy agreement with pi on the buffer's states."""
-    import copy
-
     frozen = copy.deepcopy(model.q_net).requires_grad_(False)
     model.policy.set_training_mode(True)
     td_losses, margins = [], []
