@@ -246,12 +246,11 @@ def attack_train(
             raise ZodriveError(f"--reward horizon needs a preset whose steps earn at most 1 and whose length is "
                                f"known; {preset.get('name')!r} is not one: use --reward minus")
         horizon = int(max_return)
+    inner = AdversaryEnv(make_env(preset), victim, threat, reward=reward, horizon=horizon)
     meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
             "preset": preset, "defense": defense, "defense_version": defense and defense_version(defense),
             "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
-            "action_dim": 0, "reward": reward, "horizon": horizon}
-    inner = AdversaryEnv(make_env(preset), victim, threat, reward=reward, horizon=horizon)
-    meta["action_dim"] = int(inner.action_space.shape[0])
+            "action_dim": int(inner.action_space.shape[0]), "reward": reward, "horizon": horizon}
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("model.zip", META_FILE, "train.json", "CARD.md", "monitor.monitor.csv"):
         (out / stale).unlink(missing_ok=True)  # --force: nothing of an older run is mistaken for this one's

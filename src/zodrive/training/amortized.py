@@ -65,15 +65,15 @@ def _mean(policy: Any, x: torch.Tensor) -> torch.Tensor:
     return policy.action_net(policy.mlp_extractor.forward_actor(features))
 
 
-def _fit(params: list[torch.nn.Parameter], loss_of, n: int, epochs: int, gen: torch.Generator,
-         lr: float = 1e-3) -> float:
-    """Adam on `params` over shuffled mini-batches of 256 of `n` rows; `loss_of(index)` is a
-    batch's mean loss. Returns the last epoch's mean loss."""
+def adam_epochs(params: list[torch.nn.Parameter], loss_of, n: int, epochs: int, gen: torch.Generator | None,
+                lr: float = 1e-3, batch: int = 256) -> float:
+    """Adam on `params` over shuffled mini-batches of `batch` of `n` rows (shuffled by `gen`, None:
+    torch's global generator); `loss_of(index)` is a batch's mean loss. Returns the last epoch's mean loss."""
     opt = torch.optim.Adam(params, lr=lr)
     last = float("nan")
     for _ in range(epochs):
         total, batches = 0.0, 0
-        for index in torch.randperm(n, generator=gen).split(256):
+        for index in torch.randperm(n, generator=gen).split(batch):
             loss = loss_of(index)
             opt.zero_grad()
             loss.backward()
@@ -151,7 +151,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
         def surrogate_loss(i: torch.Tensor) -> torch.Tensor:
             return (((surrogate(X[i]) - Y[i]) / scale) ** 2).mean()
 
-        mse = _fit(list(surrogate.parameters()), surrogate_loss, len(X), settings.epochs, gen)
+        mse = adam_epochs(list(surrogate.parameters()), surrogate_loss, len(X), settings.epochs, gen)
         with torch.no_grad():  # discrete: the share of points where it picks the victim's action; continuous: RMSE
             agree = (float((surrogate(X).argmax(1) == Y.argmax(1)).float().mean()) if discrete
                      else float(((surrogate(X) - Y) ** 2).mean().sqrt()))
@@ -176,7 +176,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
             outside = torch.relu(mean.abs() - 1.0)  # ... and a penalty keeps the mean near [-1, 1]
             return margin.loss(out[:, None], out.detach())[:, 0].mean() + (outside ** 2).sum(1).mean()
 
-        fit = _fit(actor, adversary_loss, len(S), settings.epochs, gen)
+        fit = adam_epochs(actor, adversary_loss, len(S), settings.epochs, gen)
         with torch.no_grad():  # on the surrogate, the share of visited states the fitted adversary wins
             out = fed_to_surrogate(slice(None), _mean(policy, S).clamp(-1.0, 1.0))
             won = float(objective.success(out[:, None], out)[:, 0].float().mean())

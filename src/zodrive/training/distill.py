@@ -107,13 +107,11 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
         total = 0.0
         for batch in order.split(256):
             x, y = x_all[batch], y_all[batch]
-            if eps is None:  # plain cloning
-                loss = F.cross_entropy(student(x.reshape(len(x), -1)), y)
-            else:  # (with kappa 0 and an eps the PGD still runs: results made so stay as they were)
+            loss = F.cross_entropy(student(x.reshape(len(x), -1)), y)  # without eps: plain cloning
+            if eps is not None:  # (with kappa 0 and an eps the PGD still runs: results made so stay as they were)
                 x_adv = worst_in_ball(lambda z: F.cross_entropy(student(z.reshape(len(z), -1)), y, reduction="none"),
                                       x, eps, pgd_steps, mask, low, high)
-                loss = F.cross_entropy(student(x.reshape(len(x), -1)), y) \
-                    + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
+                loss = loss + kappa * F.cross_entropy(student(x_adv.reshape(len(x), -1)), y)
             opt.zero_grad()
             loss.backward()
             opt.step()

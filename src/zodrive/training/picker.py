@@ -57,16 +57,13 @@ def _fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, held: torch.Ten
     results/vertex-hold/picker/README.md.)"""
     import torch
 
+    from zodrive.training.amortized import adam_epochs
+
     bce = torch.nn.functional.binary_cross_entropy_with_logits
-    opt = torch.optim.Adam(net.parameters(), LEARNING_RATE)
     net.train()
     fit_x, fit_y = x[~held], y[~held]
-    for _ in range(epochs):
-        for batch in torch.randperm(len(fit_x)).split(BATCH):
-            out = bce(net(fit_x[batch]).squeeze(1), fit_y[batch])
-            opt.zero_grad()
-            out.backward()
-            opt.step()
+    adam_epochs(list(net.parameters()), lambda i: bce(net(fit_x[i]).squeeze(1), fit_y[i]), len(fit_x), epochs, None,
+                LEARNING_RATE, BATCH)
     net.eval()
     with torch.no_grad():
         right = (net(x[held]).squeeze(1) > 0) == (y[held] > 0.5)

@@ -143,15 +143,14 @@ def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any],
         env.close()
         if actor_critic:
             done["evaluate_critic"] = finetune.evaluate_critic(model, int(settings["td_steps"]), int(model.batch_size))
-            done["wall_time_s"] = round(time.perf_counter() - start, 1)
             log.info("critic of %s evaluated: %s", recipe["init"], done["evaluate_critic"])
-            return done
-        done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
-        if settings["td_steps"]:
-            margin = float((recipe.get("guide") or {}).get("margin", 0.8))
-            done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
+        else:
+            done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
+            if settings["td_steps"]:
+                margin = float((recipe.get("guide") or {}).get("margin", 0.8))
+                done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
+            log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
         done["wall_time_s"] = round(time.perf_counter() - start, 1)
-        log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
     return done
 
 
@@ -360,7 +359,7 @@ def train(
     check_run_folder(out, resume=resume, force=force)
     if resume and not (out / "config.yaml").is_file():
         raise ZodriveError(f"nothing to resume in {out}: it holds no run (drop --resume to start one)")
-    previous = read_yaml(out / "config.yaml") if resume and (out / "config.yaml").is_file() else None
+    previous = read_yaml(out / "config.yaml") if resume else None
     if previous is not None and _without_budget(previous.get("recipe")) != _without_budget(recipe):
         raise ZodriveError(f"{out} was trained with another recipe; --resume continues a run as it was started "
                            "(only --steps may change, to train it longer)")
