@@ -93,9 +93,7 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     torch.manual_seed(seed)
     states = clean_states(env, guide, seed, steps)
     env.close()
-    context = attack_context(preset)
-    low, high = context["bounds"]
-    mask = torch.as_tensor(_threat(eps, context["features"]).mask(states.shape[1:]))
+    mask, low, high = _mask_and_box(eps, preset, states.shape[1:])
     x_all = torch.as_tensor(states, dtype=torch.float32)
     y_all = torch.as_tensor(guide.query(states).argmax(axis=1), dtype=torch.long)
     student = copy.deepcopy(source.net).train()
@@ -140,11 +138,14 @@ def _save(out: Path, model: str, preset: dict[str, Any], seed: int, method: dict
     return out / "model.zip"
 
 
-def _threat(eps: float | None, features: Any) -> Any:
-    """The threat model whose mask (frozen presence) the noise and the adversarial term use;
-    without `eps` (plain cloning) only its mask is read."""
-
-    return ThreatModel(features=features) if eps is None else ThreatModel(eps=eps, features=features)
+def _mask_and_box(eps: float | None, preset: dict[str, Any], shape: tuple[int, ...]) -> tuple[torch.Tensor, Any, Any]:
+    """The mask (frozen presence) of the threat model the noise and the adversarial term use, for
+    observations of `shape`, and the observation box (low, high); without `eps` (plain cloning)
+    only the mask is read."""
+    context = attack_context(preset)
+    features = context["features"]
+    threat = ThreatModel(features=features) if eps is None else ThreatModel(eps=eps, features=features)
+    return torch.as_tensor(threat.mask(shape)), *context["bounds"]
 
 
 ACTING_PREFIXES = {"dqn": ("q_net.q_net", "q_net_target.q_net"), "ddpg": ("actor.mu", "actor_target.mu")}
@@ -261,19 +262,18 @@ def jitter(label: Callable[[torch.Tensor], torch.Tensor], std: torch.Tensor, sca
 
 def fit(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, *, epochs: int, lr: float, batch: int,
         weight: torch.Tensor | None, gen: torch.Generator, robust: dict[str, Any] | None = None,
-        augment: Augment | None = None, criterion: Criterion | None = None, weight_decay: float = 0.0) -> list[float]:
+        augment: Augment | None = None, criterion: Criterion | None = None) -> list[float]:
     """Adam on (weighted) cross-entropy over flat states `x` and labels `y` (or on `criterion`
     (output, target), e.g. `scaled_mse` for continuous actions), the learning rate
     cosine-annealed to 0 over `epochs`; each batch passes through `augment` (e.g. `jitter`) if
     given; with `robust` (eps, kappa, pgd_steps, mask, low, high) the adversarial CE of
-    `distill` is added (discrete labels only); `weight_decay` > 0: AdamW. Returns the mean loss per epoch (over the
+    `distill` is added (discrete labels only). Returns the mean loss per epoch (over the
     batches as augmented)."""
 
     if criterion is not None and robust and robust["kappa"] > 0:
         raise ZodriveError("the adversarial term is implemented for discrete labels (cross-entropy) only")
     net.train()
-    opt = (torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay) if weight_decay
-           else torch.optim.Adam(net.parameters(), lr=lr))
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=epochs * -(-len(x) // batch))
     history = []
     for _ in range(epochs):
@@ -479,10 +479,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     held, held_out = labelled_rollout(env, guide, guide, 1.0, held_seed, steps // 2, np.random.default_rng(held_seed))
     x_held = torch.as_tensor(held.reshape(len(held), -1), dtype=torch.float32)
     y_held = targets(held_out, kind)
-    context = attack_context(preset)
-    low, high = context["bounds"]
-    robust = {"eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "low": low, "high": high,
-              "mask": torch.as_tensor(_threat(eps, context["features"]).mask(source.obs_shape))}
+    mask, low, high = _mask_and_box(eps, preset, source.obs_shape)
+    robust = {"eps": eps, "kappa": kappa, "pgd_steps": pgd_steps, "low": low, "high": high, "mask": mask}
     # the identity scale until the first refit sets it from round 0's states
     student = standardized(source.net if kind == "discrete" else reinitialized(source.net))
     measure = agreement if kind == "discrete" else action_error
