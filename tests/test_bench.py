@@ -67,3 +67,19 @@ def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
     assert brake_margin(board / "baseline-slower") == [0.0, 0.0, 0.0]
     mean, low, high = brake_margin(board / "dqn-seed-0")
     assert 0 < low < mean < high
+
+
+def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same_table() -> None:
+    """Each row is paired with every constant action benched under its protocol (not with itself), and the
+    leaderboard shows the constant it beats by the least: on intersection that is IDLE/FASTER, not the brake."""
+    from zodrive.experiments.bench import _closest_constant
+
+    rows = {(r["scenario"], r["policy"]): r for r in read_rows(Path(__file__).resolve().parents[1] / "results" / "bench")}
+    slower = rows[("intersection", "baseline-slower")]
+    assert set(slower["vs_constants"]) == {"idle", "faster"}
+    dqn = rows[("intersection", "dqn-seed-1")]
+    assert set(dqn["vs_constants"]) == {"slower", "idle", "faster"}
+    assert dqn["vs_constants"]["slower"][1] > 0 > dqn["vs_constants"]["faster"][1]  # beats the brake, not FASTER
+    assert _closest_constant(dqn).endswith(("vs idle", "vs faster"))
+    assert _closest_constant({"vs_constants": {}, "vs_brake": [1.0, 0.5, 1.5]}) == "+1.00 (+0.50 to +1.50) vs slower"
+    assert _closest_constant({"vs_constants": {"idle": None}}) == "–"

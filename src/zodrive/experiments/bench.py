@@ -143,17 +143,43 @@ def brake_margin(folder: Path) -> list[float] | None:
     """The clean return minus the constant brake's, paired on the protocol's seeds (episode by episode),
     with its bootstrap 95% CI: [mean, low, high]. A policy beats the brake by a margin its CI shows when
     low > 0. None where a cell's episodes are missing or not on the same seeds."""
+    return _paired(_clean_returns(folder), _clean_returns(folder / "brake"))
+
+
+def _clean_returns(folder: Path) -> dict[int, float] | None:
+    """Episode -> return of the clean cell of a bench folder (None: no single clean cell)."""
+    cells = sorted((folder / "cells").glob("*-none"))
+    if len(cells) != 1:
+        return None
+    return {r["episode"]: r["return"] for r in read_jsonl(cells[0] / "episodes.jsonl", needs=("episode", "return"))}
+
+
+def _paired(mine: dict[int, float] | None, theirs: dict[int, float] | None) -> list[float] | None:
+    """[mean, low, high] of mine minus theirs, episode by episode (None unless both hold the same episodes)."""
     from zodrive.evaluation.stats import paired_difference_ci
 
-    clean, brake = sorted((folder / "cells").glob("*-none")), sorted((folder / "brake" / "cells").glob("*-none"))
-    if len(clean) != 1 or len(brake) != 1:
-        return None
-    mine, theirs = ({r["episode"]: r["return"] for r in read_jsonl(cell / "episodes.jsonl", needs=("episode", "return"))}
-                    for cell in (clean[0], brake[0]))
-    if not mine or set(mine) != set(theirs):
+    if not mine or not theirs or set(mine) != set(theirs):
         return None
     seeds = sorted(mine)
     return list(paired_difference_ci([mine[k] for k in seeds], [theirs[k] for k in seeds]))
+
+
+def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
+    """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
+    `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
+    beats every constant by a margin its CI shows when every low end is above 0."""
+    from zodrive.drivers.baselines import BASELINES, PREFIX
+
+    constants: dict[str, dict[str, dict[int, float] | None]] = {}
+    for row, folder in rows:
+        name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
+        if name in BASELINES and BASELINES[name].action is not None:
+            constants.setdefault(row["protocol"], {})[name] = _clean_returns(folder)
+    for row, folder in rows:
+        mine = _clean_returns(folder)
+        row["vs_constants"] = {name: _paired(mine, theirs)
+                               for name, theirs in constants.get(row["protocol"], {}).items()
+                               if row["key"] != PREFIX + name}
 
 
 def _attack(cell: dict[str, Any]) -> str:
@@ -181,8 +207,9 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
             raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
         if "vs_brake" not in row:  # a row written before the column: from its own cells
             row["vs_brake"] = brake_margin(path.parent)
-        rows.append(row)
-    return rows
+        rows.append((row, path.parent))
+    constant_margins(rows)
+    return [row for row, _ in rows]
 
 
 def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
@@ -194,16 +221,17 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "([docs/bench.md](bench.md)). Return under attack is the worst black-box attack of the ensemble per ε;",
              "PGD (white-box, needs gradients) is a separate column. Ranked by the return at the largest ε.",
              "ε past brake: the smallest ε at which the policy collides more often than the constant brake does",
-             "clean (0: already clean). Δ brake: clean return minus the constant brake's, paired on the same seeds",
-             "(95% CI; above 0 where the CI excludes it, the policy beats the brake). Unofficial rows (fewer episodes)",
-             "are marked *.", ""]
+             "clean (0: already clean). Δ closest constant: clean return minus that of the constant action (a",
+             "`baseline:` row of the same table) it beats by the least, paired on the same seeds (95% CI); a policy",
+             "beats every constant action by a margin its CI shows where the low end is above 0. Unofficial rows",
+             "(fewer episodes) are marked *.", ""]
     for scenario_name in sorted({r["scenario"] for r in rows}):
         group = sorted((r for r in rows if r["scenario"] == scenario_name),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
         proto = group[0]["protocol"]
         eps = [p["eps"] for p in group[0]["attacked"]]
         lines += [f"## {scenario_name} (protocol {proto})", "",
-                  "| Policy | Clean return (95% CI) | Δ brake (paired 95% CI) | Collisions | Speed (m/s) | "
+                  "| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
                   "|---" * (9 + len(eps)) + "|"]
@@ -213,8 +241,7 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
             last = r["attacked"][-1]
             pgd = "–" if last["pgd_return"] is None else f"{last['pgd_return']:.2f}"
             q = next((p["queries_to_crash"] for p in r["attacked"] if p["queries_to_crash"] is not None), None)
-            margin = r.get("vs_brake")
-            delta = "–" if margin is None else f"{margin[0]:+.2f} ({margin[1]:+.2f} to {margin[2]:+.2f})"
+            delta = _closest_constant(r)
             lines.append(f"| {r['policy']}{'' if r['official'] else '*'} | {c['return']:.2f} "
                          f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
                          f"{c['speed']:.1f} | " + " | ".join(cells) + f" | {pgd} | "
@@ -223,6 +250,18 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
                          f"{'–' if q is None else format(q, '.0f')} |")
         lines.append("")
     return "\n".join(lines)
+
+
+def _closest_constant(row: dict[str, Any]) -> str:
+    """The paired margin over the constant action with the lowest CI end (the brake's, from the row's
+    own cells, where no constant is on the board); "–" where none is on the same seeds."""
+    margins = {name: m for name, m in row.get("vs_constants", {}).items() if m is not None}
+    if not margins and row.get("vs_brake") is not None:
+        margins = {BRAKE.removeprefix("baseline:"): row["vs_brake"]}
+    if not margins:
+        return "–"
+    name, (mean, low, high) = min(margins.items(), key=lambda item: item[1][1])
+    return f"{mean:+.2f} ({low:+.2f} to {high:+.2f}) vs {name}"
 
 
 def write_leaderboard(board: Path, out: Path, plot: Path | None = None) -> str:
