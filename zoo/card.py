@@ -20,9 +20,10 @@ def card(run: Path) -> str:
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario, seed = train["scenario"], train["seed"]
+    gamma = f" --gamma {train['gamma']:g}" if train.get("gamma", 0.8) != 0.8 else ""  # older runs: 0.8
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`), trained with plain stable-baselines3 by",
-             f"`python zoo/train.py --scenario {scenario} --seed {seed} --out {run.relative_to(ROOT)}` "
+             f"`python zoo/train.py --scenario {scenario} --seed {seed}{gamma} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "

@@ -33,6 +33,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--every", type=int, default=2_000, help="checkpoint interval in steps")
+    parser.add_argument("--gamma", type=float, default=0.8,
+                        help="discount (0.8: highway-env's documented setting, a horizon of about 5 decisions)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     done = [p for p in (args.out / "model.zip", args.out / "final.zip") if p.exists()]  # final.zip: a chosen run
@@ -42,7 +44,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     env = Monitor(gym.make(ENV_IDS[args.scenario]), str(args.out / "monitor"))
     model = DQN("MlpPolicy", env, policy_kwargs=dict(net_arch=[256, 256]), learning_rate=5e-4,
-                buffer_size=15_000, learning_starts=200, batch_size=32, gamma=0.8, train_freq=1,
+                buffer_size=15_000, learning_starts=200, batch_size=32, gamma=args.gamma, train_freq=1,
                 gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
                 seed=args.seed, device="cpu", verbose=0)
     start = time.perf_counter()
@@ -51,7 +53,7 @@ def main() -> None:
     model.save(args.out / "model")
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
-         "algo": "dqn", "steps": args.steps, "seed": args.seed,
+         "algo": "dqn", "steps": args.steps, "seed": args.seed, "gamma": args.gamma,
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 
