@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from zodrive.drivers.baselines import BASELINES, PREFIX
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
 from zodrive.experiments.compare import compare
 from zodrive.policies.policy import resolve
@@ -29,7 +31,7 @@ BLACK_BOX = ("random-search", "zo-signsgd")
 """The ensemble: Square-style random search (the strongest per-step black-box attack on most of the
 committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
 WHITE_BOX = "pgd"
-BRAKE = "baseline:slower"
+BRAKE = PREFIX + "slower"
 
 
 @dataclass(frozen=True)
@@ -156,8 +158,6 @@ def _clean_returns(folder: Path) -> dict[int, float] | None:
 
 def _paired(mine: dict[int, float] | None, theirs: dict[int, float] | None) -> list[float] | None:
     """[mean, low, high] of mine minus theirs, episode by episode (None unless both hold the same episodes)."""
-    from zodrive.evaluation.stats import paired_difference_ci
-
     if not mine or not theirs or set(mine) != set(theirs):
         return None
     seeds = sorted(mine)
@@ -168,8 +168,6 @@ def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
     `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
     beats every constant by a margin its CI shows when every low end is above 0."""
-    from zodrive.drivers.baselines import BASELINES, PREFIX
-
     constants: dict[str, dict[str, dict[int, float] | None]] = {}
     for row, folder in rows:
         name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
@@ -257,7 +255,7 @@ def _closest_constant(row: dict[str, Any]) -> str:
     own cells, where no constant is on the board); "–" where none is on the same seeds."""
     margins = {name: m for name, m in row.get("vs_constants", {}).items() if m is not None}
     if not margins and row.get("vs_brake") is not None:
-        margins = {BRAKE.removeprefix("baseline:"): row["vs_brake"]}
+        margins = {BRAKE.removeprefix(PREFIX): row["vs_brake"]}
     if not margins:
         return "–"
     name, (mean, low, high) = min(margins.items(), key=lambda item: item[1][1])
