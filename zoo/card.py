@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from train import DEFAULTS  # zoo/train.py, beside this script
 from zodrive.runinfo import sha256
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,10 +21,10 @@ def card(run: Path) -> str:
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario, seed = train["scenario"], train["seed"]
-    gamma = f" --gamma {train['gamma']:g}" if train.get("gamma", 0.8) != 0.8 else ""  # older runs: 0.8
+    changed = "".join(f" --{k} {train[k]:g}" for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`), trained with plain stable-baselines3 by",
-             f"`python zoo/train.py --scenario {scenario} --seed {seed}{gamma} --out {run.relative_to(ROOT)}` "
+             f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "

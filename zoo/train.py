@@ -26,14 +26,17 @@ from stable_baselines3.common.monitor import Monitor
 ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
            "intersection": "intersection-v2"}
 
+DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8}
+"""The recipe's settings a run may change (zoo/card.py writes the ones a run changed into its command)."""
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", choices=sorted(ENV_IDS), required=True)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--steps", type=int, default=20_000)
-    parser.add_argument("--every", type=int, default=2_000, help="checkpoint interval in steps")
-    parser.add_argument("--gamma", type=float, default=0.8,
+    parser.add_argument("--steps", type=int, default=DEFAULTS["steps"])
+    parser.add_argument("--every", type=int, default=DEFAULTS["every"], help="checkpoint interval in steps")
+    parser.add_argument("--gamma", type=float, default=DEFAULTS["gamma"],
                         help="discount (0.8: highway-env's documented setting, a horizon of about 5 decisions)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
@@ -53,7 +56,7 @@ def main() -> None:
     model.save(args.out / "model")
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
-         "algo": "dqn", "steps": args.steps, "seed": args.seed, "gamma": args.gamma,
+         "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma,
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 

@@ -168,13 +168,13 @@ def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
     `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
     beats every constant by a margin its CI shows when every low end is above 0."""
+    returns = [_clean_returns(folder) for _, folder in rows]  # each row's episodes, read once
     constants: dict[str, dict[str, dict[int, float] | None]] = {}
-    for row, folder in rows:
+    for (row, _), theirs in zip(rows, returns):
         name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
         if name in BASELINES and BASELINES[name].action is not None:
-            constants.setdefault(row["protocol"], {})[name] = _clean_returns(folder)
-    for row, folder in rows:
-        mine = _clean_returns(folder)
+            constants.setdefault(row["protocol"], {})[name] = theirs
+    for (row, _), mine in zip(rows, returns):
         row["vs_constants"] = {name: _paired(mine, theirs)
                                for name, theirs in constants.get(row["protocol"], {}).items()
                                if row["key"] != PREFIX + name}
