@@ -10,6 +10,10 @@ for scenario in highway-fast merge roundabout intersection; do
     python zoo/choose_checkpoint.py "$run" --scenario "$scenario"
     zodrive bench "$run" --scenario "$scenario" --name "dqn-$(basename "$run")" --no-progress
   done
+  for run in models/zoo/$scenario-imitation/seed-*; do  # zoo/imitate.sh: no checkpoint to choose
+    [ -f "$run/model.zip" ] || continue
+    zodrive bench "$run" --scenario "$scenario" --name "imitation-$(basename "$run")" --no-progress
+  done
   for baseline in slower idle faster rules idm-mobil planner; do
     zodrive bench "baseline:$baseline" --scenario "$scenario" --name "baseline-$baseline" --no-progress \
       || echo "baseline:$baseline does not drive $scenario"

@@ -32,6 +32,26 @@ def card(run: Path) -> str:
     return "\n".join(lines + _bench(run, scenario, f"dqn-{run.name}"))
 
 
+def imitation_card(run: Path) -> str:
+    """A student cloned by DAgger (`zodrive robust-train --method distill --dagger`): no checkpoint is chosen."""
+    train = json.loads((run / "train.json").read_text())
+    command = json.loads((run / "run.json").read_text())["command"]
+    scenario = run.parent.name.removesuffix("-imitation")
+    method = train["method"]
+    teacher = method["teacher"]
+    privileged = (" — a look-ahead planner that **reads the simulator**, a privileged teacher —"
+                  if teacher == "baseline:planner" else " (it reads the same observation as the student)")
+    lines = [f"# {run.parent.name} / {run.name}", "",
+             f"An MLP policy (the zoo DQN's architecture, a stable-baselines3 DQN zip) for `{scenario}`, cloned from "
+             f"`{teacher}`{privileged} by behaviour cloning with DAgger ({method['states']:,} states the teacher "
+             f"drives, then {method['rounds']} rounds of {method['states']:,} states the student drives, each "
+             f"labelled by the teacher; {method['epochs']} epochs per refit; seed {train['seed']}):", "",
+             f"`{command}`", "",
+             "No checkpoint is chosen: the student after the last DAgger round is the model. Why this recipe and "
+             "not DQN from scratch: `studies/zoo-recipe/README.md`.", ""]
+    return "\n".join(lines + _bench(run, scenario, f"imitation-{run.name}"))
+
+
 def _bench(run: Path, scenario: str, name: str) -> list[str]:
     lines = [f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
     row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
@@ -50,7 +70,9 @@ def _bench(run: Path, scenario: str, name: str) -> list[str]:
 
 def main() -> None:
     for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
-        if (run / "selection.json").is_file():
+        if run.parent.name.endswith("-imitation") and (run / "model.zip").is_file():
+            (run / "CARD.md").write_text(imitation_card(run))
+        elif (run / "selection.json").is_file():
             (run / "CARD.md").write_text(card(run))
             print(f"wrote {run / 'CARD.md'}")
 
