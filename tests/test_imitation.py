@@ -141,3 +141,21 @@ def test_a_teacher_that_reads_the_simulator_gets_no_noisy_copies_and_the_record_
             teacher="baseline:idm-mobil", dagger=1)
     method = json.loads((tmp_path / "d" / "train.json").read_text())["method"]
     assert method["teacher"] == "baseline:idm-mobil" and method["jitter"] == 0.0
+
+
+def test_a_written_student_zip_is_the_same_bytes_whenever_it_is_written(tmp_path: Path) -> None:
+    """A zip's member dates are fixed, so a run repeated with the same seed has the same SHA-256
+    (bench rows and cards name a model by it)."""
+    import zipfile
+
+    from zodrive.envs import load_preset
+    from zodrive.policies.loading import load_network
+    from zodrive.runinfo import sha256
+    from zodrive.training.distill import ZIP_DATE, _write_zip
+
+    net = load_network("models/dqn", load_preset("discrete")).net
+    _write_zip(Path("models/dqn/model.zip"), net, tmp_path / "a.zip")
+    with zipfile.ZipFile(tmp_path / "a.zip") as archive:
+        assert {info.date_time for info in archive.infolist()} == {ZIP_DATE}
+    _write_zip(Path("models/dqn/model.zip"), net, tmp_path / "b.zip")
+    assert sha256(tmp_path / "a.zip") == sha256(tmp_path / "b.zip")

@@ -10,7 +10,6 @@ Run: python studies/zoo-recipe/validate.py SCENARIO RUN [RUN ...] [--episodes 10
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import zodrive

@@ -151,6 +151,9 @@ def _mask_and_box(eps: float | None, preset: dict[str, Any], shape: tuple[int, .
 ACTING_PREFIXES = {"dqn": ("q_net.q_net", "q_net_target.q_net"), "ddpg": ("actor.mu", "actor_target.mu")}
 
 
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # every member of a written zip: the earliest date a zip can hold
+
+
 def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: str = "dqn") -> None:
     """The source's SB3 zip with its acting network's (and target network's) weights replaced:
     the Q-network of a DQN, the actor of a DDPG/TD3 (whose critic and optimizer states stay
@@ -174,8 +177,8 @@ def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: s
         members.pop("policy.optimizer.pth", None)  # the teacher's optimizer state no longer fits
     tmp = target.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name, data in members.items():
-            archive.writestr(name, data)
+        for name, data in members.items():  # a fixed date: the same seed gives the same SHA-256
+            archive.writestr(zipfile.ZipInfo(name, date_time=ZIP_DATE), data, compress_type=zipfile.ZIP_DEFLATED)
     tmp.replace(target)
 
 
