@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 from train import DEFAULTS  # zoo/train.py, beside this script
+from zodrive.drivers.baselines import get_baseline
 from zodrive.runinfo import sha256
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,8 +40,8 @@ def imitation_card(run: Path) -> str:
     scenario = run.parent.name.removesuffix("-imitation")
     method = train["method"]
     teacher = method["teacher"]
-    privileged = (" — a look-ahead planner that **reads the simulator**, a privileged teacher —"
-                  if teacher == "baseline:planner" else " (it reads the same observation as the student)")
+    privileged = (" (it **reads the simulator**: a privileged teacher)" if get_baseline(teacher).reads == "simulator"
+                  else " (it reads the same observation as the student)")
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"An MLP policy (the zoo DQN's architecture, a stable-baselines3 DQN zip) for `{scenario}`, cloned from "
              f"`{teacher}`{privileged} by behaviour cloning with DAgger ({method['states']:,} states the teacher "
@@ -74,7 +75,9 @@ def main() -> None:
             (run / "CARD.md").write_text(imitation_card(run))
         elif (run / "selection.json").is_file():
             (run / "CARD.md").write_text(card(run))
-            print(f"wrote {run / 'CARD.md'}")
+        else:
+            continue
+        print(f"wrote {run / 'CARD.md'}")
 
 
 if __name__ == "__main__":
