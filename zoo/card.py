@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import yaml
 from train import DEFAULTS  # zoo/train.py, beside this script
 from zodrive.drivers.baselines import get_baseline
 from zodrive.runinfo import sha256
@@ -37,7 +38,7 @@ def imitation_card(run: Path) -> str:
     """A student cloned by DAgger (`zodrive robust-train --method distill --dagger`): no checkpoint is chosen."""
     train = json.loads((run / "train.json").read_text())
     command = json.loads((run / "run.json").read_text())["command"]
-    scenario = run.parent.name.removesuffix("-imitation")
+    scenario = yaml.safe_load((run / "config.yaml").read_text())["preset"]["name"]  # the run's own record
     method = train["method"]
     teacher = method["teacher"]
     privileged = (" (it **reads the simulator**: a privileged teacher)" if get_baseline(teacher).reads == "simulator"
