@@ -269,3 +269,38 @@ def test_close_rules_follow_closer_and_otherwise_decide_as_the_rules() -> None:
     assert close.actions(close.query(batch))[2] == plain.actions(plain.query(batch))[2]
     assert close.reads == "observation" and close.differentiable is None
     np.testing.assert_array_equal(ObservationRules(preset).actions(batch), plain.actions(plain.query(batch)))
+
+
+def test_brake_escape_brakes_and_leaves_its_lane_only_where_braking_cannot_keep_the_gap() -> None:
+    """`baseline:brake-escape` on merge: SLOWER on a free road and behind a car it can follow, a
+    lane change towards a free lane where a car ahead is closer than braking to 20 m/s can hold.
+    On merge's two-lane main road (the on-ramp is not a lane to escape to) the right lane is lane 1."""
+    from zodrive.drivers.rules import LANE_LEFT, SLOWER
+    from zodrive.envs import scenario
+
+    preset = load_preset("merge")
+    assert scenario(preset).lanes == 2 and scenario(load_preset("highway-fast")).lanes == 3
+    x, y, v = (scenario(preset).feature_ranges[k][1] for k in ("x", "y", "vx"))
+    alone = np.zeros((1, 5, 5), np.float32)
+    alone[0, 0] = [1, 100 / x, 4 / y, 20 / v, 0]  # the right lane at 20 m/s
+    far = alone.copy()
+    far[0, 1] = [1, 80 / x, 0, 0, 0]  # a car 80 m ahead at the same speed
+    close_car = alone.copy()
+    close_car[0, 1] = [1, 12 / x, 0, -3 / v, 0]  # 12 m ahead, 3 m/s slower: braking to 20 m/s cannot keep the gap
+    boxed_in = close_car.copy()
+    boxed_in[0, 2] = [1, 2 / x, -4 / y, 0, 0]  # and a car beside it in the left lane
+    driver = load_victim("baseline:brake-escape", preset)
+    actions = driver.actions(driver.query(np.concatenate([alone, far, close_car, boxed_in]))).tolist()
+    assert actions == [SLOWER, SLOWER, LANE_LEFT, SLOWER]
+    assert driver.reads == "observation" and driver.differentiable is None
+
+
+@pytest.mark.parametrize("baseline, crashed", [("baseline:slower", True), ("baseline:brake-escape", False)])
+def test_on_merge_the_brake_rear_ends_a_car_that_merged_in_and_brake_escape_does_not(baseline: str,
+                                                                                 crashed: bool) -> None:
+    """Seed 50032 (a tuning seed): a car merges in ahead slower than 20 m/s; the constant brake
+    cannot slow below that and hits it, brake-escape changes lanes."""
+    import zodrive
+
+    episode = zodrive.evaluate(baseline, "merge", episodes=1, seed=50032).episodes[0]
+    assert episode["crashed"] is crashed

@@ -70,7 +70,7 @@ def test_baselines_fit_the_scenarios_that_have_their_actions(tmp_path: Path, cap
                  "--env-set", "highway.duration=3"]) == 0  # FASTER is index 2 there
     capsys.readouterr()
     assert "acts on steering" in _error(capsys, ["evaluate", "baseline:brake", "--preset", "racetrack", "--episodes", "1"])
-    assert "straight highway" in _error(capsys, ["evaluate", "baseline:rules", "--preset", "merge", "--episodes", "1"])
+    assert "straight road" in _error(capsys, ["evaluate", "baseline:rules", "--preset", "roundabout", "--episodes", "1"])
     assert "plans no route" in _error(capsys, ["evaluate", "baseline:idm-mobil", "--preset", "exit", "--episodes", "1"])
 
 

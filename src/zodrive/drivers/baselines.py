@@ -66,6 +66,9 @@ BASELINES: dict[str, Baseline] = {b.name: b for b in (
     Baseline("robust-rules", ("discrete",), "observation",
              "the rules made pessimistic for an attacker of L-inf budget eps (NAME@EPS, default 0.05): they see "
              "every gap as small as it may truly be", "rules, pessimistic for the attack budget", eps=0.05),
+    Baseline("brake-escape", ("discrete",), "observation",
+             "always SLOWER, except a lane change where braking cannot keep the gap to the car ahead (the rules' "
+             "room test): the brake without its rear-end crashes", "SLOWER, escaping where braking cannot help"),
     Baseline("idm-mobil", ("discrete", "continuous"), "simulator",
              "IDM + MOBIL lane-changing driver (highway-env's models), target 30 m/s; reads the simulator",
              "IDM + MOBIL driver (reads the simulator)"),
@@ -101,7 +104,8 @@ def get_baseline(model: str) -> Baseline:
                    label=f"{baseline.label} (eps {eps})")
 
 
-RULES_ENVS = ("zodrive/highway-v0", "zodrive/highway-fast-v0")  # straight multi-lane highways
+HIGHWAYS = ("zodrive/highway-v0", "zodrive/highway-fast-v0")  # straight multi-lane highways
+RULES_ENVS = (*HIGHWAYS, "zodrive/merge-v1")  # straight roads the observation-reading rules drive
 RULES_FEATURES = ("presence", "x", "y", "vx", "vy")
 
 
@@ -122,17 +126,17 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
                            f"{', '.join(env.action_names)}")
     if baseline.reads == "observation" and (preset.get("env_id") not in RULES_ENVS or env.features != RULES_FEATURES
                                             or env.action_names not in (ACTION_NAMES, CONTINUOUS_NAMES)):
-        kinds = ("its five meta-actions: presets discrete, highway, highway-fast" if baseline.kinds == ("discrete",)
-                 else "the five meta-actions or [acceleration, steering]: presets discrete, continuous, highway, "
-                      "highway-fast")
-        raise ZodriveError(f"{name} reads a straight highway's Kinematics observation (presence x y vx vy) and "
+        kinds = ("its five meta-actions: presets discrete, highway, highway-fast, merge"
+                 if baseline.kinds == ("discrete",) else "the five meta-actions or [acceleration, steering]: presets "
+                 "discrete, continuous, highway, highway-fast, merge")
+        raise ZodriveError(f"{name} reads a straight road's Kinematics observation (presence x y vx vy) and "
                            f"issues {kinds}")
     if baseline.name == "planner":
         if not env.road or env.kind != "discrete" or "IDLE" not in env.action_names:
             raise ZodriveError(f"{name} looks ahead with highway-env's meta-actions (IDLE among them) on a "
                                "highway-env road")
         return
-    if baseline.reads == "simulator" and (preset.get("env_id") not in RULES_ENVS
+    if baseline.reads == "simulator" and (preset.get("env_id") not in HIGHWAYS
                                           or (env.kind == "discrete" and env.action_names != ACTION_NAMES)
                                           or (env.kind == "continuous" and env.action_names != CONTINUOUS_NAMES)):
         raise ZodriveError(f"{name} drives a straight highway (it plans no route: no merge, exit or turn) with the "
@@ -274,7 +278,7 @@ def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind:
     if baseline.name == "planner":
         from zodrive.drivers.planner import LookAheadPlanner
 
-        straight = preset.get("env_id") in RULES_ENVS and scenario(preset).features == RULES_FEATURES
+        straight = preset.get("env_id") in HIGHWAYS and scenario(preset).features == RULES_FEATURES
         return LookAheadPlanner(env, preset, straight=straight)
     return IdmMobilDriver(env, kind, replan=replan)
 

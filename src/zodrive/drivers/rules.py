@@ -204,6 +204,19 @@ class ObservationRules:
         return np.where(found & (r["own"] < 0), pick, -1)
 
 
+class BrakeEscape(ObservationRules):
+    """`baseline:brake-escape`: the constant brake (SLOWER) that leaves its lane only where braking
+    cannot keep the gap ahead, to the side `escapes` names. On merge the return pays for a slow
+    ego in the right lane (an episode ends past x = 370 m, so a slower ego earns more steps), and
+    the constant brake collides where a car merges in ahead slower than SLOWER's 20 m/s; this is
+    the brake without those crashes (studies/zoo-recipe)."""
+
+    def actions(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        r = self.rooms(batch) if rooms is None else rooms  # `rooms`: this batch's, already computed
+        escape = self.escapes(batch, r)
+        return np.where(escape >= 0, escape, SLOWER)
+
+
 # The continuous rules (`ContinuousRules`): highway-env's own lane-keeping gains (read from its
 # ControlledVehicle) and IDM's free-road law; tuned on seeds 50000-50019 only
 # (results/rules-continuous/README.md).
@@ -284,12 +297,15 @@ class ContinuousRules:
 
 def named_rules(preset: dict[str, Any], name: str, eps: float = 0.0) -> ObservationRules:
     """The discrete rules by their baseline name: `rules`, `robust-rules` (pessimistic for `eps`)
-    or `close-rules` (following closer), e.g. as a victim, a teacher or a recipe's guide."""
+    `close-rules` (following closer) or `brake-escape` (the brake that dodges), e.g. as a victim,
+    a teacher or a recipe's guide."""
+    if name == "brake-escape":
+        return BrakeEscape(preset)
     if name == "close-rules":
         return ObservationRules(preset, eps, headway=CLOSE_HEADWAY, margin=CLOSE_MARGIN)
     if name in ("rules", "robust-rules"):
         return ObservationRules(preset, eps)
-    raise ZodriveError(f"unknown rules {name!r} (rules, robust-rules, close-rules)")
+    raise ZodriveError(f"unknown rules {name!r} (rules, robust-rules, close-rules, brake-escape)")
 
 
 def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: int, name: str = "rules",

@@ -262,12 +262,21 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
     if kinematic:
         observed = {"feature_ranges": {k: (float(v[0]), float(v[1])) for k, v in (observer.features_range or {}).items()},
                     "relative": not observer.absolute, "normalized": bool(observer.normalize),
-                    "lanes": core.config.get("lanes_count")}
+                    "lanes": core.config.get("lanes_count") or _lanes_at_start(core)}
     return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
                     feature_axis=axis, n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
                     max_return=_max_return(config, core),
                     space_low=tuple(map(float, np.asarray(space.low).ravel())),
                     space_high=tuple(map(float, np.asarray(space.high).ravel())), **observed)
+
+
+def _lanes_at_start(core: Any) -> int | None:
+    """Lanes of the road the ego starts on, where the preset does not set `lanes_count` (merge:
+    the main road's two; the on-ramp joins it from the right and ends)."""
+    vehicle = getattr(core, "vehicle", None)
+    if vehicle is None or getattr(vehicle, "lane_index", None) is None:
+        return None
+    return len(core.road.network.all_side_lanes(vehicle.lane_index))
 
 
 def _max_return(config: dict[str, Any], core: Any) -> float | None:
