@@ -14,7 +14,7 @@ for scenario in highway-fast merge roundabout intersection; do
     [ -f "$run/model.zip" ] || continue
     zodrive bench "$run" --scenario "$scenario" --name "imitation-$(basename "$run")" --no-progress
   done
-  for baseline in slower idle faster rules idm-mobil planner; do
+  for baseline in slower idle faster rules brake-escape idm-mobil planner; do
     zodrive bench "baseline:$baseline" --scenario "$scenario" --name "baseline-$baseline" --no-progress \
       || echo "baseline:$baseline does not drive $scenario"
   done
