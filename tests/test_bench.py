@@ -81,5 +81,6 @@ def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same
     assert set(dqn["vs_constants"]) == {"slower", "idle", "faster"}
     assert dqn["vs_constants"]["slower"][1] > 0 > dqn["vs_constants"]["faster"][1]  # beats the brake, not FASTER
     assert _closest_constant(dqn).endswith(("vs idle", "vs faster"))
-    assert _closest_constant({"vs_constants": {}, "vs_brake": [1.0, 0.5, 1.5]}) == "+1.00 (+0.50 to +1.50) vs slower"
+    assert _closest_constant({"vs_constants": {}, "vs_brake": [1.0, 0.5, 1.5]}) == "**+1.00** (+0.50 to +1.50) vs slower"
+    assert _closest_constant({"vs_constants": {"slower": [0.3, 0.0, 0.6]}}) == "+0.30 (+0.00 to +0.60) vs slower"
     assert _closest_constant({"vs_constants": {"idle": None}}) == "–"

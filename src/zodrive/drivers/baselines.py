@@ -13,6 +13,8 @@ agents (`zodrive.drivers.rules`): attackable like them, but it shows the attacke
 `baseline:robust-rules@EPS` is that driver made pessimistic for an attacker of budget EPS
 (default 0.05): it only ever sees gaps as small as they may truly be, so an attack can make it
 careful, not reckless (the robustness a defense should be measured against).
+`baseline:brake-escape` is the constant brake that changes lanes only where braking cannot keep
+the gap ahead (the rule-based row on merge, where the return pays for a slow ego).
 """
 
 from __future__ import annotations

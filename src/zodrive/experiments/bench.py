@@ -221,8 +221,8 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "ε past brake: the smallest ε at which the policy collides more often than the constant brake does",
              "clean (0: already clean). Δ closest constant: clean return minus that of the constant action (a",
              "`baseline:` row of the same table) it beats by the least, paired on the same seeds (95% CI); a policy",
-             "beats every constant action by a margin its CI shows where the low end is above 0. Unofficial rows",
-             "(fewer episodes) are marked *.", ""]
+             "beats every constant action by a margin its CI shows where the low end is above 0 (its margin in",
+             "bold). Unofficial rows (fewer episodes) are marked *.", ""]
     for scenario_name in sorted({r["scenario"] for r in rows}):
         group = sorted((r for r in rows if r["scenario"] == scenario_name),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
@@ -251,15 +251,17 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
 
 
 def _closest_constant(row: dict[str, Any]) -> str:
-    """The paired margin over the constant action with the lowest CI end (the brake's, from the row's
-    own cells, where no constant is on the board); "–" where none is on the same seeds."""
+    """The paired margin over the constant action with the lowest CI end, in bold where that end is
+    above 0 (the brake's, from the row's own cells, where no constant is on the board); "–" where
+    none is on the same seeds."""
     margins = {name: m for name, m in row.get("vs_constants", {}).items() if m is not None}
     if not margins and row.get("vs_brake") is not None:
         margins = {BRAKE.removeprefix(PREFIX): row["vs_brake"]}
     if not margins:
         return "–"
     name, (mean, low, high) = min(margins.items(), key=lambda item: item[1][1])
-    return f"{mean:+.2f} ({low:+.2f} to {high:+.2f}) vs {name}"
+    shown = f"**{mean:+.2f}**" if low > 0 else f"{mean:+.2f}"  # bold: beats every constant by its CI
+    return f"{shown} ({low:+.2f} to {high:+.2f}) vs {name}"
 
 
 def write_leaderboard(board: Path, out: Path, plot: Path | None = None) -> str:
