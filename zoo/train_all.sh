@@ -10,6 +10,6 @@ for seed in 0 1 2; do
   for scenario in highway-fast merge roundabout intersection; do
     extra=()
     [ "$scenario" = roundabout ] && extra=(--steps 60000 --every 6000)
-    python zoo/train.py --scenario "$scenario" --seed "$seed" "${extra[@]}" --out "models/zoo/$scenario-dqn/seed-$seed"
+    python zoo/train.py --scenario "$scenario" --seed "$seed" ${extra[@]+"${extra[@]}"} --out "models/zoo/$scenario-dqn/seed-$seed"
   done
 done
