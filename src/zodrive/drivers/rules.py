@@ -296,7 +296,7 @@ class ContinuousRules:
 
 
 def named_rules(preset: dict[str, Any], name: str, eps: float = 0.0) -> ObservationRules:
-    """The discrete rules by their baseline name: `rules`, `robust-rules` (pessimistic for `eps`)
+    """The discrete rules by their baseline name: `rules`, `robust-rules` (pessimistic for `eps`),
     `close-rules` (following closer) or `brake-escape` (the brake that dodges), e.g. as a victim,
     a teacher or a recipe's guide."""
     if name == "brake-escape":

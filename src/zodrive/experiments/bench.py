@@ -251,9 +251,9 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
 
 
 def _closest_constant(row: dict[str, Any]) -> str:
-    """The paired margin over the constant action with the lowest CI end, in bold where that end is
-    above 0 (the brake's, from the row's own cells, where no constant is on the board); "–" where
-    none is on the same seeds."""
+    """The paired margin over the constant action with the lowest CI end (the brake's, from the row's
+    own cells, where no constant is on the board), in bold where that end is above 0; "–" where none
+    is on the same seeds."""
     margins = {name: m for name, m in row.get("vs_constants", {}).items() if m is not None}
     if not margins and row.get("vs_brake") is not None:
         margins = {BRAKE.removeprefix(PREFIX): row["vs_brake"]}
