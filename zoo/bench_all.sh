@@ -5,10 +5,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 for scenario in highway-fast merge roundabout intersection; do
-  for run in models/zoo/$scenario-dqn/seed-*; do
+  for run in models/zoo/$scenario-dqn*/seed-*; do  # every DQN family (merge-dqn-g99: row dqn-g99-seed-N)
     [ -f "$run/model.zip" ] || [ -f "$run/final.zip" ] || continue
+    family=$(basename "$(dirname "$run")")
     python zoo/choose_checkpoint.py "$run" --scenario "$scenario"
-    zodrive bench "$run" --scenario "$scenario" --name "dqn-$(basename "$run")" --no-progress
+    zodrive bench "$run" --scenario "$scenario" --name "${family#"$scenario"-}-$(basename "$run")" --no-progress
   done
   for run in models/zoo/$scenario-imitation/seed-*; do  # zoo/imitate.sh: no checkpoint to choose
     [ -f "$run/model.zip" ] || continue

@@ -31,7 +31,7 @@ def card(run: Path) -> str:
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "
              f"(`python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}`), copied to `model.zip`.", ""]
-    return "\n".join(lines + _bench(run, scenario, f"dqn-{run.name}"))
+    return "\n".join(lines + _bench(run, scenario))
 
 
 def imitation_card(run: Path) -> str:
@@ -51,10 +51,17 @@ def imitation_card(run: Path) -> str:
              f"`{command}`", "",
              "No checkpoint is chosen: the student after the last DAgger round is the model. Why this recipe and "
              "not DQN from scratch: `studies/zoo-recipe/README.md`.", ""]
-    return "\n".join(lines + _bench(run, scenario, f"imitation-{run.name}"))
+    return "\n".join(lines + _bench(run, scenario))
 
 
-def _bench(run: Path, scenario: str, name: str) -> list[str]:
+def row_name(run: Path, scenario: str) -> str:
+    """The run's leaderboard row: its family without the scenario, then its seed (merge-dqn-g99/seed-0:
+    dqn-g99-seed-0), as zoo/bench_all.sh names it."""
+    return f"{run.parent.name.removeprefix(scenario + '-')}-{run.name}"
+
+
+def _bench(run: Path, scenario: str) -> list[str]:
+    name = row_name(run, scenario)
     lines = [f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
     row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
     if not row_path.is_file():

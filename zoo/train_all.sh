@@ -3,6 +3,9 @@
 # Roundabout trains three times longer (60,000 steps, a checkpoint every 6,000): adopted on held-out
 # tuning seeds by a rule fixed before the runs (studies/zoo-recipe/README.md, "Three times the steps on
 # roundabout"). The other scenarios keep zoo/train.py's defaults (20,000 steps, every 2,000).
+# Merge has a second DQN family, merge-dqn-g99: gamma 0.99 (a horizon that covers the episode) and
+# 60,000 steps, adopted the same way ("A discount that sees the whole episode on merge"); merge-dqn
+# stays, because zoo/imitate.sh starts the merge students from its weights.
 # Run: OMP_NUM_THREADS=1 nohup nice -n 19 bash zoo/train_all.sh > zoo/train.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,4 +15,5 @@ for seed in 0 1 2; do
     [ "$scenario" = roundabout ] && extra=(--steps 60000 --every 6000)
     python zoo/train.py --scenario "$scenario" --seed "$seed" ${extra[@]+"${extra[@]}"} --out "models/zoo/$scenario-dqn/seed-$seed"
   done
+  python zoo/train.py --scenario merge --seed "$seed" --gamma 0.99 --steps 60000 --every 6000 --out "models/zoo/merge-dqn-g99/seed-$seed"
 done
