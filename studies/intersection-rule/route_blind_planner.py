@@ -8,8 +8,10 @@ among the three exits other than its own entry, and the copy's random stream (fu
 drawn anew. Each meta-action is taken in every copy and IDLE held for `horizon_s` seconds; an
 action scores the mean summed reward of its copies (highway-env's own reward: -5 a crash, which
 ends the copy, 1 a step at 9 m/s, 1 on arrival); the same copies serve every action, and IDLE
-wins ties. So it chooses by expected return over what the observation leaves unknown, which is
-what a policy of the observation could at best do, up to the horizon and the samples.
+wins ties. So it chooses by expected return over the routes and spawns the observation leaves
+unknown: roughly what a policy of the observation could reach. Roughly, because it still reads what
+else the simulator holds (each driver's IDM parameters, cars beyond the 15 observed), draws routes
+uniformly rather than from what the observation implies, and looks 5 s ahead with 8 samples.
 
 Scored on tuning seeds 60000-60029 (`yield_rules.py`'s) by default, beside always-IDLE and the planner.
 
