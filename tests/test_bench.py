@@ -84,3 +84,16 @@ def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same
     assert _closest_constant({"vs_constants": {}, "vs_brake": [1.0, 0.5, 1.5]}) == "**+1.00** (+0.50 to +1.50) vs slower"
     assert _closest_constant({"vs_constants": {"slower": [0.3, 0.0, 0.6]}}) == "+0.30 (+0.00 to +0.60) vs slower"
     assert _closest_constant({"vs_constants": {"idle": None}}) == "–"
+
+
+def test_the_plot_gives_a_family_one_colour_and_each_seed_its_own_marker() -> None:
+    """Merge has 15 rows: drawn in a 10-colour cycle, two policies shared a colour and could not be told apart."""
+    from zodrive.experiments.bench import family_and_seed, line_style
+
+    assert family_and_seed("dqn-g99-seed-1") == ("dqn-g99", 1)
+    assert family_and_seed("baseline-slower") == ("baseline-slower", 0)
+    families = ["baseline-slower", "dqn", "dqn-g99"]
+    one, two = line_style("dqn-g99-seed-1", families), line_style("dqn-g99-seed-2", families)
+    assert one["color"] == two["color"] == 2 and one["marker"] != two["marker"]
+    assert line_style("dqn-seed-1", families)["color"] == 1 != one["color"]
+    assert line_style("baseline-slower", families)["linestyle"] == "--" != one["linestyle"]

@@ -275,22 +275,44 @@ def write_leaderboard(board: Path, out: Path, plot: Path | None = None) -> str:
     return text
 
 
+MARKERS = "osD^v<>"
+
+
+def family_and_seed(policy: str) -> tuple[str, int]:
+    """A row's family and seed: ('dqn-g99', 1) for 'dqn-g99-seed-1', (policy, 0) for a row without one."""
+    family, sep, seed = policy.rpartition("-seed-")
+    return (family, int(seed)) if sep and seed.isdigit() else (policy, 0)
+
+
+def line_style(policy: str, families: list[str]) -> dict[str, Any]:
+    """How a row is drawn on the leaderboard plot: one colour per family (`color` is its index in
+    `families`), one marker per seed, dashed for a baseline. Drawn in the order of a 10-colour cycle,
+    a scenario with more rows showed two policies in one colour."""
+    family, seed = family_and_seed(policy)
+    return {"color": families.index(family), "marker": MARKERS[seed % len(MARKERS)],
+            "linestyle": "--" if policy.startswith("baseline-") else "-"}
+
+
 def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
-    """Return against ε per scenario (worst black-box attack), one line per policy."""
+    """Return against ε per scenario (worst black-box attack), one line per policy, a colour per family."""
     from zodrive.evaluation.report import headless_pyplot
 
     plt = headless_pyplot()
     scenarios = sorted({r["scenario"] for r in rows})
-    fig, axes = plt.subplots(1, len(scenarios), figsize=(4.2 * len(scenarios), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(4.2 * len(scenarios), 5.2), squeeze=False)
     for ax, name in zip(axes[0], scenarios):
-        for r in sorted((r for r in rows if r["scenario"] == name), key=lambda r: r["policy"]):
+        table = sorted((r for r in rows if r["scenario"] == name), key=lambda r: r["policy"])
+        families = sorted({family_and_seed(r["policy"])[0] for r in table})
+        colours = plt.get_cmap("tab10" if len(families) <= 10 else "tab20")
+        for r in table:
             eps = [0.0, *(p["eps"] for p in r["attacked"])]
             ret = [r["clean"]["return"], *(p["return"] for p in r["attacked"])]
-            ax.plot(eps, ret, marker="o", lw=1.2, label=r["policy"])
+            style = line_style(r["policy"], families)
+            ax.plot(eps, ret, lw=1.2, ms=4, label=r["policy"], **{**style, "color": colours(style["color"])})
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("ε (normalized)")
         ax.set_ylabel("return")
-        ax.legend(fontsize=6)
+        ax.legend(fontsize=6, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
