@@ -308,7 +308,8 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
             eps = [0.0, *(p["eps"] for p in r["attacked"])]
             ret = [r["clean"]["return"], *(p["return"] for p in r["attacked"])]
             style = line_style(r["policy"], families)
-            ax.plot(eps, ret, lw=1.2, ms=4, label=r["policy"], **{**style, "color": colours(style["color"])})
+            style["color"] = colours(style["color"])
+            ax.plot(eps, ret, lw=1.2, ms=4, label=r["policy"], **style)
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("ε (normalized)")
         ax.set_ylabel("return")
