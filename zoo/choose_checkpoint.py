@@ -25,6 +25,8 @@ def main() -> None:
     parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py")
     parser.add_argument("--scenario", required=True, help="the zodrive preset it was trained for")
     parser.add_argument("--episodes", type=int, default=30)
+    parser.add_argument("--trust-model", action="store_true",
+                        help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
     args = parser.parse_args()
     if (args.run / "selection.json").exists():
         print(f"{args.run} was selected before: {json.loads((args.run / 'selection.json').read_text())['chosen']}")
@@ -36,7 +38,8 @@ def main() -> None:
                         key=lambda p: int(re.search(r"_(\d+)_steps", p.name)[1])) + [final]
     results = []
     for path in candidates:
-        r = zodrive.evaluate(str(path), args.scenario, episodes=args.episodes, seed=TUNING_SEED, envs=5)
+        r = zodrive.evaluate(str(path), args.scenario, episodes=args.episodes, seed=TUNING_SEED, envs=5,
+                            trust_model=args.trust_model)
         results.append({"candidate": str(path.relative_to(args.run)), "mean_return": r.summary["mean_return"],
                         "collision_rate": r.summary["collision_rate"]})
         print(f"{path.name}: {r.summary['mean_return']:.2f} ({100 * r.summary['collision_rate']:.0f}% collisions)")

@@ -26,7 +26,7 @@ from stable_baselines3.common.monitor import Monitor
 ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
            "intersection": "intersection-v2"}
 
-DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8}
+DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp"}
 """The recipe's settings a run may change (zoo/card.py writes the ones a run changed into its command)."""
 
 
@@ -38,6 +38,9 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=DEFAULTS["every"], help="checkpoint interval in steps")
     parser.add_argument("--gamma", type=float, default=DEFAULTS["gamma"],
                         help="discount (0.8: highway-env's documented setting, a horizon of about 5 decisions)")
+    parser.add_argument("--net", choices=("mlp", "attention"), default=DEFAULTS["net"],
+                        help="mlp: two 256-unit layers on the flattened table; attention: zoo/ego_attention.py "
+                             "then two 64-unit layers (its zips load in zodrive with PYTHONPATH=zoo and --trust-model)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     done = [p for p in (args.out / "model.zip", args.out / "final.zip") if p.exists()]  # final.zip: a chosen run
@@ -46,7 +49,12 @@ def main() -> None:
         return
     args.out.mkdir(parents=True, exist_ok=True)
     env = Monitor(gym.make(ENV_IDS[args.scenario]), str(args.out / "monitor"))
-    model = DQN("MlpPolicy", env, policy_kwargs=dict(net_arch=[256, 256]), learning_rate=5e-4,
+    if args.net == "attention":
+        from ego_attention import EgoAttention  # zoo/ is on sys.path when this script runs
+        policy_kwargs = dict(features_extractor_class=EgoAttention, net_arch=[64, 64])
+    else:
+        policy_kwargs = dict(net_arch=[256, 256])
+    model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=5e-4,
                 buffer_size=15_000, learning_starts=200, batch_size=32, gamma=args.gamma, train_freq=1,
                 gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
                 seed=args.seed, device="cpu", verbose=0)
@@ -56,7 +64,7 @@ def main() -> None:
     model.save(args.out / "model")
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
-         "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma,
+         "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 

@@ -30,6 +30,8 @@ def main() -> None:
     parser.add_argument("scenario")
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--trust-model", action="store_true",
+                        help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
     args = parser.parse_args()
     constants = {}
     print(f"seeds {FIRST}-{FIRST + args.episodes - 1}")
@@ -40,7 +42,8 @@ def main() -> None:
     print("| Run | Return | Collisions | Δ closest constant (paired 95% CI) | Δ brake (paired 95% CI) |")
     print("|---|---|---|---|---|")
     for run in args.runs:
-        r = zodrive.evaluate(str(run / "model.zip"), args.scenario, episodes=args.episodes, seed=FIRST, envs=5)
+        r = zodrive.evaluate(str(run / "model.zip"), args.scenario, episodes=args.episodes, seed=FIRST, envs=5,
+                            trust_model=args.trust_model)
         margins = {name: paired_difference_ci(returns(r), theirs) for name, theirs in constants.items()}
         closest = min(margins, key=lambda name: margins[name][0])
         mean, low, high = margins[closest]
