@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from zodrive.cli import main
@@ -97,3 +98,51 @@ def test_the_plot_gives_a_family_one_colour_and_each_seed_its_own_marker() -> No
     assert one["color"] == two["color"] == 2 and one["marker"] != two["marker"]
     assert line_style("dqn-seed-1", families)["color"] == 1 != one["color"]
     assert line_style("baseline-slower", families)["linestyle"] == "--" != one["linestyle"]
+
+
+EXTRACTOR = '''
+import torch
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+
+class RowMean(BaseFeaturesExtractor):
+    """A network of the user's own: the mean over the observation's vehicle rows."""
+
+    def __init__(self, observation_space):
+        super().__init__(observation_space, features_dim=observation_space.shape[-1])
+
+    def forward(self, obs):
+        return obs.mean(dim=1)
+'''
+
+
+def test_a_network_of_the_users_own_is_benched_only_with_trust_and_its_row_says_so(tmp_path: Path, capsys,
+                                                                                  monkeypatch) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import DQN
+
+    from zodrive.envs import load_preset, make_env
+
+    (tmp_path / "my_net.py").write_text(EXTRACTOR)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    from my_net import RowMean
+
+    env = make_env(load_preset("intersection"))
+    assert isinstance(env.observation_space, gym.spaces.Box) and env.observation_space.shape == (15, 7)
+    DQN("MlpPolicy", env, policy_kwargs={"features_extractor_class": RowMean, "net_arch": [8]}, seed=0,
+        device="cpu").save(tmp_path / "mine")
+    board = tmp_path / "board"
+    args = ["bench", str(tmp_path / "mine.zip"), "--scenario", "intersection", "--name", "mine", "--episodes", "1",
+            "--board", str(board), "--no-progress"]
+    assert main(args) == 2  # read safely, the extractor is refused, not guessed
+    assert "--trust-model" in capsys.readouterr().err
+    assert main([*args, "--trust-model"]) == 0
+    row = json.loads((board / "intersection" / "mine" / "row.json").read_text())
+    assert row["trust_model"] is True and row["attacked"][-1]["pgd_return"] is not None
+    assert "| mine*† |" in (board / "leaderboard.md").read_text()
+    monkeypatch.delitem(sys.modules, "my_net")  # and off the path: the zip names code that is not here
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p != str(tmp_path)])
+    (tmp_path / "copy.zip").write_bytes((tmp_path / "mine.zip").read_bytes())
+    assert main(["evaluate", str(tmp_path / "copy.zip"), "--preset", "intersection", "--episodes", "1",
+                 "--trust-model", "--no-progress"]) == 2
+    assert "module 'my_net', which is not importable here" in capsys.readouterr().err

@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from zodrive.cli.common import episode_count, progress_flag, workers_flag
+from zodrive.cli.common import check_trust, episode_count, progress_flag, trust_flag, workers_flag
 from zodrive.errors import ZodriveError
 
 BOARD = Path("results/bench")
@@ -25,6 +25,7 @@ def add_parsers(sub: Any) -> None:
                        help="fewer episodes than the protocol's, for a quick look: the row is marked unofficial "
                             "(default: the protocol's)")
     bench.add_argument("--force", action="store_true", help="replace another bench in the row's folder")
+    trust_flag(bench)
     workers_flag(bench)
     progress_flag(bench)
 
@@ -42,13 +43,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from zodrive.policies.policy import resolve
 
     proto = protocol(args.scenario)
+    check_trust(args)
     name = args.name or resolve(args.model).label
     if not name or "/" in name or name.startswith("."):
         raise ZodriveError(f"--name {name!r}: a row's name is one folder name")
     out = args.board / args.scenario / name
     start = time.perf_counter()
     row = bench(args.model, proto, out, name=name, episodes=args.episodes, workers=args.workers,
-                progress=not args.no_progress, force=args.force)
+                progress=not args.no_progress, force=args.force, trust=args.trust_model)
     clean, worst = row["clean"], row["attacked"][-1]
     print(f"{row['policy']} on {row['protocol']}{'' if row['official'] else ' (unofficial: fewer episodes)'}: "
           f"clean {clean['return']:.2f} ({100 * clean['collision_rate']:.0f}% collisions), at eps {worst['eps']:g} "

@@ -73,19 +73,23 @@ def physical_eps(proto: Protocol) -> dict[str, dict[str, float]]:
 
 
 def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, episodes: int | None = None,
-          workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8) -> dict[str, Any]:
+          workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8,
+          trust: bool = False) -> dict[str, Any]:
     """Run the protocol's cells for `policy` (and the constant brake, the row every table is read
     against) into `out`, and write its row (`row.json`). `episodes` overrides the protocol's count
-    for a quick look: such a row is marked unofficial."""
+    for a quick look: such a row is marked unofficial. `trust` reads an SB3 zip with SB3's own
+    loader (a network zodrive cannot rebuild safely); the row says so, for whoever reruns it."""
     n = proto.episodes if episodes is None else episodes
     resolved = resolve(policy)
     attacks = [*proto.black_box, proto.white_box]
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, force=force, envs=envs)
+            preset=proto.scenario, force=force, envs=envs, trust=trust)
     brake = out / "brake"
     compare([BRAKE], [], [], n, brake, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs)
     row = bench_row(name or resolved.label, resolved.key(), proto, out, n)
+    if trust:
+        row["trust_model"] = True
     write_json(out / "row.json", row)
     return row
 
@@ -222,7 +226,8 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "clean (0: already clean). Δ closest constant: clean return minus that of the constant action (a",
              "`baseline:` row of the same table) it beats by the least, paired on the same seeds (95% CI); a policy",
              "beats every constant action by a margin its CI shows where the low end is above 0 (its margin in",
-             "bold). Unofficial rows (fewer episodes) are marked *.", ""]
+             "bold). Unofficial rows (fewer episodes) are marked *; rows marked † load their network with SB3's",
+             "own loader (`--trust-model`: code of the model's author, which zodrive does not rebuild).", ""]
     for scenario_name in sorted({r["scenario"] for r in rows}):
         group = sorted((r for r in rows if r["scenario"] == scenario_name),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
@@ -240,7 +245,8 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
             pgd = "–" if last["pgd_return"] is None else f"{last['pgd_return']:.2f}"
             q = next((p["queries_to_crash"] for p in r["attacked"] if p["queries_to_crash"] is not None), None)
             delta = _closest_constant(r)
-            lines.append(f"| {r['policy']}{'' if r['official'] else '*'} | {c['return']:.2f} "
+            marks = ("" if r["official"] else "*") + ("†" if r.get("trust_model") else "")
+            lines.append(f"| {r['policy']}{marks} | {c['return']:.2f} "
                          f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
                          f"{c['speed']:.1f} | " + " | ".join(cells) + f" | {pgd} | "
                          f"{'–' if r['robustness_area'] is None else format(r['robustness_area'], '.2f')} | "

@@ -32,9 +32,10 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             address: str | None = None, defenses: list[str | None] | None = None,
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None,
-            force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS) -> list[dict[str, Any]]:
+            force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
+            trust: bool = False) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
-    evaluation per cell. Policies that do not read the observation (constant and
+    evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
     can change what they do; white-box attacks skip policies that offer no gradients."""
     from zodrive.defense import make_defense
@@ -69,7 +70,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                                               + ("" if eps is None else f"-eps{number_name(eps)}")
                                               + ("" if budget is None else f"-qb{budget}"))
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
-                                  defense=defense)
+                                  defense=defense, trust=trust)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack, spec and spec.attack), "eps": eps, "query_budget": budget})
                     cells.append(Cell(job, episodes, folder, force=force))

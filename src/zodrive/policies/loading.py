@@ -137,6 +137,9 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
             return (cls or algo).load(file, device="cpu")
     except ZodriveError:
         raise
+    except ModuleNotFoundError as exc:  # a network class of the user's own, e.g. a feature extractor
+        raise ZodriveError(f"{file} could not be loaded: it names code from module {exc.name!r}, which is not "
+                           "importable here (put its folder on PYTHONPATH)") from exc
     except Exception as exc:
         raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
 
