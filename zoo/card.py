@@ -23,14 +23,20 @@ def card(run: Path) -> str:
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario, seed = train["scenario"], train["seed"]
-    changed = "".join(f" --{k} {train[k]:g}" for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
+    changed = "".join(f" --{k} {train[k]:g}" if isinstance(v, (int, float)) else f" --{k} {train[k]}"
+                      for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
+    own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only
+    path, trust = ("PYTHONPATH=zoo ", " --trust-model") if own else ("", "")
+    network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
+               "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
     lines = [f"# {run.parent.name} / {run.name}", "",
-             f"A DQN for `{scenario}` (highway-env `{train['env_id']}`), trained with plain stable-baselines3 by",
+             f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "
-             f"(`python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}`), copied to `model.zip`.", ""]
+             f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}`), "
+             "copied to `model.zip`.", ""]
     return "\n".join(lines + _bench(run, scenario))
 
 
@@ -68,8 +74,9 @@ def _bench(run: Path, scenario: str) -> list[str]:
         return lines + ["No bench row yet: `bash zoo/bench_all.sh`.", ""]
     row = json.loads(row_path.read_text())
     c = row["clean"]
-    return lines + [f"Bench row ({row['protocol']}, `zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
-                    f"--name {name}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
+    path, trust = ("PYTHONPATH=zoo ", " --trust-model") if row.get("trust_model") else ("", "")
+    return lines + [f"Bench row ({row['protocol']}, `{path}zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
+                    f"--name {name}{trust}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
                     f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
                     f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions). Under the "
                     "strongest black-box attack: " + ", ".join(
