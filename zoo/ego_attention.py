@@ -36,7 +36,7 @@ class EgoAttention(BaseFeaturesExtractor):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         rows = torch.cat([obs, obs - obs[:, :1]], dim=-1)
         x = self.embed(rows)
-        batch, n, width = x.shape
+        batch, _, width = x.shape
         per_head = width // self.heads
 
         def split(t: torch.Tensor) -> torch.Tensor:
