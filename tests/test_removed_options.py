@@ -1,6 +1,7 @@
 """Committed evaluations still match the key today's code builds for the same job, after attack
 options were removed (`zodrive.attacks.schema.REMOVED`): a key that records a removed option at
-the behaviour left resumes; one that records another value is refused in one line."""
+the behaviour left resumes; one that records another value is refused in one line. The removed dqn
+recipe options (`zodrive.training.recipes.REMOVED`) are refused in one line too."""
 
 from __future__ import annotations
 
@@ -122,3 +123,29 @@ def test_a_committed_adversary_that_records_victim_action_false_still_loads(tmp_
     (tmp_path / "model.zip").write_bytes(b"")
     with pytest.raises(ZodriveError, match=r"clean action \(attack-train --victim-action\): removed from zodrive"):
         read_meta(tmp_path)
+
+
+def test_a_dqn_recipe_that_names_a_removed_option_or_recipe_is_refused_in_one_line(tmp_path: Path, capsys) -> None:
+    """Guided exploration, DQfD and fine-tuning the DQN from the clone were removed (issue 45): `guide`, `init`
+    and `calibrate` on a dqn recipe (shipped, a file or `--set`) and the four recipes are one-line errors, exit 2;
+    the continuous side keeps them (`td3-finetune` loads as it did)."""
+    from zodrive.cli import main
+    from zodrive.training.recipes import REMOVED_RECIPES, load_recipe, train
+
+    def error(args: list[str]) -> str:
+        assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "run"), *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("zodrive: error:") and "\n" not in err and "Traceback" not in err
+        return err
+
+    for option in ("guide.name=rules", "guide.imitation=1.0", "init=models/dqn-imitation", "calibrate.episodes=30"):
+        assert "removed from zodrive for dqn recipes" in error(["--set", option]), option
+    recipe = tmp_path / "mine.yaml"
+    recipe.write_text("base: dqn-driver\nguide: {name: rules, demonstrations: 60, pretrain_steps: 20000}\n")
+    assert "guide (its measurement: results/driver-sweep/" in error(["--recipe", str(recipe)])
+    for name in REMOVED_RECIPES:
+        assert f"recipe {name!r} was removed from zodrive" in error(["--recipe", name])
+    with pytest.raises(ZodriveError, match="removed from zodrive"):  # the Python door too, before any folder is made
+        train({**load_recipe("dqn"), "init": "models/dqn-imitation"}, tmp_path / "run", progress_bar=False)
+    assert not (tmp_path / "run").exists()
+    assert {"init", "calibrate", "guide"} <= set(load_recipe("td3-finetune"))

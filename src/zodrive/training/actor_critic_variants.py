@@ -11,8 +11,8 @@ preset (`rules`, TD3+BC with an online teacher). The Q term is normalized as in 
 `imitation` means the same whatever the return scale (TD3+BC's alpha = 2.5 is `imitation` = 0.4).
 With `error` "absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, the loss the
 continuous clone was fitted with. The guide's term keeps the driver where the critic does not show
-it something better, the way DQfD's margin loss does for the DQN (`dqn_variants.GuidedDQN`); from a
-clone of the rules, the clone is the guide that works (the rules' high-gain steering, which the
+it something better, the way DQfD's margin loss was meant to for the DQN (removed, issue 45:
+results/finetune/README.md); from a clone of the rules, the clone is the guide that works (the rules' high-gain steering, which the
 clone smooths, undid its lane keeping: results/finetune-continuous/README.md). With `train_actor`
 False, `train` updates the critics only (target actions from the frozen actor): policy evaluation
 of the initial driver before RL starts; a recipe with `init` therefore trains a GuidedTD3 even

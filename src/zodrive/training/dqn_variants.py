@@ -24,7 +24,6 @@ import torch as th
 from stable_baselines3 import DQN
 from torch.nn import functional as F
 
-from zodrive.training.finetune import drive_into_buffer
 from zodrive.training.state_adversarial import SAMixin
 from zodrive.attacks.threat import worst_in_ball
 
@@ -95,67 +94,3 @@ class SADQN(SAMixin, LossHookDQN):
         x = worst_in_ball(margin, x0, eps, r["pgd_steps"], mask, r["low"], r["high"])  # maximize the margin
         reg = th.clamp(margin(x), min=-r["hinge"]).mean()  # gradient flows into the network only
         return r["kappa"] * reg
-
-
-class GuidedDQN(LossHookDQN):
-    """DQN whose exploration is guided by a driver that reads the same observation.
-
-    With probability `rate(t)` the behaviour action is the guide's (`baseline:rules`),
-    decaying linearly from `start` to 0 over the first `fraction` of training; otherwise SB3's
-    epsilon-greedy (or, before `learning_starts`, uniform) action. The learner is unchanged:
-    off-policy Q-learning on the collected transitions (n-step returns then carry the guide's
-    good returns early on). The guide decides which transitions get collected, as
-    demonstrations do in DQfD (Hester et al., AAAI 2018); with `imitation` > 0 DQfD's
-    large-margin loss on the guide's labels is added to the TD loss (`extra_loss`). The saved
-    zip is an ordinary SB3 DQN zip; the guide is not part of the policy.
-    """
-
-    guide: Any = None
-    guide_schedule: tuple[float, int] = (0.0, 1)
-    margin: tuple[float, float] = (0.0, 0.8)  # (weight, margin) of the large-margin imitation loss
-
-    def configure_guide(self, guide: Any, start: float, steps: int, imitation: float = 0.0,
-                        margin: float = 0.8) -> None:
-        self.guide, self.guide_schedule = guide, (float(start), max(int(steps), 1))
-        self.margin = (float(imitation), float(margin))
-
-    def extra_loss(self, observations: th.Tensor) -> th.Tensor | None:
-        """DQfD's large-margin loss (Hester et al. 2018), with the guide labelling every sampled
-        state: weight * mean(max_a [Q(s, a) + margin * (a != a_G)] - Q(s, a_G)), a_G = guide(s).
-        It keeps the guide's action ahead by the margin unless the TD loss shows a better one."""
-        weight, margin = self.margin
-        if weight <= 0 or self.guide is None:
-            return None
-        labels = th.as_tensor(np.asarray(self.guide(observations.detach().cpu().numpy())), dtype=th.long,
-                              device=observations.device)[:, None]
-        q = self.q_net(observations)
-        bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
-        return weight * ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
-
-    def add_demonstrations(self, env: Any, episodes: int, seed: int) -> dict[str, float]:
-        """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the guide and put
-        every transition in the replay buffer, as DQfD's demonstration data (n-step returns are
-        computed from it like from any other transitions). Returns the demonstrations' mean return."""
-        returns = drive_into_buffer(self.replay_buffer, env, episodes, seed,
-                                    lambda obs: int(np.asarray(self.guide(obs[None]))[0]))
-        return {"episodes": episodes, "transitions": int(self.replay_buffer.size()),  # type: ignore[union-attr]
-                "mean_return": float(np.mean(returns))}
-
-    def pretrain(self, gradient_steps: int, batch_size: int, sync_every: int = 2500) -> None:
-        """DQfD's pre-training phase: TD + large-margin updates on the buffer before the first
-        environment step; the target network copies the online one every `sync_every` updates."""
-        while gradient_steps > 0:
-            chunk = min(sync_every, gradient_steps)
-            self.train(chunk, batch_size)
-            self.q_net_target.load_state_dict(self.q_net.state_dict())
-            gradient_steps -= chunk
-
-    def guide_rate(self) -> float:
-        start, steps = self.guide_schedule
-        return start * max(0.0, 1.0 - self.num_timesteps / steps)
-
-    def _sample_action(self, learning_starts: int, action_noise: Any = None, n_envs: int = 1) -> Any:
-        if self.guide is not None and np.random.rand() < self.guide_rate():
-            action = np.asarray(self.guide(self._last_obs), dtype=np.int64).reshape(n_envs)
-            return action, action
-        return super()._sample_action(learning_starts, action_noise, n_envs)

@@ -1,20 +1,11 @@
-"""Reinforcement learning that starts from a cloned driver (issue 22, item 2).
-
-A behaviour-cloned network (`models/dqn-imitation`) outputs *logits*: their argmax drives well,
-their values mean nothing to a TD target. So the clone goes into the online and target Q-networks
-(`init_from_model`), drives into the replay buffer (`collect`), and its values are fitted to its own
-returns by LSTD-Q (`calibrate`; Lagoudakis & Parr, JMLR 2003) in a family that a positive scale and a
-per-state shift keep argmax-preserving at *every* state, folded into the last Linear layer: the greedy
-policy stays exactly the clone's, and RL changes it only where the TD errors show a better action
-(cf. DQfD's pre-training, Hester et al., AAAI 2018, from demonstrations instead of a trained policy).
-`evaluate_td` (recipe `calibrate.td_steps`) optionally continues that policy evaluation with TD updates
-of the whole network (the linear fit on frozen features leaves large TD errors, whose gradients would
-reshape the hidden layers once RL starts) and DQfD's large-margin loss on the clone's actions.
+"""Reinforcement learning that starts from a cloned driver (issue 22, item 2), continuous side.
 
 A cloned DDPG / TD3 actor (`models/ddpg-imitation`) keeps its outputs as they are: it goes into the
 actor and target actor (`init_actor_from_model`), drives into the buffer with the recipe's exploration
 noise (`collect`), and the fresh critics are fitted to its returns by critic-only TD updates
-(`evaluate_critic`) before the first actor update (then `GuidedTD3`, TD3+BC).
+(`evaluate_critic`) before the first actor update (then `GuidedTD3`, TD3+BC). The DQN side (LSTD-Q
+calibration of a cloned Q-network, DQfD's margin loss) lost and was removed (issue 45;
+results/finetune/README.md).
 """
 
 from __future__ import annotations
@@ -30,19 +21,9 @@ from torch.nn import functional as F
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import sha256
 
-Q_PREFIX = "q_net.q_net."  # SB3 DQN: the online Q-network's MLP in policy.pth
 ACTOR_PREFIX = "actor.mu."  # SB3 DDPG / TD3: the actor's MLP in policy.pth
 ACTOR_KIND = "DDPG or TD3 (no actor weights)"
 EVALUATION_TAU = 0.05  # Polyak rate of the target critics during `evaluate_critic`
-
-
-def init_from_model(model: Any, path: str | Path) -> dict[str, Any]:
-    """Copy the Q-network weights of the DQN zip at `path` (file or model folder) into `model`'s
-    online and target networks. Nothing is unpickled; a missing, non-DQN or differently shaped
-    model is a one-line ZodriveError. Returns the file and its SHA-256."""
-    file = _load_network(model.q_net, path, Q_PREFIX, "q_net.", "DQN (no Q-network weights)")
-    model.q_net_target.load_state_dict(model.q_net.state_dict())
-    return {"model": str(file), "sha256": sha256(file)}
 
 
 def init_actor_from_model(model: Any, path: str | Path) -> dict[str, Any]:
@@ -109,33 +90,20 @@ def drive_into_buffer(buffer: Any, env: Any, episodes: int, seed: int, choose: A
     return returns
 
 
-def collect(model: Any, env: Any, episodes: int, seed: int, epsilon: float = 0.0) -> dict[str, Any]:
-    """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the model's own
-    action and add every transition to its replay buffer. A DQN acts greedily, a uniform random
-    action with probability `epsilon` (numpy generator seeded by `seed`); a DDPG / TD3 takes its
-    deterministic action plus its recipe's exploration noise (`model.action_noise`), clipped to
-    [-1, 1] (the noise is drawn from numpy's global generator, which SB3 seeds with the run's seed).
-    Returns counts and the mean return."""
-    rng = np.random.default_rng(seed)
-    discrete = hasattr(model.action_space, "n")
-    random_actions = 0
+def collect(model: Any, env: Any, episodes: int, seed: int) -> dict[str, Any]:
+    """Drive `episodes` episodes of `env` (seeds `seed`, `seed` + 1, ...) with the DDPG / TD3 model's
+    deterministic action plus its recipe's exploration noise (`model.action_noise`), clipped to [-1, 1]
+    (the noise is drawn from numpy's global generator, which SB3 seeds with the run's seed), and add
+    every transition to its replay buffer. Returns counts and the mean return."""
 
-    def choose(obs: np.ndarray) -> Any:
-        nonlocal random_actions
-        if not discrete:  # the actor's [-1, 1] space is the preset's (checked by the recipe)
-            with th.no_grad():
-                action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
-            return action if model.action_noise is None else np.clip(action + model.action_noise(), -1.0, 1.0)
-        if rng.random() < epsilon:
-            random_actions += 1
-            return int(rng.integers(model.action_space.n))
+    def choose(obs: np.ndarray) -> Any:  # the actor's [-1, 1] space is the preset's (checked by the recipe)
         with th.no_grad():
-            return int(model.q_net(th.as_tensor(obs[None], dtype=th.float32)).argmax(dim=1)[0])
+            action = model.actor(th.as_tensor(obs[None], dtype=th.float32))[0].numpy()
+        return action if model.action_noise is None else np.clip(action + model.action_noise(), -1.0, 1.0)
 
     returns = drive_into_buffer(model.replay_buffer, env, episodes, seed, choose)
-    return {"episodes": episodes, "seeds_from": seed,
-            **({"epsilon": epsilon, "random_actions": random_actions} if discrete else {}),
-            "transitions": int(model.replay_buffer.size()), "mean_return": round(float(np.mean(returns)), 3)}
+    return {"episodes": episodes, "seeds_from": seed, "transitions": int(model.replay_buffer.size()),
+            "mean_return": round(float(np.mean(returns)), 3)}
 
 
 def evaluate_critic(model: Any, steps: int, batch_size: int) -> dict[str, Any]:
@@ -166,116 +134,3 @@ def evaluate_critic(model: Any, steps: int, batch_size: int) -> dict[str, Any]:
         value = model.critic.q1_forward(data.observations, model.actor(data.observations))
     return {"td_steps": steps, "td_loss_before": round(before, 4), "td_loss_after": round(td_loss(), 4),
             "mean_q": round(float(value.mean()), 4), "mean_reward": round(float(data.rewards.mean()), 4)}
-
-
-def _hidden_and_logits(q_net: Any, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-    """The last hidden layer h(s) and the outputs of an SB3 QNetwork."""
-    mlp = q_net.q_net
-    hidden = mlp[:-1](q_net.extract_features(obs, q_net.features_extractor))
-    return hidden, mlp[-1](hidden)
-
-
-def _buffer_samples(model: Any) -> Any:
-    """Every stored transition once (n-step returns as the buffer computes them for training)."""
-    buffer = model.replay_buffer
-    size = buffer.buffer_size if buffer.full else buffer.pos
-    return buffer._get_samples(np.arange(size))
-
-
-def calibrate(model: Any, ridge: float = 1e-3, min_scale: float = 0.1) -> dict[str, Any]:
-    """Policy evaluation of the model's greedy policy on its replay buffer by LSTD-Q, in the
-    argmax-preserving family Q = alpha * f(s, a) + u . h(s) + c (f: the current outputs); the
-    solution is folded into the last layer of the online and target networks. `ridge` is
-    Tikhonov regularization relative to the features' mean square; alpha below `min_scale` (the
-    clone's ranking is not reflected in its returns) is raised to it and (u, c) refit. Returns
-    the fit and the TD errors before and after, and the greedy agreement (1.0 by construction)."""
-    q_net = model.q_net
-    data = _buffer_samples(model)
-    with th.no_grad():
-        h, f = _hidden_and_logits(q_net, data.observations)
-        h2, f2 = _hidden_and_logits(q_net, data.next_observations)
-        greedy_before = f.argmax(dim=1)
-        taken = f.gather(1, data.actions.long()).squeeze(1)
-        nxt = f2.max(dim=1).values  # the clone's own next action (argmax), frozen
-        discount = (data.discounts if data.discounts is not None else th.full_like(data.rewards, model.gamma))
-        cont = (discount * (1 - data.dones)).squeeze(1).double()
-        reward = data.rewards.squeeze(1).double()
-        ones = th.ones(len(h), 1, dtype=th.float64)
-        phi = th.cat([taken.double()[:, None], h.double(), ones], dim=1)
-        phi2 = th.cat([nxt.double()[:, None], h2.double(), ones], dim=1)
-
-        def td_errors(alpha: float, u: th.Tensor, c: float) -> th.Tensor:
-            q, q2 = (alpha * p[:, 0] + p[:, 1:-1] @ u + c for p in (phi, phi2))
-            return reward + cont * q2 - q
-
-        before = float(td_errors(1.0, th.zeros(h.shape[1], dtype=th.float64), 0.0).abs().mean())
-        n = len(phi)
-
-        def lstd(a: th.Tensor, b: th.Tensor) -> th.Tensor:  # solve (A + ridge * scale * I) w = b
-            scale = float((a.diagonal().abs().mean()))
-            return th.linalg.solve(a + ridge * max(scale, 1e-12) * th.eye(len(a), dtype=a.dtype), b)
-
-        matrix = phi.T @ (phi - cont[:, None] * phi2) / n
-        w = lstd(matrix, phi.T @ reward / n)
-        alpha_fit = float(w[0])
-        if alpha_fit < min_scale:  # refit the value part with alpha fixed
-            psi, psi2 = phi[:, 1:], phi2[:, 1:]
-            target = reward + min_scale * (cont * phi2[:, 0] - phi[:, 0])
-            w = th.cat([th.tensor([min_scale], dtype=th.float64),
-                        lstd(psi.T @ (psi - cont[:, None] * psi2) / n, psi.T @ target / n)])
-        alpha, u, c = float(w[0]), w[1:-1], float(w[-1])
-        after = float(td_errors(alpha, u, c).abs().mean())
-        last = q_net.q_net[-1]
-        last.weight.copy_((alpha * last.weight.double() + u[None, :]).to(last.weight.dtype))
-        last.bias.copy_((alpha * last.bias.double() + c).to(last.bias.dtype))
-        model.q_net_target.load_state_dict(q_net.state_dict())
-        _, f_new = _hidden_and_logits(q_net, data.observations)
-        q_taken = f_new.gather(1, data.actions.long()).squeeze(1)
-    return {"method": "LSTD-Q policy evaluation of the frozen greedy policy (Lagoudakis & Parr 2003), "
-                      "Q = alpha * logit + u . h + c folded into the last layer",
-            "transitions": n, "ridge": ridge, "alpha_fit": round(alpha_fit, 6), "alpha": round(alpha, 6),
-            "offset": round(c, 4), "mean_q": round(float(q_taken.mean()), 4),
-            "mean_n_step_return": round(float(reward.mean()), 4),
-            "mean_abs_td_error_before": round(before, 4), "mean_abs_td_error_after": round(after, 4),
-            "greedy_agreement": float((f_new.argmax(dim=1) == greedy_before).float().mean())}
-
-
-def evaluate_td(model: Any, steps: int, batch_size: int, margin: float = 0.8, weight: float = 1.0,
-                sync_every: int = 1000) -> dict[str, Any]:
-    """`steps` TD updates of policy evaluation on the replay buffer: target r + gamma^n Q'(s', pi(s')),
-    pi the argmax of a frozen copy of the current network (the calibrated clone), plus `weight` times
-    the large-margin loss (Hester et al. 2018) on pi's actions; the target network copies the online
-    one every `sync_every` updates and at the end. Uses the model's optimizer, learning rate and
-    gradient clipping. Returns the losses and the greedy agreement with pi on the buffer's states."""
-    frozen = copy.deepcopy(model.q_net).requires_grad_(False)
-    model.policy.set_training_mode(True)
-    td_losses, margins = [], []
-    for step in range(steps):
-        data = model.replay_buffer.sample(batch_size)
-        discounts = data.discounts if data.discounts is not None else model.gamma
-        with th.no_grad():
-            nxt = frozen(data.next_observations).argmax(dim=1, keepdim=True)
-            target = data.rewards + (1 - data.dones) * discounts * model.q_net_target(data.next_observations).gather(1, nxt)
-            labels = frozen(data.observations).argmax(dim=1, keepdim=True)
-        q = model.q_net(data.observations)
-        td = F.smooth_l1_loss(q.gather(1, data.actions.long()), target)
-        bonus = th.full_like(q, margin).scatter_(1, labels, 0.0)
-        large_margin = ((q + bonus).amax(dim=1) - q.gather(1, labels).squeeze(1)).mean()
-        loss = td + weight * large_margin
-        model.policy.optimizer.zero_grad()
-        loss.backward()
-        th.nn.utils.clip_grad_norm_(model.policy.parameters(), model.max_grad_norm)
-        model.policy.optimizer.step()
-        td_losses.append(td.item())
-        margins.append(large_margin.item())
-        if (step + 1) % sync_every == 0:
-            model.q_net_target.load_state_dict(model.q_net.state_dict())
-    model.q_net_target.load_state_dict(model.q_net.state_dict())
-    data = _buffer_samples(model)
-    with th.no_grad():
-        agreement = float((model.q_net(data.observations).argmax(dim=1)
-                           == frozen(data.observations).argmax(dim=1)).float().mean())
-    tail = max(1, steps // 10)
-    return {"td_steps": steps, "td_loss_first": round(float(np.mean(td_losses[:tail])), 4),
-            "td_loss_last": round(float(np.mean(td_losses[-tail:])), 4),
-            "margin_loss_last": round(float(np.mean(margins[-tail:])), 4), "greedy_agreement": round(agreement, 4)}

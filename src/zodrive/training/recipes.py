@@ -33,38 +33,55 @@ KIND_OF_ALGO = {"dqn": "discrete", "ddpg": "continuous", "td3": "continuous"}
 ACTOR_CRITIC = ("ddpg", "td3")  # deterministic actor + action noise; their zips load alike
 RECIPE_KEYS = {"algo", "preset", "total_timesteps", "seed", "hyperparameters", "action_noise", "checkpoint_every",
                "double_q", "guide", "init", "calibrate"}
-GUIDES = ("rules", "close-rules")  # drivers that may guide a DQN's exploration (recipe `guide: {name, start, fraction}`)
-DEMO_SEEDS = 20000   # guide demonstrations of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
-CALIBRATE_KEYS = {"episodes": 30, "epsilon": 0.02, "ridge": 1e-3, "min_scale": 0.1, "td_steps": 0}  # recipe `calibrate:` defaults
-CALIBRATE_KEYS_ACTOR_CRITIC = {"episodes": 30, "td_steps": 10000}  # DDPG / TD3: collect, then critic-only TD
-GUIDE_KEYS_ACTOR_CRITIC = {"name", "imitation", "error"}  # DDPG / TD3: TD3+BC's imitation term only
-GUIDES_ACTOR_CRITIC = ("rules", "init")  # the continuous rules, or the recipe's init actor kept frozen
+DEMO_SEEDS = 20000   # the init actor's episodes of a run with seed s use seeds 20000 + 1000 s + i (not tuning/eval)
+CALIBRATE_KEYS = {"episodes": 30, "td_steps": 10000}  # recipe `calibrate:` defaults: collect, then critic-only TD
+GUIDE_KEYS = {"name", "imitation", "error"}  # DDPG / TD3: TD3+BC's imitation term
+GUIDES = ("rules", "init")  # the continuous rules, or the recipe's init actor kept frozen
+REMOVED = {"guide": "results/driver-sweep/ and results/finetune/", "init": "results/finetune/",
+           "calibrate": "results/finetune/"}
+"""Options a dqn recipe no longer has (issue 45: guided exploration, DQfD's margin loss and pre-training,
+fine-tuning from the clone; none was shipped), and where their measurements live (docs/drivers.md,
+section "Removed options")."""
+REMOVED_RECIPES = ("dqn-guided", "dqn-dqfd", "dqn-pretrained", "dqn-finetune")
+
+
+def check_removed(recipe: dict[str, Any], context: str) -> None:
+    """A dqn recipe that sets a removed option is a one-line error (an ignored option would be silent)."""
+    gone = [key for key in REMOVED if recipe.get("algo") == "dqn" and recipe.get(key) is not None]
+    if gone:
+        where = "; ".join(f"{key} (its measurement: {REMOVED[key]})" for key in gone)
+        raise ZodriveError(f"{context}: {where}: removed from zodrive for dqn recipes "
+                           "(docs/drivers.md, section \"Removed options\")")
 
 
 def algorithm_class(recipe: dict[str, Any]):
-    """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target) or DDPG."""
+    """The SB3 class a recipe trains: DQN (optionally with the Double-DQN target), DDPG or TD3
+    (GuidedDDPG / GuidedTD3 with a guide or an init actor)."""
     if recipe.get("double_q"):
-        if recipe["algo"] != "dqn" or recipe.get("guide"):
-            raise ZodriveError("double_q applies to dqn recipes without a guide only")
+        if recipe["algo"] != "dqn":
+            raise ZodriveError("double_q applies to dqn recipes only")
         from zodrive.training.dqn_variants import DoubleDQN
 
         return DoubleDQN
-    if recipe.get("guide") or (recipe["algo"] in ACTOR_CRITIC and recipe.get("init")):
+    if recipe["algo"] in ACTOR_CRITIC and (recipe.get("guide") or recipe.get("init")):
         # an actor-critic started from a clone needs GuidedTD3's critic-only updates even without a guide
         from zodrive.training.actor_critic_variants import GuidedDDPG, GuidedTD3
-        from zodrive.training.dqn_variants import GuidedDQN
 
-        return {"dqn": GuidedDQN, "ddpg": GuidedDDPG, "td3": GuidedTD3}[recipe["algo"]]
+        return {"ddpg": GuidedDDPG, "td3": GuidedTD3}[recipe["algo"]]
     return ALGOS[recipe["algo"]]
 
 
 def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]:
     """A training recipe (algorithm, preset, step budget, hyperparameters)."""
+    if name in REMOVED_RECIPES:
+        raise ZodriveError(f"recipe {name!r} was removed from zodrive (issue 45; its measurement: "
+                           "results/driver-sweep/ and results/finetune/; docs/drivers.md, section \"Removed options\")")
     recipe = load_config(name, "recipes", overrides)
     algo = recipe.get("algo")
     if algo not in ALGOS:
         raise ZodriveError(f"recipe {name!r}: algo must be one of {sorted(ALGOS)}, not {algo!r}")
     check_keys(recipe, RECIPE_KEYS, f"recipe {name!r}")
+    check_removed(recipe, f"recipe {name!r}")
     params = set(inspect.signature(ALGOS[algo].__init__).parameters) - {"self", "policy", "env", "seed", "device",
                                                                         "verbose", "tensorboard_log", "action_noise"}
     check_keys(recipe.get("hyperparameters") or {}, params, f"recipe {name!r}", "hyperparameters.")
@@ -83,10 +100,9 @@ def load_recipe(name: str, overrides: list[str] | None = None) -> dict[str, Any]
 
 
 def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
-    """Check a recipe's `init: MODEL` and `calibrate:` (start from a cloned network, then evaluate
-    its policy; `finetune`): for a DQN `{episodes, epsilon, ridge, min_scale, td_steps}`, for a DDPG /
-    TD3 `{episodes, td_steps}` (critic-only updates). Returns the calibration settings with
-    defaults, or None. Options that would be ignored are errors."""
+    """Check a DDPG / TD3 recipe's `init: MODEL` and `calibrate: {episodes, td_steps}` (start from a
+    cloned actor, then fit the critics to its returns by critic-only updates; `finetune`). Returns the
+    calibration settings with defaults, or None. Options that would be ignored are errors."""
     init, spec = recipe.get("init"), recipe.get("calibrate")
     if init is None:
         if spec is not None:
@@ -96,26 +112,11 @@ def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
         raise ZodriveError(f"{context}: init applies to recipes without double_q only")
     if not isinstance(init, str) or not init:
         raise ZodriveError(f"{context}: init must be a model path (a zip or model folder), not {init!r}")
-    if recipe["algo"] in ACTOR_CRITIC:
-        return _check_calibrate(spec, CALIBRATE_KEYS_ACTOR_CRITIC, context)
-    guide = recipe.get("guide") or {}
-    if isinstance(guide, dict) and (guide.get("demonstrations") or guide.get("pretrain_steps")):
-        raise ZodriveError(f"{context}: init with guide demonstrations/pretrain_steps is not supported "
-                           "(the calibration replaces DQfD's pre-training)")
-    settings = _check_calibrate(spec, CALIBRATE_KEYS, context)
-    if settings is not None and not (0 <= settings["epsilon"] <= 1 and settings["ridge"] > 0
-                                     and settings["min_scale"] > 0):
-        raise ZodriveError(f"{context}: calibrate needs epsilon in [0, 1], ridge > 0 and min_scale > 0")
-    return settings
-
-
-def _check_calibrate(spec: Any, defaults: dict[str, float], context: str) -> dict[str, float] | None:
-    """`calibrate:` with `defaults` filled in: known keys, numbers, integer episodes >= 1 and td_steps >= 0."""
     if spec is None:
         return None
-    if not isinstance(spec, dict) or set(spec) - set(defaults):
-        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(defaults)}}}, not {spec!r}")
-    settings = {**defaults, **spec}
+    if not isinstance(spec, dict) or set(spec) - set(CALIBRATE_KEYS):
+        raise ZodriveError(f"{context}: calibrate must be {{{', '.join(CALIBRATE_KEYS)}}}, not {spec!r}")
+    settings = {**CALIBRATE_KEYS, **spec}
     if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in settings.values()):
         raise ZodriveError(f"{context}: calibrate values must be numbers, not {spec!r}")
     if not (isinstance(settings["episodes"], int) and settings["episodes"] >= 1
@@ -125,44 +126,34 @@ def _check_calibrate(spec: Any, defaults: dict[str, float], context: str) -> dic
 
 
 def _start_from_init(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
-    """Load `init` into the online and target networks; with `calibrate`, let it drive and
-    evaluate its policy (`finetune.collect`, `finetune.calibrate`). Returns what was done."""
+    """Load `init` into the actor and target actor; with `calibrate`, let it drive and fit the critics
+    to its returns (`finetune.collect`, `finetune.evaluate_critic`). Returns what was done."""
     if recipe.get("init") is None:
         return None
     from zodrive.training import finetune
 
-    actor_critic = recipe["algo"] in ACTOR_CRITIC
-    init = finetune.init_actor_from_model if actor_critic else finetune.init_from_model
-    done: dict[str, Any] = {"init": init(model, recipe["init"])}
+    done: dict[str, Any] = {"init": finetune.init_actor_from_model(model, recipe["init"])}
     settings = check_init(recipe, "recipe")
     if settings is not None:
         start = time.perf_counter()
         env = make_env(preset)
-        done["collect"] = finetune.collect(model, env, int(settings["episodes"]), DEMO_SEEDS + 1000 * seed,
-                                           float(settings.get("epsilon", 0.0)))
+        done["collect"] = finetune.collect(model, env, int(settings["episodes"]), DEMO_SEEDS + 1000 * seed)
         env.close()
-        if actor_critic:
-            done["evaluate_critic"] = finetune.evaluate_critic(model, int(settings["td_steps"]), int(model.batch_size))
-            log.info("critic of %s evaluated: %s", recipe["init"], done["evaluate_critic"])
-        else:
-            done["calibrate"] = finetune.calibrate(model, float(settings["ridge"]), float(settings["min_scale"]))
-            if settings["td_steps"]:
-                margin = float((recipe.get("guide") or {}).get("margin", 0.8))
-                done["evaluate_td"] = finetune.evaluate_td(model, int(settings["td_steps"]), int(model.batch_size), margin)
-            log.info("calibrated %s: %s", recipe["init"], done["calibrate"])
+        done["evaluate_critic"] = finetune.evaluate_critic(model, int(settings["td_steps"]), int(model.batch_size))
+        log.info("critic of %s evaluated: %s", recipe["init"], done["evaluate_critic"])
         done["wall_time_s"] = round(time.perf_counter() - start, 1)
     return done
 
 
-def _actor_critic_guide(recipe: dict[str, Any], model: Any, preset: dict[str, Any]) -> tuple[Any, float, str]:
-    """A DDPG / TD3 recipe's `guide: {name: init|rules, imitation: W, error: squared|absolute}` as
-    (guide function, weight, error): the init model's actor kept frozen, or the continuous rules."""
+def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
+    """Give a GuidedTD3 / GuidedDDPG its guide from the recipe's `guide: {name: init|rules, imitation: W,
+    error: squared|absolute}` (TD3+BC's term): the init model's actor kept frozen, or the continuous rules."""
     from zodrive.training.actor_critic_variants import IMITATION_ERRORS
 
     spec = recipe["guide"]
-    if not isinstance(spec, dict) or spec.get("name") not in GUIDES_ACTOR_CRITIC or set(spec) - GUIDE_KEYS_ACTOR_CRITIC:
-        raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES_ACTOR_CRITIC)}, "
-                           f"imitation: W, error: E}} (guided exploration and DQfD's options are for dqn), not {spec!r}")
+    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - GUIDE_KEYS:
+        raise ZodriveError(f"recipe guide of a {recipe['algo']} recipe must be {{name: {'|'.join(GUIDES)}, "
+                           f"imitation: W, error: E}}, not {spec!r}")
     weight, error = spec.get("imitation", 0.4), spec.get("error", "squared")
     if isinstance(weight, bool) or not isinstance(weight, (int, float)) or weight < 0:
         raise ZodriveError(f"recipe guide: imitation must be a number >= 0, not {weight!r}")
@@ -171,53 +162,14 @@ def _actor_critic_guide(recipe: dict[str, Any], model: Any, preset: dict[str, An
     if spec["name"] == "rules":
         from zodrive.drivers.rules import ContinuousRules
 
-        return ContinuousRules(preset).controls, float(weight), error
-    if recipe.get("init") is None:
+        guide = ContinuousRules(preset).controls
+    elif recipe.get("init") is None:
         raise ZodriveError("recipe guide: name init needs init: MODEL (the actor it keeps the learner near)")
-    from zodrive.training.finetune import frozen_actor
+    else:
+        from zodrive.training.finetune import frozen_actor
 
-    return frozen_actor(model, recipe["init"]), float(weight), error
-
-
-def _configure_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any]) -> None:
-    """Give a GuidedDQN its guide from the recipe's `guide: {name: rules, start: P, fraction: F, ...}`,
-    a GuidedTD3 / GuidedDDPG from `guide: {name: init|rules, imitation: W, error: E}` (TD3+BC's term)."""
-    if recipe["algo"] in ACTOR_CRITIC:
-        model.configure_guide(*_actor_critic_guide(recipe, model, preset))
-        return
-    spec = recipe["guide"]
-    keys = {"name", "start", "fraction", "imitation", "margin", "demonstrations", "pretrain_steps"}
-    if not isinstance(spec, dict) or spec.get("name") not in GUIDES or set(spec) - keys:
-        raise ZodriveError(f"recipe guide must be {{name: {'|'.join(GUIDES)}, start: P, fraction: F, "
-                           f"imitation: W, margin: M, demonstrations: EPISODES, pretrain_steps: N}}, not {spec!r}")
-    start, fraction = float(spec.get("start", 0.5)), float(spec.get("fraction", 0.3))
-    imitation, margin = float(spec.get("imitation", 0.0)), float(spec.get("margin", 0.8))
-    if not (0 <= start <= 1 and 0 < fraction <= 1 and imitation >= 0 and margin >= 0
-            and int(spec.get("demonstrations", 0)) >= 0 and int(spec.get("pretrain_steps", 0)) >= 0):
-        raise ZodriveError("recipe guide: start in [0, 1], fraction in (0, 1], imitation, margin, demonstrations "
-                           "and pretrain_steps >= 0")
-    from zodrive.drivers.rules import named_rules
-
-    rules = named_rules(preset, spec["name"])
-    model.configure_guide(rules.actions, start, int(fraction * int(recipe["total_timesteps"])),
-                          imitation=imitation, margin=margin)
-
-
-def _pretrain_from_guide(model: Any, recipe: dict[str, Any], preset: dict[str, Any], seed: int) -> dict | None:
-    """DQfD's start (Hester et al. 2018): the guide's episodes into the replay buffer, then
-    `pretrain_steps` TD + margin updates on them before the agent's first step. Returns what was
-    done (episodes, transitions, the guide's mean return, minutes), or None if the recipe asks none."""
-    spec = recipe.get("guide") or {}
-    episodes, steps = int(spec.get("demonstrations", 0)), int(spec.get("pretrain_steps", 0))
-    if not episodes:
-        return None
-    start = time.perf_counter()
-    env = make_env(preset)
-    stats = model.add_demonstrations(env, episodes, DEMO_SEEDS + 1000 * seed)
-    env.close()
-    model.pretrain(steps, int(model.batch_size))
-    return {**stats, "pretrain_steps": steps, "seeds_from": DEMO_SEEDS + 1000 * seed,
-            "wall_time_s": round(time.perf_counter() - start, 1)}
+        guide = frozen_actor(model, recipe["init"])
+    model.configure_guide(guide, float(weight), error)
 
 
 def action_noise(spec: dict[str, Any] | None, n_actions: int):
@@ -356,6 +308,7 @@ def train(
     `resume`, training continues from the newest one with the run's own recipe and seed (the
     environment restarts from a fresh episode, so a resumed run is not bit-identical to an
     uninterrupted one)."""
+    check_removed(recipe, f"recipe {recipe.get('algo')}")
     check_run_folder(out, resume=resume, force=force)
     if resume and not (out / "config.yaml").is_file():
         raise ZodriveError(f"nothing to resume in {out}: it holds no run (drop --resume to start one)")
@@ -442,7 +395,6 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         _configure_guide(model, recipe, preset)
     model.set_logger(configure(str(out), ["csv"] + (["tensorboard"] if tensorboard else [])))
     initial = _start_from_init(model, recipe, preset, seed) if checkpoint is None else None
-    demonstrations = _pretrain_from_guide(model, recipe, preset, seed) if checkpoint is None else None
     every = int(recipe.get("checkpoint_every", 0) or 0)
     if initial and every:  # the calibrated start is a checkpoint too: the curve's first point, a candidate
         (out / "checkpoints").mkdir(exist_ok=True)
@@ -467,7 +419,6 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         out / "train.json",
         {"algo": algo, "total_timesteps": total, "seed": seed, "resumed_from": done or None,
          "wall_time_s": round(wall, 1), "steps_per_s": round((total - done) / max(wall, 1e-9), 1),
-         **({"demonstrations": demonstrations} if demonstrations else {}),
          **({"initial": initial} if initial else {})},
     )
     env.close()
