@@ -101,3 +101,29 @@ def test_same_seed_same_episode() -> None:
 def test_bad_presets_are_clear_errors(name: str, overrides: list[str], message: str) -> None:
     with pytest.raises(ZodriveError, match=message):
         load_preset(name, overrides)
+
+
+def _traffic_after(preset: str, steps: int) -> np.ndarray:
+    """Every vehicle's position after `steps` IDLE decisions from seed 3."""
+    env = make_env(load_preset(preset))
+    env.reset(seed=3)
+    for _ in range(steps):
+        env.step(1)
+    return np.array([v.position for v in env.unwrapped.road.vehicles])
+
+
+def test_an_intersection_earlier_in_the_process_does_not_change_another_scenarios_traffic() -> None:
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    before = _traffic_after("highway-fast", 8)
+    _traffic_after("intersection", 2)  # highway-env sets IDMVehicle's jam distance and comfort accelerations here
+    assert IDMVehicle.DISTANCE_WANTED == 7
+    np.testing.assert_array_equal(_traffic_after("highway-fast", 8), before)
+
+
+def test_two_scenarios_stepped_in_turn_are_refused() -> None:
+    crossing = make_env(load_preset("intersection"))
+    crossing.reset(seed=0)
+    make_env(load_preset("highway-fast")).reset(seed=0)
+    with pytest.raises(ZodriveError, match="driver model"):
+        crossing.step(1)

@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from zodrive.config import available, check_keys, config_root, load_config, read_text
+from zodrive.envs.traffic import KeepTraffic, restore_defaults
 from zodrive.errors import ZodriveError
 
 ENV_ID = "zodrive/highway-v0"
@@ -356,6 +357,7 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     env_id = config.get("env_id", ENV_ID)
     kwargs = {"config": _shapes_as_tuples(config["highway"])} if config.get("highway") is not None \
         else dict(config.get("env_kwargs") or {})
+    restore_defaults()  # highway-env's constructor resets the env once already
     try:
         env = gym.make(env_id, render_mode=render_mode, max_episode_steps=config.get("max_episode_steps"), **kwargs)
     except gym.error.Error as exc:
@@ -363,6 +365,8 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
     except (TypeError, ValueError, KeyError, AssertionError) as exc:
         raise ZodriveError(f"preset {config.get('name', '?')!r} is not a valid config for {env_id}: "
                            f"{type(exc).__name__}: {exc}") from exc
+    if "other_vehicles_type" in (getattr(env.unwrapped, "config", None) or {}):  # highway-env's traffic
+        env = KeepTraffic(env)
     return env
 
 
