@@ -47,11 +47,12 @@ def _values(kind: type) -> tuple[Any, ...]:
     return tuple(getattr(kind, name, None) for name in SHARED)
 
 
-class KeepTraffic(gym.Wrapper):
+class KeepTraffic(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """A highway-env environment whose traffic drives with the driver model it was reset with."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         self._kind = utils.class_from_path(env.unwrapped.config["other_vehicles_type"])  # type: ignore[attr-defined]
         self._values: tuple[Any, ...] | None = None
 
