@@ -25,6 +25,8 @@ def main() -> None:
     parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py")
     parser.add_argument("--scenario", required=True, help="the zodrive preset it was trained for")
     parser.add_argument("--episodes", type=int, default=30)
+    parser.add_argument("--from-step", type=int, default=0,
+                        help="only checkpoints from this step on (and the final model)")
     parser.add_argument("--trust-model", action="store_true",
                         help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
     args = parser.parse_args()
@@ -36,6 +38,7 @@ def main() -> None:
         shutil.move(args.run / "model.zip", final)
     candidates = sorted(args.run.glob("checkpoints/step_*_steps.zip"),
                         key=lambda p: int(re.search(r"_(\d+)_steps", p.name)[1])) + [final]
+    candidates = [p for p in candidates if p == final or int(re.search(r"_(\d+)_steps", p.name)[1]) >= args.from_step]
     results = []
     for path in candidates:
         r = zodrive.evaluate(str(path), args.scenario, episodes=args.episodes, seed=TUNING_SEED, envs=5,
@@ -47,6 +50,7 @@ def main() -> None:
     shutil.copy(args.run / best["candidate"], args.run / "model.zip")
     (args.run / "selection.json").write_text(json.dumps(
         {"script": "zoo/choose_checkpoint.py", "scenario": args.scenario, "tuning_seeds": [TUNING_SEED, TUNING_SEED + args.episodes - 1],
+         **({"from_step": args.from_step} if args.from_step else {}),
          "chosen": best["candidate"], "candidates": results}, indent=2) + "\n")
     print(f"chose {best['candidate']}")
 

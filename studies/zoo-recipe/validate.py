@@ -30,19 +30,20 @@ def main() -> None:
     parser.add_argument("scenario")
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=FIRST, help="first tuning seed (default: %(default)s)")
     parser.add_argument("--trust-model", action="store_true",
                         help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
     args = parser.parse_args()
     constants = {}
-    print(f"seeds {FIRST}-{FIRST + args.episodes - 1}")
+    print(f"seeds {args.seed}-{args.seed + args.episodes - 1}")
     for name in CONSTANTS:
-        r = zodrive.evaluate(f"baseline:{name}", args.scenario, episodes=args.episodes, seed=FIRST)
+        r = zodrive.evaluate(f"baseline:{name}", args.scenario, episodes=args.episodes, seed=args.seed)
         constants[name] = returns(r)
         print(f"always-{name.upper()}: {r.summary['mean_return']:.2f} ({100 * r.summary['collision_rate']:.0f}% collisions)")
     print("| Run | Return | Collisions | Δ closest constant (paired 95% CI) | Δ brake (paired 95% CI) |")
     print("|---|---|---|---|---|")
     for run in args.runs:
-        r = zodrive.evaluate(str(run / "model.zip"), args.scenario, episodes=args.episodes, seed=FIRST, envs=5,
+        r = zodrive.evaluate(str(run / "model.zip"), args.scenario, episodes=args.episodes, seed=args.seed, envs=5,
                             trust_model=args.trust_model)
         margins = {name: paired_difference_ci(returns(r), theirs) for name, theirs in constants.items()}
         closest = min(margins, key=lambda name: margins[name][0])
