@@ -11,6 +11,11 @@ for scenario in highway-fast merge roundabout intersection; do
     python zoo/choose_checkpoint.py "$run" --scenario "$scenario"
     zodrive bench "$run" --scenario "$scenario" --name "${family#"$scenario"-}-$(basename "$run")" --no-progress
   done
+  for run in models/zoo/$scenario-attention/seed-*; do  # zoo/ego_attention.py: a network zodrive does not rebuild
+    [ -f "$run/model.zip" ] || [ -f "$run/final.zip" ] || continue
+    PYTHONPATH=zoo python zoo/choose_checkpoint.py "$run" --scenario "$scenario" --trust-model
+    PYTHONPATH=zoo zodrive bench "$run" --scenario "$scenario" --name "attention-$(basename "$run")" --trust-model --no-progress
+  done
   for run in models/zoo/$scenario-imitation/seed-*; do  # zoo/imitate.sh: no checkpoint to choose
     [ -f "$run/model.zip" ] || continue
     zodrive bench "$run" --scenario "$scenario" --name "imitation-$(basename "$run")" --no-progress

@@ -29,13 +29,15 @@ def card(run: Path) -> str:
     path, trust = ("PYTHONPATH=zoo ", " --trust-model") if own else ("", "")
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
                "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
+    start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
+    since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
-             f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]} "
-             f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}`), "
+             f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]}{since} "
+             f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}{flag}`), "
              "copied to `model.zip`.", ""]
     return "\n".join(lines + _bench(run, scenario))
 
@@ -68,11 +70,14 @@ def row_name(run: Path, scenario: str) -> str:
 
 def _bench(run: Path, scenario: str) -> list[str]:
     name = row_name(run, scenario)
-    lines = [f"SHA-256 of `model.zip`: `{sha256(run / 'model.zip')}`", ""]
+    digest = sha256(run / "model.zip")
+    lines = [f"SHA-256 of `model.zip`: `{digest}`", ""]
     row_path = ROOT / "results" / "bench" / scenario / name / "row.json"
     if not row_path.is_file():
         return lines + ["No bench row yet: `bash zoo/bench_all.sh`.", ""]
     row = json.loads(row_path.read_text())
+    if row["key"] != f"sha256:{digest}":  # a row of an earlier model.zip: never shown as this one's
+        return lines + [f"The bench row `{row_path.relative_to(ROOT)}` is of another model file: bench it again.", ""]
     c = row["clean"]
     path, trust = ("PYTHONPATH=zoo ", " --trust-model") if row.get("trust_model") else ("", "")
     return lines + [f"Bench row ({row['protocol']}, `{path}zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
