@@ -1,10 +1,11 @@
 """Held-out tuning check of zoo runs: each run's model against every constant action of its
 scenario (`baseline:slower`, `idle`, `faster`) on tuning seeds that no checkpoint choice saw
-(50030 on; zoo/choose_checkpoint.py used 50000-50029, the bench starts at 100000), paired
+(50030 on by default, `--seed` for another unused set; zoo/choose_checkpoint.py uses 50000-50029,
+the bench starts at 100000), paired
 episode by episode; the margin shown is over the constant the run beats by the least (issue 48's
 bar). A recipe is adopted on this table, before any of its models is benched.
 
-Run: python studies/zoo-recipe/validate.py SCENARIO RUN [RUN ...] [--episodes 100]
+Run: python studies/zoo-recipe/validate.py SCENARIO RUN [RUN ...] [--episodes 100] [--seed 50030] [--trust-model]
 """
 
 from __future__ import annotations
