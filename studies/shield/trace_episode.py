@@ -24,7 +24,7 @@ from zodrive.system import make_policy_env
 from zodrive.attacks.spec import load_attack
 from zodrive.defense import make_defense
 from zodrive.envs import load_preset
-from zodrive.evaluation.rollout import find_attack_wrapper as _find_attack, act
+from zodrive.evaluation.rollout import act, find_attack_wrapper
 
 NAMES = ("LEFT", "IDLE", "RIGHT", "FASTER", "SLOWER")
 
@@ -51,7 +51,7 @@ def main() -> None:
     spec = None if a.attack == "none" else load_attack(a.attack, [f"eps={a.eps}"])
     policy, env = make_policy_env(a.model, preset, spec, defense=a.defense)
     driver, shield = load_victim(a.model, preset), make_defense(a.defense, preset)
-    wrapper = _find_attack(env)
+    wrapper = find_attack_wrapper(env)
     obs, _ = env.reset(seed=int(a.seed))
     rows, done, t = [], False, 0
     while not done:

@@ -136,6 +136,12 @@ class Attack(abc.ABC):
         self._carry: np.ndarray | None = None
         self._fed: np.ndarray | None = None
 
+    @property
+    def carried(self) -> np.ndarray | None:
+        """Per row, the perturbation carried to the next step (the warm start; vertex hold's held
+        vertex), flat; a row of NaN carries none. Read-only: for studies and traces."""
+        return self._carry
+
     @classmethod
     def check_objective(cls, objective: Objective) -> None:
         """An attack that never asks about the clean observation cannot judge a goal defined by it."""

@@ -100,7 +100,7 @@ class VertexHold(Attack):
         """The step above for clean observations `x0` (N, *obs)."""
         x0, delta, _ = self._begin(x0, oracle, objective)
         fed = self._project(x0, delta)
-        out, took = self._ask(fed, np.ones(len(x0), dtype=bool), oracle, objective)
+        out, took = self.ask(fed, np.ones(len(x0), dtype=bool), oracle, objective)
         # the vertex itself is held, not its projection: a coordinate the box clipped at this step
         # is whole again at the next one if the observation has moved away from the edge
         self._carry = np.where(took[:, None], delta, np.nan).astype(np.float32)
@@ -129,7 +129,7 @@ class VertexHold(Attack):
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
         fresh = np.flatnonzero(stale)
         if fresh.size:
-            drawn, rated = self._fresh(flat0[fresh], fresh, shape)
+            drawn, rated = self.fresh(flat0[fresh], fresh, shape)
             take = rated >= rating[fresh]  # a held vertex stays unless a candidate rates higher
             delta[fresh[take]] = drawn[take]
             rating[fresh[take]] = -np.inf
@@ -144,10 +144,11 @@ class VertexHold(Attack):
         L-inf projection is elementwise: row by row is the same)."""
         return self.threat.project((x0.reshape(len(x0), -1) + delta).reshape(x0.shape), x0).astype(np.float32)
 
-    def _ask(self, fed: np.ndarray, ask: np.ndarray, oracle: QueryOracle, objective: Objective
+    def ask(self, fed: np.ndarray, ask: np.ndarray, oracle: QueryOracle, objective: Objective
              ) -> tuple[np.ndarray, np.ndarray]:
         """One counted query per row in `ask` on `fed`: the outputs (NaN for a row not asked) and
-        whether the victim took the target."""
+        whether the victim took the target. Public, as `fresh` is, so that a study can replace how a
+        step asks or draws (studies/learned-adversary/pilots/one-query/hard.py)."""
         asked = np.flatnonzero(ask)
         took = np.zeros(len(fed), dtype=bool)
         if not asked.size:  # vertex check skipped every check: no outputs, as on a step with nothing asked
@@ -172,7 +173,7 @@ class VertexHold(Attack):
                             iterations=np.ones(n, dtype=np.int64), queries=oracle.row_queries.copy(), linf=linf, l2=l2,
                             adv_outputs=out, clean_outputs=np.full_like(out, np.nan))
 
-    def _fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    def fresh(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """A new vertex (unprojected, flat) for each of `rows` (clean observations `flat0`) and its rating:
         a random one (rated +inf), or with a picker the best-rated of `candidates` random ones at the
         row's observation (one picker call per row)."""
@@ -262,11 +263,11 @@ class VertexCheck(VertexHold):
         self._bank += 1
         ask = np.ones(n, dtype=bool) if self.check_below is None else rating < self.check_below  # -inf: a fresh vertex
         fed = self._project(x0, delta)
-        out, took = self._ask(fed, ask, oracle, objective)
+        out, took = self.ask(fed, ask, oracle, objective)
         self._bank[ask] -= 1
         failed = np.flatnonzero(ask & ~took)
         if failed.size and self.check_below is None:
-            delta[failed] = self._fresh(flat0[failed], failed, shape)[0]
+            delta[failed] = self.fresh(flat0[failed], failed, shape)[0]
         elif failed.size:
             drawn, scores = self._rated(flat0[failed], failed, shape)
             for i, r in enumerate(failed):

@@ -100,7 +100,7 @@ def drive_attack(env: Any, victim: Victim, attack: Any, objective: Any, oracle: 
         total, done = 0.0, False
         while not done:
             x = np.asarray(obs, np.float32)[None]
-            at_state(x, attack._carry)
+            at_state(x, attack.carried)
             result = attack.perturb(x, oracle, objective)
             after(result)
             obs, reward, terminated, truncated, _ = env.step(int(victim.query(result.x_adv)[0].argmax()))

@@ -117,7 +117,7 @@ def drive(a: argparse.Namespace) -> None:
     victim, env, threat, attack, objective, oracle = vertex_check(a.model, a.eps, a.picker)
     committed = attack.picker
     hard = Picker(fine_tune(a, attack), committed.candidates, committed.switch)
-    ask, fresh = attack._ask, attack._fresh
+    ask, fresh = attack.ask, attack.fresh
     asked = [False]
 
     def ask_then_mark(*args, **kwargs):  # the product's check; a fresh vertex drawn after it is fed unasked
@@ -134,7 +134,7 @@ def drive(a: argparse.Namespace) -> None:
     def begin(x: np.ndarray, held: np.ndarray | None) -> None:
         asked[0] = False
 
-    attack._ask, attack._fresh = ask_then_mark, fresh_by_case
+    attack.ask, attack.fresh = ask_then_mark, fresh_by_case
     returns, actions = drive_counting(env, victim, attack, objective, oracle, a.episodes, begin)
     share = percent(actions)
     print(f"  vertex check, the fine-tuned copy choosing the vertices fed unasked: return {np.mean(returns):.2f} over "

@@ -64,8 +64,8 @@ def main() -> None:
         hits["any-1024"] += bool(ok.any())
 
     def after(result) -> None:  # a vertex the check confirmed joins the episode's winners
-        if result.success[0] and (not winners or not np.array_equal(winners[-1], attack._carry[0])):
-            winners.append(attack._carry[0].copy())
+        if result.success[0] and (not winners or not np.array_equal(winners[-1], attack.carried[0])):
+            winners.append(attack.carried[0].copy())
 
     returns = drive_attack(env, victim, attack, objective, oracle, 900000, a.episodes, at_state, after)
     print(f"  vertex check: return {np.mean(returns):.2f} over {a.episodes} episodes, {steps} steps; the held vertex "
