@@ -6,7 +6,10 @@ roundabout episode run later in the same process then drives its traffic with in
 and gives other numbers than in a fresh process, silently. `KeepTraffic` gives each environment the
 values it was built for: its reset restores highway-env's own (intersection then sets its values
 again), and its step refuses when another environment changed them since (two scenarios stepped in
-turn in one process), as a wrong number is worse than a refusal.
+turn in one process), as a wrong number is worse than a refusal. The values restored are those the
+classes had when zodrive was imported: a change made to them later, by hand, does not survive a
+reset of an environment zodrive built. `zodrive.AttackWrapper` around an environment of your own
+does not add the guard: that environment's traffic is yours.
 """
 
 from __future__ import annotations
