@@ -26,7 +26,7 @@ def card(run: Path) -> str:
     changed = "".join(f" --{k} {train[k]:g}" if isinstance(v, (int, float)) else f" --{k} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only
-    path, trust = ("PYTHONPATH=zoo ", " --trust-model") if own else ("", "")
+    path, trust = loader_words(own)
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
                "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
     start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
@@ -62,6 +62,11 @@ def imitation_card(run: Path) -> str:
     return "\n".join(lines + _bench(run, scenario))
 
 
+def loader_words(trusted: bool) -> tuple[str, str]:
+    """What a command needs before and after itself to load a zoo zip with a network of its own."""
+    return ("PYTHONPATH=zoo ", " --trust-model") if trusted else ("", "")
+
+
 def row_name(run: Path, scenario: str) -> str:
     """The run's leaderboard row: its family without the scenario, then its seed (merge-dqn-g99/seed-0:
     dqn-g99-seed-0), as zoo/bench_all.sh names it."""
@@ -79,7 +84,7 @@ def _bench(run: Path, scenario: str) -> list[str]:
     if row["key"] != f"sha256:{digest}":  # a row of an earlier model.zip: never shown as this one's
         return lines + [f"The bench row `{row_path.relative_to(ROOT)}` is of another model file: bench it again.", ""]
     c = row["clean"]
-    path, trust = ("PYTHONPATH=zoo ", " --trust-model") if row.get("trust_model") else ("", "")
+    path, trust = loader_words(row.get("trust_model", False))
     return lines + [f"Bench row ({row['protocol']}, `{path}zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
                     f"--name {name}{trust}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
                     f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "

@@ -17,6 +17,7 @@ import shutil
 from pathlib import Path
 
 import zodrive
+from zodrive.cli.common import trust_flag
 from zodrive.seeds import TUNING_SEED
 
 
@@ -27,8 +28,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=30)
     parser.add_argument("--from-step", type=int, default=0,
                         help="only checkpoints from this step on (and the final model)")
-    parser.add_argument("--trust-model", action="store_true",
-                        help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
+    trust_flag(parser)  # for a network of its own, such as zoo/ego_attention.py
     args = parser.parse_args()
     if (args.run / "selection.json").exists():
         print(f"{args.run} was selected before: {json.loads((args.run / 'selection.json').read_text())['chosen']}")
@@ -36,9 +36,9 @@ def main() -> None:
     final = args.run / "final.zip"
     if not final.exists():
         shutil.move(args.run / "model.zip", final)
-    candidates = sorted(args.run.glob("checkpoints/step_*_steps.zip"),
-                        key=lambda p: int(re.search(r"_(\d+)_steps", p.name)[1])) + [final]
-    candidates = [p for p in candidates if p == final or int(re.search(r"_(\d+)_steps", p.name)[1]) >= args.from_step]
+    checkpoints = sorted((int(re.search(r"_(\d+)_steps", p.name)[1]), p)
+                         for p in args.run.glob("checkpoints/step_*_steps.zip"))
+    candidates = [p for step, p in checkpoints if step >= args.from_step] + [final]
     results = []
     for path in candidates:
         r = zodrive.evaluate(str(path), args.scenario, episodes=args.episodes, seed=TUNING_SEED, envs=5,

@@ -14,6 +14,7 @@ import argparse
 from pathlib import Path
 
 import zodrive
+from zodrive.cli.common import trust_flag
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.seeds import TUNING_SEED
 
@@ -32,8 +33,7 @@ def main() -> None:
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=FIRST, help="first tuning seed (default: %(default)s)")
-    parser.add_argument("--trust-model", action="store_true",
-                        help="load the zips with SB3 (unpickles; for a custom network such as zoo/ego_attention.py)")
+    trust_flag(parser)  # for a network of its own, such as zoo/ego_attention.py
     args = parser.parse_args()
     constants = {}
     print(f"seeds {args.seed}-{args.seed + args.episodes - 1}")

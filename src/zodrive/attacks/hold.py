@@ -144,12 +144,12 @@ class VertexHold(Attack):
         L-inf projection is elementwise: row by row is the same)."""
         return self.threat.project((x0.reshape(len(x0), -1) + delta).reshape(x0.shape), x0).astype(np.float32)
 
-    def ask(self, fed: np.ndarray, ask: np.ndarray, oracle: QueryOracle, objective: Objective
+    def ask(self, fed: np.ndarray, mask: np.ndarray, oracle: QueryOracle, objective: Objective
              ) -> tuple[np.ndarray, np.ndarray]:
-        """One counted query per row in `ask` on `fed`: the outputs (NaN for a row not asked) and
+        """One counted query per row in `mask` on `fed`: the outputs (NaN for a row not asked) and
         whether the victim took the target. Public, as `fresh` is, so that a study can replace how a
         step asks or draws (studies/learned-adversary/pilots/one-query/hard.py)."""
-        asked = np.flatnonzero(ask)
+        asked = np.flatnonzero(mask)
         took = np.zeros(len(fed), dtype=bool)
         if not asked.size:  # vertex check skipped every check: no outputs, as on a step with nothing asked
             return np.full((len(fed), 0), np.nan, dtype=np.float32), took

@@ -35,7 +35,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
             trust: bool = False) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
-    evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies that do not read the observation (constant and
+    evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies
+    that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
     can change what they do; white-box attacks skip policies that offer no gradients."""
     from zodrive.defense import make_defense
