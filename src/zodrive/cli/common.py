@@ -266,7 +266,7 @@ def scenario_of(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
 def check_trust(args: argparse.Namespace) -> None:
     """--trust-model reads SB3 zips; for anything else it would be ignored: an error."""
     if getattr(args, "trust_model", False):
-        from zodrive.policies.resolve import is_sb3_zip
+        from zodrive.policies.policy import resolve
 
-        if not is_sb3_zip(str(args.model)):
+        if resolve(args.model).kind != "model":
             raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")

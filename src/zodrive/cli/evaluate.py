@@ -95,22 +95,23 @@ def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary
-    from zodrive.policies.resolve import check_policy, load_victim, policy_ref
+    from zodrive.policies.policy import resolve
     from zodrive.system import build_attacker
 
     spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
     preset, source = scenario_of(args)
     check_trust(args)
     _check_loss(args, spec, preset)
-    check_policy(args.model, preset, attacked=spec is not None)
+    policy = resolve(args.model)
+    policy.check(preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
-        build_attacker(spec, load_victim(args.model, preset, trust=args.trust_model), preset)
+        build_attacker(spec, policy.victim(preset, trust=args.trust_model), preset)
     if args.defense is not None:
         from zodrive.defense import make_defense
 
         make_defense(args.defense, preset)  # the preset must be one the defense understands
     job = EvalJob(
-        model=policy_ref(args.model), preset=preset,
+        model=policy.ref, preset=preset,
         attack=spec.to_dict() if spec else None,
         seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
         scenario_source=source,
@@ -130,7 +131,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.evaluation.video import record_episode, save_gif, save_mp4, save_png
-    from zodrive.policies.resolve import policy_ref
+    from zodrive.policies.policy import resolve
     from zodrive.runinfo import write_json
     from zodrive.system import make_policy_env
 
@@ -139,11 +140,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     preset = preset_of(args)
     check_trust(args)
     _check_loss(args, spec, preset)
+    policy = resolve(args.model)
     if spec is not None:
         from zodrive.evaluation.evaluate import check_trained_folder
 
-        check_trained_folder(spec.to_dict(), policy_ref(str(args.model)), preset, args.defense)
-    victim, env = make_policy_env(args.model, preset, spec, render_mode="rgb_array", defense=args.defense,
+        check_trained_folder(spec.to_dict(), policy.ref, preset, args.defense)
+    victim, env = make_policy_env(policy, preset, spec, render_mode="rgb_array", defense=args.defense,
                                   trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
     for seed in range(first, first + args.until_crash):
@@ -171,12 +173,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob, evaluate
     from zodrive.evaluation.report import format_summary, plural
     from zodrive.envs import load_preset
-    from zodrive.policies.resolve import policy_label, policy_ref, resolve_preset
+    from zodrive.policies.policy import resolve
+    from zodrive.policies.resolve import resolve_preset
 
     model = args.model or str(demo_model())
     # the shipped driver was trained on the paper's discrete preset (its zip in the package has no folder to say so)
     preset = load_preset("discrete") if args.model is None else resolve_preset(model, None, [])
-    ref, name = policy_ref(model), ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy_label(model))
+    policy = resolve(model)
+    ref, name = policy.ref, ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy.label)
     spec = load_attack("zo-signsgd")
     results = {}
     for label, attack in (("clean", None), ("attacked", spec)):
@@ -199,18 +203,17 @@ def cmd_certify(args: argparse.Namespace) -> int:
     from zodrive.attacks.spec import load_attack
     from zodrive.evaluation.certify import certify_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
-    from zodrive.policies.loading import model_kind
-    from zodrive.policies.resolve import is_sb3_zip
+    from zodrive.policies.policy import resolve
     from zodrive.runinfo import command_line, write_json
 
-    model = str(args.model)
-    if not is_sb3_zip(model):
+    policy = resolve(args.model)
+    if policy.kind != "model":
         raise ZodriveError("certify bounds an SB3 zip's rebuilt network; baselines, ONNX files and Python "
                            "policies have no network zodrive can read")
     if args.out is not None:
         refuse_nonempty(args.out / "certify.json", args.force, "certificates")
     preset = preset_of(args)
-    if args.tol is not None and model_kind(model) == "discrete":
+    if args.tol is not None and policy.action_kind() == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol
     for name in args.attack:
@@ -218,7 +221,7 @@ def cmd_certify(args: argparse.Namespace) -> int:
         if spec.attack not in ATTACKS or not ATTACKS[spec.attack].search:
             raise ZodriveError(f"certify attacks every state on its own, untargeted, beside its certificate: "
                                f"{spec.attack} is no per-state search (use random-search, zo-signsgd, pgd, ...)")
-    result = certify_model(model, preset, args.eps, episodes=args.episodes,
+    result = certify_model(policy.ref, preset, args.eps, episodes=args.episodes,
                            seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
                            attacks=tuple(args.attack))
     what = ("the action cannot change" if result["kind"] == "discrete"

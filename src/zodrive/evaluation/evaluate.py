@@ -32,7 +32,6 @@ from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
 from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import check_policy
 from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, sha256, to_json, versions,
                              write_atomic, write_json)
 from zodrive.seeds import EVAL_SEED
@@ -262,7 +261,7 @@ def evaluate(
         raise ZodriveError(f"workers must be >= 1, not {workers}")
     if envs < 1:
         raise ZodriveError(f"envs must be >= 1, not {envs}")
-    check_policy(job.model, job.preset, attacked=job.attack is not None)  # fail fast, in this process
+    resolve(job.model).check(job.preset, attacked=job.attack is not None)  # fail fast, in this process
     check_trained_folder(job.attack, job.model, job.preset, job.defense)
     if out is None:
         return _run(job, episodes, None, {}, workers, envs, progress, records, label)

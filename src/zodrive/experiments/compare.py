@@ -17,7 +17,7 @@ from typing import Any
 
 from zodrive.drivers.baselines import get_baseline
 from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import check_policy, resolve_preset
+from zodrive.policies.resolve import resolve_preset
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
@@ -53,7 +53,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     names = policy_names([p.label for p in policies], [p.key() for p in policies])
     for model, policy, name in zip(models, policies, names):
         model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
-        check_policy(model, model_preset)
+        resolve(model).check(model_preset)
         ref, gradients = policy.ref, policy.gradients
         reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
         reads_obs = reads == "observation"

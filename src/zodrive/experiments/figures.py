@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.policies.resolve import load_victim
+from zodrive.policies.policy import resolve
 from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import make_env
 from zodrive.evaluation.rollout import clean_states
@@ -20,7 +20,7 @@ from zodrive.system import build_attacker
 def loss_trace(model: str, preset: dict[str, Any], spec: AttackSpec, *, seed: int = TUNING_SEED,
                max_states: int = 200) -> dict[str, Any]:
     """Attack clean-rollout states with early stopping off; return the trace of the first success."""
-    victim = load_victim(str(model), preset)
+    victim = resolve(model).victim(preset)
     x0 = clean_states(make_env(preset), victim, seed, max_states)
     attack, objective, oracle = build_attacker(spec, victim, preset)
     result = attack.perturb(x0, oracle, objective, trace=True)

@@ -1,10 +1,11 @@
-"""One name for "what drives": a trained model (SB3 zip, run folder, ONNX file), a Python
+"""What a policy named by text means: a trained model (SB3 zip, run folder, ONNX file), a Python
 factory (`FILE.py:NAME`) or `baseline:NAME`.
 
-Every command that accepts a model goes through here, so a baseline can stand wherever a
-model can: `policy_kind` picks the default preset, `policy_label` names it in tables,
-`policy_ref` is what an evaluation is keyed on, and `make_policy_env` builds the victim with
-its (optionally attacked) environment.
+These readers stand behind `zodrive.policies.policy.resolve`, through which the rest of the
+package reads a policy: `policy_kind` picks the default preset, `policy_label` names it in
+tables, `policy_ref` is what an evaluation is keyed on, `check_policy` and `load_victim` read it
+on a preset. Only `resolve_preset` / `resolve_scenario`, which say where a policy drives when the
+user did not, are called from outside `policies/`.
 """
 
 from __future__ import annotations
@@ -39,15 +40,6 @@ def policy_kind(model: str) -> str:
         return onnx_metadata(Path(model))["kind"]
 
     return model_kind(model)
-
-
-def has_gradients(model: str) -> bool:
-    """Whether white-box attacks can differentiate the policy (SB3 networks and torch
-    factories; not baselines or ONNX)."""
-    if bl.is_baseline(model):
-        return False
-
-    return not is_onnx(model)
 
 
 def policy_ref(model: str) -> str:
@@ -114,11 +106,6 @@ def resolve_scenario(model: str, preset: str | None, env_set: list[str] | None =
 def _trained_with(model: str) -> TrainedWith:
 
     return trained_with(model_file(model))
-
-
-def is_sb3_zip(model: str) -> bool:
-    """Whether `model` names an SB3 zip or model folder (not a baseline, ONNX file or Python factory)."""
-    return not (bl.is_baseline(model) or is_onnx(model) or is_factory(model))
 
 
 def check_policy(model: str, preset: dict[str, Any], *, attacked: bool = False) -> None:

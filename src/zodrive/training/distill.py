@@ -47,7 +47,6 @@ from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import act, clean_states, states_driven, to_action
 from zodrive.policies.loading import load_network, model_file
 from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import load_victim
 from zodrive.policies.safe_load import PolicyNetwork
 from zodrive.policies.victims import network_victim
 from zodrive.runinfo import write_json, write_run_info
@@ -424,7 +423,7 @@ def teacher_and_env(teacher: str | None, source: PolicyNetwork, preset: dict[str
         env = make_env(preset)
         driver = simulator_driver(get_baseline(teacher), env, preset, source.kind, replan=True)
         return driver_victim(driver, source.kind, observation_shape(preset), n_actions(preset)), env
-    guide = load_victim(teacher, preset) if teacher else network_victim(source.net, source.kind, source.obs_shape)
+    guide = resolve(teacher).victim(preset) if teacher else network_victim(source.net, source.kind, source.obs_shape)
     return guide, make_env(preset)
 
 
