@@ -13,7 +13,7 @@ for scenario in highway-fast merge roundabout intersection; do
   done
   for run in models/zoo/$scenario-attention/seed-*; do  # zoo/ego_attention.py: a network zodrive does not rebuild
     [ -f "$run/model.zip" ] || [ -f "$run/final.zip" ] || continue
-    PYTHONPATH=zoo python zoo/choose_checkpoint.py "$run" --scenario "$scenario" --trust-model --from-step 42000  # after exploration
+    PYTHONPATH=zoo python zoo/choose_checkpoint.py "$run" --scenario "$scenario" --trust-model --from-step 42000 --episodes 100  # after exploration; 100 episodes: studies/zoo-recipe
     PYTHONPATH=zoo zodrive bench "$run" --scenario "$scenario" --name "attention-$(basename "$run")" --trust-model --no-progress
   done
   for run in models/zoo/$scenario-imitation/seed-*; do  # zoo/imitate.sh: no checkpoint to choose

@@ -31,6 +31,8 @@ def card(run: Path) -> str:
                "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
     start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
     since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
+    first, last = selection["tuning_seeds"]
+    flag += f" --episodes {last - first + 1}" if last - first + 1 != 30 else ""  # 30: choose_checkpoint.py's default
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "

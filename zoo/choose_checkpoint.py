@@ -25,7 +25,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py")
     parser.add_argument("--scenario", required=True, help="the zodrive preset it was trained for")
-    parser.add_argument("--episodes", type=int, default=30)
+    parser.add_argument("--episodes", type=int, default=30, help="tuning episodes per candidate (default: %(default)s)")
     parser.add_argument("--from-step", type=int, default=0,
                         help="only checkpoints from this step on (and the final model)")
     trust_flag(parser)  # for a network of its own, such as zoo/ego_attention.py
