@@ -6,6 +6,10 @@ alone, then benched by `zodrive bench`. DQN with highway-env's documented SB3 se
 steps) on one environment, so that a run fits on one core. Checkpoints every `--every` steps are
 kept so that the one to ship is chosen on tuning seeds, never on the evaluation seeds.
 
+`--start-from ZIP` continues a finished run instead: its weights and target network, a new replay
+buffer that SB3's warm-up fills with 1,000 random-action steps before learning resumes, `--lr`,
+and exploration held at the recipe's final 0.05; checkpoints are named by the total step count.
+
 Run: python zoo/train.py --scenario highway-fast --seed 0 --out models/zoo/highway-fast-dqn/seed-0
 """
 
@@ -26,7 +30,7 @@ from stable_baselines3.common.monitor import Monitor
 ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
            "intersection": "intersection-v2"}
 
-DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp"}
+DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp", "lr": 5e-4}
 """The recipe's settings a run may change (zoo/card.py writes the ones a run changed into its command)."""
 
 
@@ -41,6 +45,9 @@ def main() -> None:
     parser.add_argument("--net", choices=("mlp", "attention"), default=DEFAULTS["net"],
                         help="mlp: two 256-unit layers on the flattened table; attention: zoo/ego_attention.py "
                              "then two 64-unit layers (its zips load in zodrive with PYTHONPATH=zoo and --trust-model)")
+    parser.add_argument("--lr", type=float, default=DEFAULTS["lr"], help="learning rate (default: %(default)s)")
+    parser.add_argument("--start-from", type=Path,
+                        help="continue this finished run's zip for --steps more steps (exploration held at 0.05)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     done = [p for p in (args.out / "model.zip", args.out / "final.zip") if p.exists()]  # final.zip: a chosen run
@@ -54,17 +61,25 @@ def main() -> None:
         policy_kwargs = dict(features_extractor_class=EgoAttention, net_arch=[64, 64])
     else:
         policy_kwargs = dict(net_arch=[256, 256])
-    model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=5e-4,
-                buffer_size=15_000, learning_starts=200, batch_size=32, gamma=args.gamma, train_freq=1,
-                gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
-                seed=args.seed, device="cpu", verbose=0)
+    if args.start_from is None:
+        model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=args.lr,
+                    buffer_size=15_000, learning_starts=200, batch_size=32, gamma=args.gamma, train_freq=1,
+                    gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
+                    seed=args.seed, device="cpu", verbose=0)
+    else:  # the same recipe, continued: SB3 rebuilds the schedules from these values
+        model = DQN.load(args.start_from, env=env, device="cpu", seed=args.seed, learning_rate=args.lr,
+                         exploration_initial_eps=0.05, exploration_final_eps=0.05)
+        if model.gamma != args.gamma or model.policy_kwargs.get("net_arch") != policy_kwargs["net_arch"]:
+            raise SystemExit(f"{args.start_from} was not trained with --gamma {args.gamma} --net {args.net}")
+        model.learning_starts = model.num_timesteps + 1_000  # SB3's warm-up refills the new, empty buffer first
     start = time.perf_counter()
-    model.learn(total_timesteps=args.steps,
+    model.learn(total_timesteps=args.steps, reset_num_timesteps=args.start_from is None,
                 callback=CheckpointCallback(args.every, str(args.out / "checkpoints"), name_prefix="step"))
     model.save(args.out / "model")
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
          "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
+         "lr": args.lr, **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 
