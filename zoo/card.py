@@ -25,6 +25,7 @@ def card(run: Path) -> str:
     scenario, seed = train["scenario"], train["seed"]
     changed = "".join(f" --{k} {train[k]:g}" if isinstance(v, (int, float)) else f" --{k} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
+    changed += f" --start-from {train['start_from']}" if "start_from" in train else ""  # a continued run
     own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only
     path, trust = loader_words(own)
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
@@ -36,7 +37,8 @@ def card(run: Path) -> str:
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
-             f"({train['steps']:,} steps, {train['wall_time_s']:.0f} s).", "",
+             f"({train['steps']:,} steps{' more, to step ' + format(train['total_steps'], ',') if 'start_from' in train else ''}, "
+             f"{train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
              f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]}{since} "
              f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}{flag}`), "
