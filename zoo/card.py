@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import yaml
+from choose_checkpoint import EPISODES  # zoo/choose_checkpoint.py, beside this script
 from train import DEFAULTS  # zoo/train.py, beside this script
 from zodrive.drivers.baselines import get_baseline
 from zodrive.runinfo import sha256
@@ -33,14 +34,14 @@ def card(run: Path) -> str:
     start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
     since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
     first, last = selection["tuning_seeds"]
-    flag += f" --episodes {last - first + 1}" if last - first + 1 != 30 else ""  # 30: choose_checkpoint.py's default
+    flag += f" --episodes {last - first + 1}" if last - first + 1 != EPISODES else ""
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps{' more, to step ' + format(train['total_steps'], ',') if 'start_from' in train else ''}, "
              f"{train['wall_time_s']:.0f} s).", "",
              f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
-             f"{selection['tuning_seeds'][0]}–{selection['tuning_seeds'][1]}{since} "
+             f"{first}–{last}{since} "
              f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}{flag}`), "
              "copied to `model.zip`.", ""]
     return "\n".join(lines + _bench(run, scenario))

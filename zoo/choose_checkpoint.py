@@ -20,12 +20,14 @@ import zodrive
 from zodrive.cli.common import trust_flag
 from zodrive.seeds import TUNING_SEED
 
+EPISODES = 30  # tuning episodes per candidate unless --episodes says otherwise (zoo/card.py reads it)
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py")
     parser.add_argument("--scenario", required=True, help="the zodrive preset it was trained for")
-    parser.add_argument("--episodes", type=int, default=30, help="tuning episodes per candidate (default: %(default)s)")
+    parser.add_argument("--episodes", type=int, default=EPISODES, help="tuning episodes per candidate (default: %(default)s)")
     parser.add_argument("--from-step", type=int, default=0,
                         help="only checkpoints from this step on (and the final model)")
     trust_flag(parser)  # for a network of its own, such as zoo/ego_attention.py

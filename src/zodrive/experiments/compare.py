@@ -53,7 +53,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     names = policy_names([p.label for p in policies], [p.key() for p in policies])
     for model, policy, name in zip(models, policies, names):
         model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
-        resolve(model).check(model_preset)
+        policy.check(model_preset)
         ref, gradients = policy.ref, policy.gradients
         reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
         reads_obs = reads == "observation"
