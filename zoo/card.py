@@ -24,7 +24,8 @@ def card(run: Path) -> str:
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario, seed = train["scenario"], train["seed"]
-    changed = "".join(f" --{k} {train[k]:g}" if isinstance(v, (int, float)) else f" --{k} {train[k]}"
+    changed = "".join(f" --{k.replace('_', '-')} {train[k]:g}" if isinstance(v, (int, float))
+                      else f" --{k.replace('_', '-')} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     changed += f" --start-from {train['start_from']}" if "start_from" in train else ""  # a continued run
     own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only

@@ -30,7 +30,7 @@ from stable_baselines3.common.monitor import Monitor
 ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
            "intersection": "intersection-v2"}
 
-DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp", "lr": 5e-4}
+DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp", "lr": 5e-4, "batch": 32, "target_update": 50}
 """The recipe's settings a run may change (zoo/card.py writes the ones a run changed into its command)."""
 
 
@@ -46,6 +46,9 @@ def main() -> None:
                         help="mlp: two 256-unit layers on the flattened table; attention: zoo/ego_attention.py "
                              "then two 64-unit layers (its zips load in zodrive with PYTHONPATH=zoo and --trust-model)")
     parser.add_argument("--lr", type=float, default=DEFAULTS["lr"], help="learning rate (default: %(default)s)")
+    parser.add_argument("--batch", type=int, default=DEFAULTS["batch"], help="minibatch size (default: %(default)s)")
+    parser.add_argument("--target-update", type=int, default=DEFAULTS["target_update"],
+                        help="steps between target-network updates (default: %(default)s)")
     parser.add_argument("--start-from", type=Path,
                         help="continue this finished run's zip for --steps more steps (exploration held at 0.05)")
     parser.add_argument("--out", type=Path, required=True)
@@ -63,8 +66,8 @@ def main() -> None:
         policy_kwargs = dict(net_arch=[256, 256])
     if args.start_from is None:
         model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=args.lr,
-                    buffer_size=15_000, learning_starts=200, batch_size=32, gamma=args.gamma, train_freq=1,
-                    gradient_steps=1, target_update_interval=50, exploration_fraction=0.7,
+                    buffer_size=15_000, learning_starts=200, batch_size=args.batch, gamma=args.gamma, train_freq=1,
+                    gradient_steps=1, target_update_interval=args.target_update, exploration_fraction=0.7,
                     seed=args.seed, device="cpu", verbose=0)
     else:  # the same recipe, continued: SB3 rebuilds the schedules from these values
         model = DQN.load(args.start_from, env=env, device="cpu", seed=args.seed, learning_rate=args.lr,
@@ -79,7 +82,7 @@ def main() -> None:
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
          "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
-         "lr": args.lr, **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
+         "lr": args.lr, "batch": args.batch, "target_update": args.target_update, **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 
