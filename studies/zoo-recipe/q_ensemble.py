@@ -1,0 +1,94 @@
+"""Build one SB3 DQN zip whose Q-values are the mean of a zoo run's last checkpoints.
+
+A run's checkpoints after exploration ends are about equally good and make different mistakes;
+averaging their Q-values uses all of them instead of betting on the one that looked best on a set
+of tuning seeds. The zip is a plain SB3 DQN: its features extractor (`QEnsemble`, below) holds the
+members, each a whole Q-network of the run's architecture with its own weights, and outputs their
+mean Q-values; the Q-head after it is the identity. Nothing is trained and no seed is read.
+
+It loads with this module and `zoo/ego_attention.py` on PYTHONPATH, and `--trust-model`.
+
+Run: PYTHONPATH=zoo:studies/zoo-recipe python studies/zoo-recipe/q_ensemble.py RUN OUT [--steps 42000 48000 54000 60000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+from pathlib import Path
+from typing import Sequence
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers the highway-env scenarios)
+import torch
+from ego_attention import EgoAttention  # zoo/ego_attention.py: the members' extractor
+from stable_baselines3 import DQN
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, create_mlp
+from torch import nn
+
+STEPS = (42_000, 48_000, 54_000, 60_000)  # the checkpoints after exploration ends (zoo/train.py: 70 % of 60,000)
+
+
+class Member(nn.Module):
+    """One Q-network, named as SB3's QNetwork names its parts, so a checkpoint's state dict loads as is."""
+
+    def __init__(self, observation_space: gym.spaces.Box, net_arch: Sequence[int], actions: int) -> None:
+        super().__init__()
+        self.features_extractor = EgoAttention(observation_space)
+        self.q_net = nn.Sequential(*create_mlp(self.features_extractor.features_dim, actions, list(net_arch)))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.q_net(self.features_extractor(obs))
+
+
+class QEnsemble(BaseFeaturesExtractor):
+    """(batch, vehicles, features) -> (batch, actions): the members' mean Q-values."""
+
+    def __init__(self, observation_space: gym.spaces.Box, members: int = 4, net_arch: Sequence[int] = (64, 64),
+                 actions: int = 3) -> None:
+        super().__init__(observation_space, features_dim=actions)
+        self.members = nn.ModuleList(Member(observation_space, net_arch, actions) for _ in range(members))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return torch.stack([member(obs) for member in self.members]).mean(dim=0)
+
+
+def build(run: Path, out: Path, steps: Sequence[int] = STEPS) -> Path:
+    """Write OUT/model.zip (the ensemble of RUN's checkpoints at `steps`) and OUT/build.json."""
+    paths = [run / "checkpoints" / f"step_{step}_steps.zip" for step in steps]
+    sources = [DQN.load(p, device="cpu") for p in paths]
+    first = sources[0]
+    actions = int(first.action_space.n)
+    env = gym.make(json.loads((run / "train.json").read_text())["env_id"])
+    model = DQN("MlpPolicy", env, gamma=first.gamma, device="cpu", seed=0, policy_kwargs=dict(
+        features_extractor_class=QEnsemble, net_arch=[],
+        features_extractor_kwargs=dict(members=len(paths), net_arch=first.policy_kwargs["net_arch"], actions=actions)))
+    with torch.no_grad():
+        for network in (model.policy.q_net, model.policy.q_net_target):
+            for member, source in zip(network.features_extractor.members, sources):
+                member.load_state_dict(source.policy.q_net.state_dict())
+            head = network.q_net[0]  # net_arch=[]: one Linear(actions, actions)
+            head.weight.copy_(torch.eye(actions))
+            head.bias.zero_()
+    out.mkdir(parents=True, exist_ok=True)
+    model.save(out / "model.zip")
+    (out / "build.json").write_text(json.dumps(
+        {"script": "studies/zoo-recipe/q_ensemble.py", "run": str(run), "steps": list(steps),
+         "members": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}}, indent=2) + "\n")
+    return out / "model.zip"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py --net attention")
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="the checkpoints to average")
+    args = parser.parse_args()
+    if (args.out / "model.zip").exists():
+        raise SystemExit(f"{args.out / 'model.zip'} exists")
+    print(f"wrote {build(args.run, args.out, args.steps)}")
+
+
+if __name__ == "__main__":
+    main()
