@@ -6,9 +6,9 @@ of tuning seeds. The zip is a plain SB3 DQN: its features extractor (`QEnsemble`
 members, each a whole Q-network of the run's architecture with its own weights, and outputs their
 mean Q-values; the Q-head after it is the identity. Nothing is trained and no seed is read.
 
-It loads with this module and `zoo/ego_attention.py` on PYTHONPATH, and `--trust-model`.
+Its zips load in zodrive with `zoo/` on PYTHONPATH and `--trust-model`, as the attention runs do.
 
-Run: PYTHONPATH=zoo:studies/zoo-recipe python studies/zoo-recipe/q_ensemble.py RUN OUT [--steps 42000 48000 54000 60000]
+Run: PYTHONPATH=zoo python zoo/q_ensemble.py models/zoo/intersection-attention/seed-0 models/zoo/intersection-attention-ensemble/seed-0 [--steps 42000 48000 54000 60000]
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ def build(run: Path, out: Path, steps: Sequence[int] = STEPS) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "model.zip")
     (out / "build.json").write_text(json.dumps(
-        {"script": "studies/zoo-recipe/q_ensemble.py", "run": str(run), "steps": list(steps),
+        {"script": "zoo/q_ensemble.py", "run": str(run), "steps": list(steps),
          "members": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}}, indent=2) + "\n")
     return out / "model.zip"
 
