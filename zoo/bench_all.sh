@@ -16,6 +16,10 @@ for scenario in highway-fast merge roundabout intersection; do
     PYTHONPATH=zoo python zoo/choose_checkpoint.py "$run" --scenario "$scenario" --trust-model --from-step 42000 --episodes 100  # after exploration; 100 episodes: studies/zoo-recipe
     PYTHONPATH=zoo zodrive bench "$run" --scenario "$scenario" --name "attention-$(basename "$run")" --trust-model --no-progress
   done
+  for run in models/zoo/$scenario-attention-ensemble/seed-*; do  # zoo/q_ensemble.py: built, no checkpoint to choose
+    [ -f "$run/model.zip" ] || continue
+    PYTHONPATH=zoo zodrive bench "$run" --scenario "$scenario" --name "attention-ensemble-$(basename "$run")" --trust-model --no-progress
+  done
   for run in models/zoo/$scenario-imitation/seed-*; do  # zoo/imitate.sh: no checkpoint to choose
     [ -f "$run/model.zip" ] || continue
     zodrive bench "$run" --scenario "$scenario" --name "imitation-$(basename "$run")" --no-progress

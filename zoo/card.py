@@ -12,6 +12,7 @@ from pathlib import Path
 
 import yaml
 from choose_checkpoint import EPISODES  # zoo/choose_checkpoint.py, beside this script
+from q_ensemble import STEPS  # zoo/q_ensemble.py, beside this script
 from train import DEFAULTS  # zoo/train.py, beside this script
 from zodrive.drivers.baselines import get_baseline
 from zodrive.runinfo import sha256
@@ -68,6 +69,25 @@ def imitation_card(run: Path) -> str:
     return "\n".join(lines + _bench(run, scenario))
 
 
+def ensemble_card(run: Path) -> str:
+    """An ensemble built by zoo/q_ensemble.py from a run's checkpoints: nothing trained, no checkpoint chosen."""
+    build = json.loads((run / "build.json").read_text())
+    source = Path(build["run"])
+    train = json.loads((ROOT / source / "train.json").read_text())
+    scenario = train["scenario"]
+    members = ", ".join(f"`{name}` (`{digest[:12]}…`)" for name, digest in build["members"].items())
+    steps = " --steps " + " ".join(map(str, build["steps"])) if tuple(build["steps"]) != STEPS else ""
+    lines = [f"# {run.parent.name} / {run.name}", "",
+             f"An ensemble for `{scenario}` (highway-env `{train['env_id']}`): one stable-baselines3 DQN zip whose "
+             f"Q-values are the mean of {len(build['members'])} checkpoints of the zoo run "
+             f"[`{source.parent.name}/{source.name}`](../../{source.parent.name}/{source.name}/CARD.md) "
+             f"(seed {train['seed']}): {members}. Nothing is trained and no checkpoint is chosen; it was built by",
+             f"`PYTHONPATH=zoo python zoo/q_ensemble.py {source} {run.relative_to(ROOT)}{steps}`, and loads in zodrive with "
+             "`zoo/` on `PYTHONPATH` and `--trust-model`. Why: `studies/zoo-recipe/README.md`, \"An ensemble of a run's "
+             "last checkpoints\".", ""]
+    return "\n".join(lines + _bench(run, scenario))
+
+
 def loader_words(trusted: bool) -> tuple[str, str]:
     """What a command needs before and after itself to load a zoo zip with a network of its own."""
     return ("PYTHONPATH=zoo ", " --trust-model") if trusted else ("", "")
@@ -104,6 +124,8 @@ def main() -> None:
     for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
         if run.parent.name.endswith("-imitation") and (run / "model.zip").is_file():
             (run / "CARD.md").write_text(imitation_card(run))
+        elif (run / "build.json").is_file():
+            (run / "CARD.md").write_text(ensemble_card(run))
         elif (run / "selection.json").is_file():
             (run / "CARD.md").write_text(card(run))
         else:

@@ -16,8 +16,8 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import gymnasium as gym
 import highway_env  # noqa: F401  (registers the highway-env scenarios)
@@ -61,9 +61,9 @@ def build(run: Path, out: Path, steps: Sequence[int] = STEPS) -> Path:
     first = sources[0]
     actions = int(first.action_space.n)
     env = gym.make(json.loads((run / "train.json").read_text())["env_id"])
-    model = DQN("MlpPolicy", env, gamma=first.gamma, device="cpu", seed=0, policy_kwargs=dict(
-        features_extractor_class=QEnsemble, net_arch=[],
-        features_extractor_kwargs=dict(members=len(paths), net_arch=first.policy_kwargs["net_arch"], actions=actions)))
+    members = {"members": len(paths), "net_arch": first.policy_kwargs["net_arch"], "actions": actions}
+    model = DQN("MlpPolicy", env, gamma=first.gamma, device="cpu", seed=0, policy_kwargs={
+        "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": members})
     with torch.no_grad():
         for network in (model.policy.q_net, model.policy.q_net_target):
             for member, source in zip(network.features_extractor.members, sources):
@@ -85,8 +85,9 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="the checkpoints to average")
     args = parser.parse_args()
-    if (args.out / "model.zip").exists():
-        raise SystemExit(f"{args.out / 'model.zip'} exists")
+    if (args.out / "model.zip").exists():  # never overwritten; zoo/train_all.sh resumes through it
+        print(f"{args.out / 'model.zip'} exists: skipped")
+        return
     print(f"wrote {build(args.run, args.out, args.steps)}")
 
 

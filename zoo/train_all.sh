@@ -7,7 +7,9 @@
 # 60,000 steps, adopted the same way ("A discount that sees the whole episode on merge"); merge-dqn
 # stays, because zoo/imitate.sh starts the merge students from its weights.
 # Intersection has a second family, intersection-attention: the ego-attention network of
-# zoo/ego_attention.py, gamma 0.95 and 60,000 steps ("An attention network on intersection").
+# zoo/ego_attention.py, gamma 0.95 and 60,000 steps ("An attention network on intersection"), and a
+# third built from it, intersection-attention-ensemble: each run's last four checkpoints averaged by
+# zoo/q_ensemble.py ("An ensemble of a run's last checkpoints").
 # Run: OMP_NUM_THREADS=1 nohup nice -n 19 bash zoo/train_all.sh > zoo/train.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,4 +22,6 @@ for seed in 0 1 2; do
   python zoo/train.py --scenario merge --seed "$seed" --gamma 0.99 --steps 60000 --every 6000 --out "models/zoo/merge-dqn-g99/seed-$seed"
   python zoo/train.py --scenario intersection --seed "$seed" --net attention --gamma 0.95 --steps 60000 --every 6000 \
     --out "models/zoo/intersection-attention/seed-$seed"
+  PYTHONPATH=zoo python zoo/q_ensemble.py "models/zoo/intersection-attention/seed-$seed" \
+    "models/zoo/intersection-attention-ensemble/seed-$seed"
 done
