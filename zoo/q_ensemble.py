@@ -1,4 +1,4 @@
-"""Build one SB3 DQN zip whose Q-values are the mean of a zoo run's last checkpoints.
+"""Build one SB3 DQN zip whose Q-values are the mean of zoo runs' last checkpoints.
 
 A run's checkpoints after exploration ends are about equally good and make different mistakes;
 averaging their Q-values uses all of them instead of betting on the one that looked best on a set
@@ -8,7 +8,7 @@ mean Q-values; the Q-head after it is the identity. Nothing is trained and no se
 
 Its zips load in zodrive with `zoo/` on PYTHONPATH and `--trust-model`, as the attention runs do.
 
-Run: PYTHONPATH=zoo python zoo/q_ensemble.py models/zoo/intersection-attention/seed-0 models/zoo/intersection-attention-ensemble/seed-0 [--steps 42000 48000 54000 60000]
+Run: PYTHONPATH=zoo python zoo/q_ensemble.py RUN [RUN ...] OUT [--steps 42000 48000 54000 60000]
 """
 
 from __future__ import annotations
@@ -54,19 +54,21 @@ class QEnsemble(BaseFeaturesExtractor):
         return torch.stack([member(obs) for member in self.members]).mean(dim=0)
 
 
-def build(run: Path, out: Path, steps: Sequence[int] = STEPS) -> Path:
-    """Write OUT/model.zip (the ensemble of RUN's checkpoints at `steps`) and OUT/build.json."""
-    paths = [run / "checkpoints" / f"step_{step}_steps.zip" for step in steps]
+def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path:
+    """Write OUT/model.zip (the ensemble of each run's checkpoints at `steps`) and OUT/build.json."""
+    paths = [run / "checkpoints" / f"step_{step}_steps.zip" for run in runs for step in steps]
     sources = [DQN.load(p, device="cpu") for p in paths]
     first = sources[0]
+    env_ids = {json.loads((run / "train.json").read_text())["env_id"] for run in runs}
+    if len(env_ids) != 1 or any(s.policy_kwargs != first.policy_kwargs or s.gamma != first.gamma for s in sources):
+        raise SystemExit(f"{', '.join(map(str, runs))}: not one scenario, network and discount")
     actions = int(first.action_space.n)
-    env = gym.make(json.loads((run / "train.json").read_text())["env_id"])
     members = {"members": len(paths), "net_arch": first.policy_kwargs["net_arch"], "actions": actions}
-    model = DQN("MlpPolicy", env, gamma=first.gamma, device="cpu", seed=0, policy_kwargs={
+    model = DQN("MlpPolicy", gym.make(env_ids.pop()), gamma=first.gamma, device="cpu", seed=0, policy_kwargs={
         "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": members})
     with torch.no_grad():
         for network in (model.policy.q_net, model.policy.q_net_target):
-            for member, source in zip(network.features_extractor.members, sources):
+            for member, source in zip(network.features_extractor.members, sources, strict=True):
                 member.load_state_dict(source.policy.q_net.state_dict())
             head = network.q_net[0]  # net_arch=[]: one Linear(actions, actions)
             head.weight.copy_(torch.eye(actions))
@@ -74,21 +76,21 @@ def build(run: Path, out: Path, steps: Sequence[int] = STEPS) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "model.zip")
     (out / "build.json").write_text(json.dumps(
-        {"script": "zoo/q_ensemble.py", "run": str(run), "steps": list(steps),
-         "members": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}}, indent=2) + "\n")
+        {"script": "zoo/q_ensemble.py", "runs": [str(run) for run in runs], "steps": list(steps),
+         "members": {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}}, indent=2) + "\n")
     return out / "model.zip"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run", type=Path, help="a run folder written by zoo/train.py --net attention")
+    parser.add_argument("runs", type=Path, nargs="+", help="run folders written by zoo/train.py --net attention")
     parser.add_argument("out", type=Path)
-    parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="the checkpoints to average")
+    parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="each run's checkpoints to average")
     args = parser.parse_args()
     if (args.out / "model.zip").exists():  # never overwritten; zoo/train_all.sh resumes through it
         print(f"{args.out / 'model.zip'} exists: skipped")
         return
-    print(f"wrote {build(args.run, args.out, args.steps)}")
+    print(f"wrote {build(args.runs, args.out, args.steps)}")
 
 
 if __name__ == "__main__":
