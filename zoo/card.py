@@ -70,21 +70,26 @@ def imitation_card(run: Path) -> str:
 
 
 def ensemble_card(run: Path) -> str:
-    """An ensemble built by zoo/q_ensemble.py from a run's checkpoints: nothing trained, no checkpoint chosen."""
+    """An ensemble built by zoo/q_ensemble.py from runs' checkpoints: nothing trained, no checkpoint chosen."""
     build = json.loads((run / "build.json").read_text())
-    source = Path(build["run"])
-    train = json.loads((ROOT / source / "train.json").read_text())
-    scenario = train["scenario"]
-    members = ", ".join(f"`{name}` (`{digest[:12]}…`)" for name, digest in build["members"].items())
+    sources = [Path(r) for r in build["runs"]]
+    trains = [json.loads((ROOT / source / "train.json").read_text()) for source in sources]
+    scenario = trains[0]["scenario"]
+    runs = " and ".join(f"[`{s.parent.name}/{s.name}`](../../{s.parent.name}/{s.name}/CARD.md) (seed {t['seed']})"
+                        for s, t in zip(sources, trains, strict=True))
+    members = ", ".join(f"`{Path(path).relative_to(source)}` of `{source.parent.name}` (`{digest[:12]}…`)"
+                        for path, digest in build["members"].items()
+                        for source in sources if Path(path).is_relative_to(source))
     steps = " --steps " + " ".join(map(str, build["steps"])) if tuple(build["steps"]) != STEPS else ""
     lines = [f"# {run.parent.name} / {run.name}", "",
-             f"An ensemble for `{scenario}` (highway-env `{train['env_id']}`): one stable-baselines3 DQN zip whose "
-             f"Q-values are the mean of {len(build['members'])} checkpoints of the zoo run "
-             f"[`{source.parent.name}/{source.name}`](../../{source.parent.name}/{source.name}/CARD.md) "
-             f"(seed {train['seed']}): {members}. Nothing is trained and no checkpoint is chosen; it was built by",
-             f"`PYTHONPATH=zoo python zoo/q_ensemble.py {source} {run.relative_to(ROOT)}{steps}`, and loads in zodrive with "
-             "`zoo/` on `PYTHONPATH` and `--trust-model`. Why: `studies/zoo-recipe/README.md`, \"An ensemble of a run's "
-             "last checkpoints\".", ""]
+             f"An ensemble for `{scenario}` (highway-env `{trains[0]['env_id']}`): one stable-baselines3 DQN zip whose "
+             f"Q-values are the mean of {len(build['members'])} checkpoints of the zoo run{'s' * (len(sources) > 1)} "
+             f"{runs}: {members}. Nothing is trained and no checkpoint is chosen; it was built by",
+             f"`PYTHONPATH=zoo python zoo/q_ensemble.py {' '.join(map(str, sources))} {run.relative_to(ROOT)}{steps}`, "
+             "and loads in zodrive with `zoo/` on `PYTHONPATH` and `--trust-model`. Why: "
+             "`studies/zoo-recipe/README.md`, \"An ensemble of a run's last checkpoints\". A rebuild gives the same "
+             "weights (`policy.pth`, byte for byte) in a zip with other bytes: SB3 writes memory addresses into the "
+             "zip's `data`.", ""]
     return "\n".join(lines + _bench(run, scenario))
 
 
