@@ -24,29 +24,41 @@ def card(run: Path) -> str:
     """A DQN trained from scratch by zoo/train.py (a checkpoint chosen on tuning seeds)."""
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
+    scenario = train["scenario"]
+    path, trust = loader_words(train.get("net", "mlp") != "mlp")
+    start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
+    since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
+    first, last = selection["tuning_seeds"]
+    flag += f" --episodes {last - first + 1}" if last - first + 1 != EPISODES else ""
+    lines = _trained(run, train) + [
+        f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds {first}–{last}{since} "
+        f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}{flag}`), "
+        "copied to `model.zip`.", ""]
+    return "\n".join(lines + _bench(run, scenario))
+
+
+def member_card(run: Path, ensembles: list[Path]) -> str:
+    """A run trained by zoo/train.py only for its checkpoints' places in ensembles: no checkpoint chosen, no row."""
+    names = ", ".join(f"[`{e.parent.name}/{e.name}`](../../{e.parent.name}/{e.name}/CARD.md)" for e in ensembles)
+    return "\n".join(_trained(run, json.loads((run / "train.json").read_text())) + [
+        f"No checkpoint is chosen and the run is not benched on its own: its checkpoints are members of {names}.", ""])
+
+
+def _trained(run: Path, train: dict) -> list[str]:
+    """The card's title and the command that trained the run."""
     scenario, seed = train["scenario"], train["seed"]
     changed = "".join(f" --{k.replace('_', '-')} {train[k]:g}" if isinstance(v, (int, float))
                       else f" --{k.replace('_', '-')} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     changed += f" --start-from {train['start_from']}" if "start_from" in train else ""  # a continued run
     own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only
-    path, trust = loader_words(own)
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
                "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
-    start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
-    since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
-    first, last = selection["tuning_seeds"]
-    flag += f" --episodes {last - first + 1}" if last - first + 1 != EPISODES else ""
-    lines = [f"# {run.parent.name} / {run.name}", "",
+    return [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
              f"({train['steps']:,} steps{' more, to step ' + format(train['total_steps'], ',') if 'start_from' in train else ''}, "
-             f"{train['wall_time_s']:.0f} s).", "",
-             f"Checkpoint: `{selection['chosen']}`, the best mean return on tuning seeds "
-             f"{first}–{last}{since} "
-             f"(`{path}python zoo/choose_checkpoint.py {run.relative_to(ROOT)} --scenario {scenario}{trust}{flag}`), "
-             "copied to `model.zip`.", ""]
-    return "\n".join(lines + _bench(run, scenario))
+             f"{train['wall_time_s']:.0f} s).", ""]
 
 
 def imitation_card(run: Path) -> str:
@@ -126,13 +138,20 @@ def _bench(run: Path, scenario: str) -> list[str]:
 
 
 def main() -> None:
-    for run in sorted((ROOT / "models" / "zoo").glob("*/seed-*")):
+    runs = sorted((ROOT / "models" / "zoo").glob("*/seed-*"))
+    members = {}  # run -> the ensembles built from its checkpoints
+    for ensemble in (r for r in runs if (r / "build.json").is_file()):
+        for source in json.loads((ensemble / "build.json").read_text())["runs"]:
+            members.setdefault(ROOT / source, []).append(ensemble)
+    for run in runs:
         if run.parent.name.endswith("-imitation") and (run / "model.zip").is_file():
             (run / "CARD.md").write_text(imitation_card(run))
         elif (run / "build.json").is_file():
             (run / "CARD.md").write_text(ensemble_card(run))
         elif (run / "selection.json").is_file():
             (run / "CARD.md").write_text(card(run))
+        elif run in members and (run / "train.json").is_file():
+            (run / "CARD.md").write_text(member_card(run, members[run]))
         else:
             continue
         print(f"wrote {run / 'CARD.md'}")
