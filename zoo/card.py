@@ -99,7 +99,8 @@ def ensemble_card(run: Path) -> str:
              f"{runs}: {members}. Nothing is trained and no checkpoint is chosen; it was built by",
              f"`PYTHONPATH=zoo python zoo/q_ensemble.py {' '.join(map(str, sources))} {run.relative_to(ROOT)}{steps}`, "
              "and loads in zodrive with `zoo/` on `PYTHONPATH` and `--trust-model`. Why: "
-             "`studies/zoo-recipe/README.md`, \"An ensemble of a run's last checkpoints\". A rebuild gives the same "
+             "`studies/zoo-recipe/README.md`, \"An ensemble of a run's last checkpoints\" and \"Two runs per seed in one "
+             "ensemble\". A rebuild gives the same "
              "weights (`policy.pth`, byte for byte) in a zip with other bytes: SB3 writes memory addresses into the "
              "zip's `data`.", ""]
     return "\n".join(lines + _bench(run, scenario))

@@ -7,9 +7,10 @@
 # 60,000 steps, adopted the same way ("A discount that sees the whole episode on merge"); merge-dqn
 # stays, because zoo/imitate.sh starts the merge students from its weights.
 # Intersection has a second family, intersection-attention: the ego-attention network of
-# zoo/ego_attention.py, gamma 0.95 and 60,000 steps ("An attention network on intersection"), and a
-# third built from it, intersection-attention-ensemble: each run's last four checkpoints averaged by
-# zoo/q_ensemble.py ("An ensemble of a run's last checkpoints").
+# zoo/ego_attention.py, gamma 0.95 and 60,000 steps ("An attention network on intersection"); a
+# second run per seed, intersection-attention-t512 (target update every 512 steps, batch 64), trained
+# only for its checkpoints; and intersection-attention-ensemble, the Q-values of both runs' last four
+# checkpoints averaged by zoo/q_ensemble.py ("Two runs per seed in one ensemble").
 # Run: OMP_NUM_THREADS=1 nohup nice -n 19 bash zoo/train_all.sh > zoo/train.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,6 +23,8 @@ for seed in 0 1 2; do
   python zoo/train.py --scenario merge --seed "$seed" --gamma 0.99 --steps 60000 --every 6000 --out "models/zoo/merge-dqn-g99/seed-$seed"
   python zoo/train.py --scenario intersection --seed "$seed" --net attention --gamma 0.95 --steps 60000 --every 6000 \
     --out "models/zoo/intersection-attention/seed-$seed"
+  python zoo/train.py --scenario intersection --seed "$seed" --net attention --gamma 0.95 --steps 60000 --every 6000 \
+    --batch 64 --target-update 512 --out "models/zoo/intersection-attention-t512/seed-$seed"
   PYTHONPATH=zoo python zoo/q_ensemble.py "models/zoo/intersection-attention/seed-$seed" \
-    "models/zoo/intersection-attention-ensemble/seed-$seed"
+    "models/zoo/intersection-attention-t512/seed-$seed" "models/zoo/intersection-attention-ensemble/seed-$seed"
 done
