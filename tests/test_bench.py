@@ -41,6 +41,28 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
     assert (tmp_path / "b.png").stat().st_size > 0
 
 
+def test_a_forced_bench_drops_the_old_row_before_it_runs(tmp_path: Path, monkeypatch) -> None:
+    """While a forced bench replaces another policy's cells, the leaderboard must not pair the old row
+    with the new cells: the old row goes first, and the folder has no row until the new one is done."""
+    import zodrive.experiments.bench as bench_module
+
+    args = ["bench", "baseline:slower", "--scenario", "highway-fast", "--name", "x", "--episodes", "1",
+            "--board", str(tmp_path), "--no-progress"]
+    assert main(args) == 0
+    row = tmp_path / "highway-fast" / "x" / "row.json"
+    assert json.loads(row.read_text())["key"] == "baseline:slower"
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(bench_module, "compare", interrupted)
+    try:
+        main(["bench", "baseline:idle", *args[2:], "--force"])
+    except KeyboardInterrupt:
+        pass
+    assert not row.exists()
+
+
 def test_eps_is_stated_in_the_scenarios_units() -> None:
     units = physical_eps(PROTOCOLS["highway-fast"])
     assert units["0.05"]["x"] == 10.0 and units["0.05"]["vx"] == 4.0  # x normalized by +-200 m, vx by +-80 m/s
