@@ -63,9 +63,9 @@ def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path
     if len(env_ids) != 1 or any(s.policy_kwargs != first.policy_kwargs or s.gamma != first.gamma for s in sources):
         raise SystemExit(f"{', '.join(map(str, runs))}: not one scenario, network and discount")
     actions = int(first.action_space.n)
-    members = {"members": len(paths), "net_arch": first.policy_kwargs["net_arch"], "actions": actions}
+    shape = {"members": len(paths), "net_arch": first.policy_kwargs["net_arch"], "actions": actions}
     model = DQN("MlpPolicy", gym.make(env_ids.pop()), gamma=first.gamma, device="cpu", seed=0, policy_kwargs={
-        "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": members})
+        "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": shape})
     with torch.no_grad():
         for network in (model.policy.q_net, model.policy.q_net_target):
             for member, source in zip(network.features_extractor.members, sources, strict=True):
