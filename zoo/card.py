@@ -25,7 +25,7 @@ def card(run: Path) -> str:
     train = json.loads((run / "train.json").read_text())
     selection = json.loads((run / "selection.json").read_text())
     scenario = train["scenario"]
-    path, trust = loader_words(train.get("net", "mlp") != "mlp")
+    path, trust = loader_words(own_network(train))
     start = selection.get("from_step", 0)  # a choice among the checkpoints after exploration ended
     since, flag = (f" among the checkpoints from step {start:,} on", f" --from-step {start}") if start else ("", "")
     first, last = selection["tuning_seeds"]
@@ -51,9 +51,8 @@ def _trained(run: Path, train: dict) -> list[str]:
                       else f" --{k.replace('_', '-')} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     changed += f" --start-from {train['start_from']}" if "start_from" in train else ""  # a continued run
-    own = train.get("net", "mlp") != "mlp"  # a network of its own: zodrive reads it with SB3's loader only
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
-               "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own else ""
+               "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own_network(train) else ""
     return [f"# {run.parent.name} / {run.name}", "",
              f"A DQN for `{scenario}` (highway-env `{train['env_id']}`){network}, trained with plain stable-baselines3 by",
              f"`python zoo/train.py --scenario {scenario} --seed {seed}{changed} --out {run.relative_to(ROOT)}` "
@@ -89,9 +88,7 @@ def ensemble_card(run: Path) -> str:
     scenario = trains[0]["scenario"]
     runs = " and ".join(f"[`{s.parent.name}/{s.name}`](../../{s.parent.name}/{s.name}/CARD.md) (seed {t['seed']})"
                         for s, t in zip(sources, trains, strict=True))
-    members = ", ".join(f"`{Path(path).relative_to(source)}` of `{source.parent.name}` (`{digest[:12]}…`)"
-                        for path, digest in build["members"].items()
-                        for source in sources if Path(path).is_relative_to(source))
+    members = ", ".join(f"`{path}` (`{digest[:12]}…`)" for path, digest in build["members"].items())
     steps = " --steps " + " ".join(map(str, build["steps"])) if tuple(build["steps"]) != STEPS else ""
     lines = [f"# {run.parent.name} / {run.name}", "",
              f"An ensemble for `{scenario}` (highway-env `{trains[0]['env_id']}`): one stable-baselines3 DQN zip whose "
@@ -104,6 +101,11 @@ def ensemble_card(run: Path) -> str:
              "weights (`policy.pth`, byte for byte) in a zip with other bytes: SB3 writes memory addresses into the "
              "zip's `data`.", ""]
     return "\n".join(lines + _bench(run, scenario))
+
+
+def own_network(train: dict) -> bool:
+    """A network of its own (not the MLP): zodrive reads its zips with SB3's loader only."""
+    return train.get("net", "mlp") != "mlp"
 
 
 def loader_words(trusted: bool) -> tuple[str, str]:

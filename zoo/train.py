@@ -72,8 +72,12 @@ def main() -> None:
     else:  # the same recipe, continued: SB3 rebuilds the schedules from these values
         model = DQN.load(args.start_from, env=env, device="cpu", seed=args.seed, learning_rate=args.lr,
                          exploration_initial_eps=0.05, exploration_final_eps=0.05)
-        if model.gamma != args.gamma or model.policy_kwargs.get("net_arch") != policy_kwargs["net_arch"]:
-            raise SystemExit(f"{args.start_from} was not trained with --gamma {args.gamma} --net {args.net}")
+        recipe = {"gamma": (model.gamma, args.gamma), "batch": (model.batch_size, args.batch),
+                  "target-update": (model.target_update_interval, args.target_update),
+                  "net": (model.policy_kwargs.get("net_arch"), policy_kwargs["net_arch"])}
+        differ = [name for name, (theirs, mine) in recipe.items() if theirs != mine]
+        if differ:  # the zip's settings win in SB3's load, so a differing flag would be ignored silently
+            raise SystemExit(f"{args.start_from} was not trained with these --{', --'.join(differ)}")
         model.learning_starts = model.num_timesteps + 1_000  # SB3's warm-up refills the new, empty buffer first
     start = time.perf_counter()
     model.learn(total_timesteps=args.steps, reset_num_timesteps=args.start_from is None,
@@ -82,7 +86,8 @@ def main() -> None:
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario],
          "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
-         "lr": args.lr, "batch": args.batch, "target_update": args.target_update, **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
+         "lr": args.lr, "batch": args.batch, "target_update": args.target_update,
+         **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
 
