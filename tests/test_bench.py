@@ -6,8 +6,15 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 from zodrive.cli import main
-from zodrive.experiments.bench import PROTOCOLS, leaderboard_markdown, physical_eps, read_rows
+from zodrive.experiments.bench import (
+    PROTOCOLS,
+    leaderboard_markdown,
+    physical_eps,
+    read_rows,
+)
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ppo-highway-fast"
 
@@ -18,12 +25,14 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
             "--board", str(board), "--no-progress"]
     assert main(args) == 0
     row = json.loads((board / "highway-fast" / "ppo" / "row.json").read_text())
-    assert row["protocol"] == "highway-fast-v1" and row["official"] is False and row["key"].startswith("sha256:")
+    assert row["protocol"] == "highway-fast-v2" and row["official"] is False and row["key"].startswith("sha256:")
     table = json.loads((board / "highway-fast" / "ppo" / "table.json").read_text())
-    for cell in row["attacked"]:  # the row keeps the black-box attack that hurts most at each eps
-        attacked = [c["mean_return"] for c in table if c["eps"] == cell["eps"] and c["attack"] in
-                    PROTOCOLS["highway-fast"].black_box]
-        assert len(attacked) == 2 and cell["return"] == min(attacked)
+    clean = next(c["mean_return"] for c in table if c["attack"] == "none")
+    for cell in row["attacked"]:  # the row keeps the cell that hurts most inside each eps-ball
+        attacked = [c["mean_return"] for c in table if c["attack"] in PROTOCOLS["highway-fast"].black_box
+                    and c["eps"] <= cell["eps"]]
+        assert len(attacked) == 2 * (1 + PROTOCOLS["highway-fast"].eps.index(cell["eps"]))
+        assert cell["return"] == min(*attacked, clean)
         assert cell["pgd_return"] is not None  # white-box apart, since the PPO has gradients
     assert row["brake"]["collision_rate"] >= 0 and 0 < row["robustness_area"] <= 1.5
     assert "ppo*" in (board / "leaderboard.md").read_text()
@@ -61,6 +70,61 @@ def test_a_forced_bench_drops_the_old_row_before_it_runs(tmp_path: Path, monkeyp
     except KeyboardInterrupt:
         pass
     assert not row.exists()
+
+
+def _cell(attack: str, eps: float, mean_return: float, collisions: float = 0.0) -> dict:
+    return {"model": "m", "attack": attack, "eps": eps, "mean_return": mean_return, "ci95_low": mean_return - 1,
+            "ci95_high": mean_return + 1, "collision_rate": collisions, "queries_per_step": 1.0, "mean_speed": 20.0}
+
+
+def _bench_folder(folder: Path, cells: list[dict], brake_collisions: float = 0.2) -> Path:
+    """A finished bench folder made of `cells` (table.json), each attacked cell with one crashed episode."""
+    (folder / "brake").mkdir(parents=True)
+    (folder / "table.json").write_text(json.dumps(cells))
+    (folder / "brake" / "table.json").write_text(json.dumps([{**_cell("none", 0.0, 5.0, brake_collisions),
+                                                               "model": "baseline:slower"}]))
+    for c in cells:
+        if c["attack"] != "none":
+            cell = folder / "cells" / f"m-{c['attack'].split(' ')[0]}-eps{c['eps']:g}"
+            cell.mkdir(parents=True)
+            (cell / "episodes.jsonl").write_text(json.dumps({"episode": 0, "crashed": True, "queries": 7}) + "\n")
+    return folder
+
+
+def test_the_return_at_eps_is_the_worst_inside_the_eps_ball(tmp_path: Path) -> None:
+    """Version 2: an attack at a smaller eps (or none at all) is inside the ball, so a weaker search at a
+    larger eps never raises the row's return there; collisions past the brake's count at any cell."""
+    from zodrive.experiments.bench import bench_row
+
+    proto = PROTOCOLS["highway-fast"]  # eps 0.01, 0.02, 0.05
+    cells = [_cell("none", 0.0, 10.0, 0.1),
+             _cell("random-search", 0.01, 8.0, 0.1), _cell("zo-signsgd", 0.01, 9.0),
+             _cell("random-search", 0.02, 9.5, 0.5), _cell("zo-signsgd", 0.02, 8.5),
+             _cell("random-search", 0.05, 7.0, 0.9), _cell("zo-signsgd", 0.05, 12.0),
+             _cell("pgd (white-box)", 0.01, 5.0), _cell("pgd (white-box)", 0.02, 6.0), _cell("pgd (white-box)", 0.05, 5.5)]
+    row = bench_row("m", "k", proto, _bench_folder(tmp_path / "a", cells), 100)
+    assert [p["return"] for p in row["attacked"]] == [8.0, 8.0, 7.0]  # version 1 said 8.0, 8.5, 7.0
+    assert [p["attack_eps"] for p in row["attacked"]] == [0.01, 0.01, 0.05]
+    assert [p["pgd_return"] for p in row["attacked"]] == [5.0, 5.0, 5.0]
+    assert row["eps_collisions_pass_brake"] == 0.02  # random search at 0.02 crashes 50 %, the brake 20 %
+    assert row["robustness_area"] == pytest.approx((0.01 * 9 + 0.01 * 8 + 0.03 * 7.5) / (0.05 * 10))
+
+    helped = [_cell("none", 0.0, 5.0), _cell("random-search", 0.01, 6.0), _cell("zo-signsgd", 0.01, 5.0)]
+    row = bench_row("m", "k", PROTOCOLS["discrete"], _bench_folder(tmp_path / "b", helped), 30)
+    first = row["attacked"][0]  # a tie with clean goes to the attack; an attack that only helps is not one
+    assert (first["return"], first["attack"], first["attack_eps"]) == (5.0, "zo-signsgd", 0.01)
+    assert row["attacked"][0]["queries_to_crash"] == 7.0 and row["robustness_area"] == pytest.approx(1.0)
+
+
+def test_rows_of_two_protocol_versions_never_share_a_table() -> None:
+    def row(protocol: str) -> dict:
+        return {"protocol": protocol, "scenario": "merge", "policy": protocol, "official": True, "key": "k",
+                "clean": {"return": 1.0, "ci95": [0.0, 2.0], "collision_rate": 0.0, "speed": 20.0},
+                "attacked": [{"eps": 0.01, "return": 1.0, "collision_rate": 0.0, "queries_to_crash": None,
+                              "pgd_return": None}], "robustness_area": 1.0, "eps_collisions_pass_brake": None}
+
+    text = leaderboard_markdown([row("merge-v1"), row("merge-v2")])
+    assert "## merge (protocol merge-v1)" in text and "## merge (protocol merge-v2)" in text
 
 
 def test_eps_is_stated_in_the_scenarios_units() -> None:

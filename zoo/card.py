@@ -135,7 +135,7 @@ def _bench(run: Path, scenario: str) -> list[str]:
                     f"--name {name}{trust}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
                     f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
                     f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions). Under the "
-                    "strongest black-box attack: " + ", ".join(
+                    "strongest black-box attack inside each ε-ball (docs/bench.md): " + ", ".join(
                         f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
                     + ".", ""]
 

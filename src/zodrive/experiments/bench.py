@@ -2,7 +2,8 @@
 
 A protocol fixes what a row means: the scenario, the evaluation seeds and episodes, the ε grid
 (normalized units, also stated in metres and m/s), the black-box attack ensemble (every attack
-runs at every ε; the row keeps, per ε, the one that hurts the policy most) and white-box PGD as a
+runs at every ε; the row keeps, per ε, the cell that hurts the policy most among all those inside
+the ε-ball, smaller ε and clean included) and white-box PGD as a
 separate, labelled column where the policy has gradients. Every cell is an ordinary resumable
 evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt from the cells.
 """
@@ -26,7 +27,9 @@ from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
 
-VERSION = 1
+VERSION = 2
+"""Version 2 (2026-11-27): a row's return at ε is the worst over the ε-ball (attacks at every ε' ≤ ε,
+and clean); version 1 kept the worst attack at ε alone. The protocols' seeds, ε and attacks are unchanged."""
 BLACK_BOX = ("random-search", "zo-signsgd")
 """The ensemble: Square-style random search (the strongest per-step black-box attack on most of the
 committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
@@ -108,33 +111,42 @@ def _cells(out: Path) -> list[dict[str, Any]]:
 
 
 def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -> dict[str, Any]:
-    """The row of a finished bench folder: clean figures, the worst black-box attack per ε, PGD
-    apart, the robustness area, the ε where collisions pass the brake's, queries to a crash."""
+    """The row of a finished bench folder: clean figures, the strongest black-box attack per ε, PGD
+    apart, the robustness area, the ε where collisions pass the brake's, queries to a crash.
+
+    The return at ε is the worst over every cell the ε-ball holds: each black-box attack at every
+    ε' ≤ ε, and no perturbation at all (version 2). An attack that finds a point within ε' is an
+    attack within ε, so a return that rose with ε (a weaker search in a bigger ball, seen on 15 of 54
+    version-1 rows) only measured the search; the envelope is never above a smaller ε's, nor clean."""
     cells = _cells(out)
     clean = next(c for c in cells if c["attack"] == "none")
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
+    black_box = [c for c in cells if c["attack"] in proto.black_box]
+    white_box = [c for c in cells if _attack(c) == proto.white_box]
     per_eps: list[dict[str, Any]] = []
     for eps in proto.eps:
-        attacked = [c for c in cells if c["eps"] == eps and c["attack"] in proto.black_box]
-        if not attacked:  # a policy no observation attack reaches (a constant or simulator-reading driver)
+        if not black_box:  # a policy no observation attack reaches (a constant or simulator-reading driver)
             per_eps.append({"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
                             "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None})
             continue
-        worst = min(attacked, key=lambda c: c["mean_return"])
-        pgd = next((c for c in cells if c["eps"] == eps and _attack(c) == proto.white_box), None)
+        worst = _strongest(black_box, eps, clean)
+        pgd = _strongest(white_box, eps, clean) if white_box else None
+        attacked = worst is not clean
         per_eps.append({
             "eps": eps, "return": worst["mean_return"], "ci95": [worst["ci95_low"], worst["ci95_high"]],
-            "collision_rate": worst["collision_rate"], "attack": worst["attack"],
-            "queries_per_step": worst["queries_per_step"],
-            "queries_to_crash": _median_queries_to_crash(out, worst),
+            "collision_rate": worst["collision_rate"], "attack": worst["attack"] if attacked else None,
+            "attack_eps": worst["eps"] if attacked else 0.0,
+            "queries_per_step": worst["queries_per_step"] if attacked else None,
+            "queries_to_crash": _median_queries_to_crash(out, worst) if attacked else None,
             "pgd_return": pgd["mean_return"] if pgd else None,
             "pgd_collision_rate": pgd["collision_rate"] if pgd else None,
         })
     returns = [clean["mean_return"], *(p["return"] for p in per_eps)]
     grid = [0.0, *proto.eps]
     area = float(np.trapezoid(returns, grid) / (grid[-1] * clean["mean_return"])) if clean["mean_return"] > 0 else None
+    # the smallest ε whose ball holds an attack that collides more often than the brake does clean
     passes = 0.0 if clean["collision_rate"] > brake["collision_rate"] else \
-        next((p["eps"] for p in per_eps if p["collision_rate"] > brake["collision_rate"]), None)
+        min((c["eps"] for c in black_box if c["collision_rate"] > brake["collision_rate"]), default=None)
     return {
         "protocol": proto.name(), "official": episodes == proto.episodes, "policy": label, "key": key,
         "scenario": proto.scenario, "episodes": episodes, "seeds": [proto.seed, proto.seed + episodes - 1],
@@ -145,6 +157,13 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
         "vs_brake": brake_margin(out), "eps_units": physical_eps(proto),
     }
+
+
+def _strongest(attacked: list[dict[str, Any]], eps: float, clean: dict[str, Any]) -> dict[str, Any]:
+    """The cell with the lowest mean return among those inside the ε-ball: the attacks at every ε' ≤ ε
+    and the clean cell (no perturbation). Ties go to the largest ε' and then to an attack over clean."""
+    inside = sorted((c for c in attacked if c["eps"] <= eps), key=lambda c: -c["eps"])
+    return min([*inside, clean], key=lambda c: c["mean_return"])
 
 
 def brake_margin(folder: Path) -> list[float] | None:
@@ -222,7 +241,8 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
     lines = ["# Leaderboard", "",
              "Generated by `zodrive leaderboard` from the bench rows in `results/bench/` (never typed).",
              "Each row: `zodrive bench POLICY --scenario S` under the protocol named in its table's title",
-             "([docs/bench.md](bench.md)). Return under attack is the worst black-box attack of the ensemble per ε;",
+             "([docs/bench.md](bench.md)). Return under attack at ε is the worst black-box attack of the ensemble",
+             "at that ε or any smaller one (no perturbation included: every such point is inside the ε-ball);",
              "PGD (white-box, needs gradients) is a separate column. Ranked by the return at the largest ε.",
              "ε past brake: the smallest ε at which the policy collides more often than the constant brake does",
              "clean (0: already clean). Δ closest constant: clean return minus that of the constant action (a",
@@ -230,12 +250,11 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "beats every constant action by a margin its CI shows where the low end is above 0 (its margin in",
              "bold). Unofficial rows (fewer episodes) are marked *; rows marked † load their network with SB3's",
              "own loader (`--trust-model`: code of the model's author, which zodrive does not rebuild).", ""]
-    for scenario_name in sorted({r["scenario"] for r in rows}):
-        group = sorted((r for r in rows if r["scenario"] == scenario_name),
+    for proto in sorted({r["protocol"] for r in rows}):  # rows of two versions never share a table
+        group = sorted((r for r in rows if r["protocol"] == proto),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
-        proto = group[0]["protocol"]
         eps = [p["eps"] for p in group[0]["attacked"]]
-        lines += [f"## {scenario_name} (protocol {proto})", "",
+        lines += [f"## {group[0]['scenario']} (protocol {proto})", "",
                   "| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
@@ -306,10 +325,10 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     from zodrive.evaluation.report import headless_pyplot
 
     plt = headless_pyplot()
-    scenarios = sorted({r["scenario"] for r in rows})
-    fig, axes = plt.subplots(1, len(scenarios), figsize=(4.2 * len(scenarios), 5.2), squeeze=False)
-    for ax, name in zip(axes[0], scenarios):
-        table = sorted((r for r in rows if r["scenario"] == name), key=lambda r: r["policy"])
+    protocols = sorted({r["protocol"] for r in rows})  # one panel per table of the leaderboard
+    fig, axes = plt.subplots(1, len(protocols), figsize=(4.2 * len(protocols), 5.2), squeeze=False)
+    for ax, name in zip(axes[0], protocols):
+        table = sorted((r for r in rows if r["protocol"] == name), key=lambda r: r["policy"])
         families = sorted({family_and_seed(r["policy"])[0] for r in table})
         colours = plt.get_cmap("tab10" if len(families) <= 10 else "tab20")
         for r in table:
