@@ -325,3 +325,12 @@ def test_a_td3_row_trains_and_is_read_like_a_ddpg(tmp_path: Path) -> None:
     assert policy_kind(str(out)) == "continuous"
     assert load_policy_network(out / "model.zip").n_outputs == 2  # the actor, rebuilt without unpickling
     assert json.loads((out / "train.json").read_text())["algo"] == "td3"
+
+
+def test_a_reader_that_closes_the_pipe_stops_the_command_quietly() -> None:
+    """`zodrive … | head` is a pipeline, not an error: no message, no traceback, exit 141 (128 + SIGPIPE)."""
+    proc = subprocess.Popen([sys.executable, "-m", "zodrive", "baselines"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader is gone before the command writes
+    err = proc.stderr.read().decode()
+    assert proc.wait() == 141 and err == ""

@@ -14,13 +14,14 @@ functions.
 from __future__ import annotations
 
 import argparse
+import io
 import logging
 import os
 import signal
 import sys
 import threading
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from zodrive.cli import bench, evaluate, experiments, info, train
 from zodrive.cli.attack import ATTACK_FLAGS, attack_spec_from_args
@@ -60,6 +61,14 @@ def _terminated(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that flushing what is left at exit does not fail a second time."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, io.UnsupportedOperation):  # not a real file (a test's capture)
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminated)
@@ -82,7 +91,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_model_paths(args)
         if getattr(args, "address", None) and getattr(args, "backend", "local") != "ray":
             raise ZodriveError("--address joins a Ray cluster: it needs --backend ray")
-        return COMMANDS[args.command](args)
+        code = COMMANDS[args.command](args)
+        sys.stdout.flush()  # a reader that went away (`| head`) is met here, not at interpreter exit
+        return code
+    except BrokenPipeError:  # the reader closed the pipe: stop quietly, as a command in a pipeline should
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, what a shell reports for a command its reader cut off
     except ZodriveError as exc:
         print(f"zodrive: error: {exc}", file=sys.stderr)
         return 2
