@@ -152,7 +152,7 @@ def test_bad_attack_flags(tiny_dqn: Path, flags: list[str], message: str, capsys
 
 def test_console_script_exits_nonzero_without_traceback(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "zodrive", "evaluate", str(tmp_path / "nope.zip")],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, check=False)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [f"zodrive: error: model file not found: {tmp_path / 'nope.zip'}"]
 
