@@ -116,6 +116,22 @@ def test_the_return_at_eps_is_the_worst_inside_the_eps_ball(tmp_path: Path) -> N
     assert row["attacked"][0]["queries_to_crash"] == 7.0 and row["robustness_area"] == pytest.approx(1.0)
 
 
+def test_compare_keeps_the_strongest_attack_inside_each_eps_ball() -> None:
+    """`zodrive compare`'s robustness table and plot use the same rule as the bench row: at each eps the
+    strongest row at that eps, a smaller one, or clean, and they say where a row came from."""
+    from zodrive.experiments.compare import robustness_markdown, strongest
+
+    rows = [{**_cell("none", None, 300.0), "defense": "none", "mean_speed": 20.0},
+            {**_cell("random-search", 0.05, 90.0), "defense": "none", "mean_speed": 27.0},
+            {**_cell("pgd (white-box)", 0.05, 80.0), "defense": "none", "mean_speed": 27.0},
+            {**_cell("random-search", 0.2, 130.0), "defense": "none", "mean_speed": 29.0},
+            {**_cell("random-search", 0.01, 310.0), "defense": "none", "mean_speed": 20.0}]
+    curve = strongest(rows)["m"]
+    assert [curve[e]["mean_return"] for e in (0.0, 0.01, 0.05, 0.2)] == [300.0, 300.0, 80.0, 80.0]
+    text = robustness_markdown(rows)
+    assert "80.0 (pgd (white-box) at ε 0.05, 27.0 m/s) |" in text and "300.0 (clean: no attack hurt more" in text
+
+
 def test_rows_of_two_protocol_versions_never_share_a_table() -> None:
     def row(protocol: str) -> dict:
         return {"protocol": protocol, "scenario": "merge", "policy": protocol, "official": True, "key": "k",

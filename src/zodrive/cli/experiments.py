@@ -49,7 +49,7 @@ def add_parsers(sub: Any) -> None:
                       help="defenses in front of each model, one set of cells each (default: none, undefended)")
     cmp_.add_argument("--plot", type=Path, default=None,
                       help="PNG: with --query-budgets, return and success against queries per step; "
-                           "otherwise return against eps under the strongest attack")
+                           "otherwise return against eps under the strongest attack inside each eps-ball")
     backend_flags(cmp_)
     cmp_.add_argument("--episodes", type=episode_count, default=20, help="episodes per cell")
     workers_flag(cmp_)

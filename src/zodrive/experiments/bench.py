@@ -22,7 +22,7 @@ from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
-from zodrive.experiments.compare import compare
+from zodrive.experiments.compare import compare, strongest
 from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
@@ -123,15 +123,16 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in proto.black_box]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
+    inside = _inside(black_box, clean, proto.eps) if black_box else {}
+    pgd_inside = _inside(white_box, clean, proto.eps) if white_box else {}
     per_eps: list[dict[str, Any]] = []
     for eps in proto.eps:
         if not black_box:  # a policy no observation attack reaches (a constant or simulator-reading driver)
             per_eps.append({"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
                             "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None})
             continue
-        worst = _strongest(black_box, eps, clean)
-        pgd = _strongest(white_box, eps, clean) if white_box else None
-        attacked = worst is not clean
+        worst, pgd = inside[eps], pgd_inside.get(eps)
+        attacked = worst["eps"] is not None
         per_eps.append({
             "eps": eps, "return": worst["mean_return"], "ci95": [worst["ci95_low"], worst["ci95_high"]],
             "collision_rate": worst["collision_rate"], "attack": worst["attack"] if attacked else None,
@@ -159,11 +160,11 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
     }
 
 
-def _strongest(attacked: list[dict[str, Any]], eps: float, clean: dict[str, Any]) -> dict[str, Any]:
-    """The cell with the lowest mean return among those inside the ε-ball: the attacks at every ε' ≤ ε
-    and the clean cell (no perturbation). Ties go to the largest ε' and then to an attack over clean."""
-    inside = sorted((c for c in attacked if c["eps"] <= eps), key=lambda c: -c["eps"])
-    return min([*inside, clean], key=lambda c: c["mean_return"])
+def _inside(attacked: list[dict[str, Any]], clean: dict[str, Any], grid: tuple[float, ...]) -> dict[float, dict[str, Any]]:
+    """ε of `grid` -> the cell with the lowest mean return inside the ε-ball, from `attacked` and
+    clean (compare's `strongest`, for the one policy of a bench folder)."""
+    (curve,) = strongest([clean, *attacked]).values()
+    return {eps: curve[max(e for e in curve if e <= eps)] for eps in grid}
 
 
 def brake_margin(folder: Path) -> list[float] | None:

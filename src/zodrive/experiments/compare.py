@@ -3,8 +3,9 @@
 Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/
 (eps exact: `cells.number_name`; two models of one name told apart by their content: `cells.policy_names`);
 the table is rebuilt from their summaries, so an interrupted comparison resumes. With several
-eps, `robustness.md` gives each model (and defense) its strongest attack per eps: a defense is
-judged by the attack that hurts it most, not by the one that flatters it.
+eps, `robustness.md` gives each model (and defense) its strongest attack inside each eps-ball (at
+that eps or a smaller one): a defense is judged by the attack that hurts it most, not by the one
+that flatters it.
 """
 
 from __future__ import annotations
@@ -196,20 +197,37 @@ def _ignores_input(row: dict[str, Any]) -> bool:
 
 
 def strongest(rows: list[dict[str, Any]]) -> dict[str, dict[float, dict[str, Any]]]:
-    """Per system (model + defense): its clean row at eps 0 and, per eps, the attacked row
-    with the lowest mean return (over attacks and query budgets)."""
+    """Per system (model + defense): its clean row at eps 0 and, per eps, the row with the lowest
+    mean return inside the eps-ball: over attacks and query budgets at that eps, at every smaller
+    eps, and clean (a point within a smaller eps, or no perturbation, is within eps). So the return
+    never rises with eps; a row kept from a smaller eps (or clean) has its own `eps`. Ties go to the
+    row at the larger eps."""
     table: dict[str, dict[float, dict[str, Any]]] = {}
     for r in rows:
         eps = 0.0 if r["eps"] is None else float(r["eps"])
         cells = table.setdefault(_system(r), {})
         if eps not in cells or r["mean_return"] < cells[eps]["mean_return"]:
             cells[eps] = r
+    for cells in table.values():
+        inside: dict[str, Any] | None = None  # the strongest row of the smaller balls
+        for eps in sorted(cells):
+            if inside is not None and inside["mean_return"] < cells[eps]["mean_return"]:
+                cells[eps] = inside
+            inside = cells[eps]
     return table
 
 
+def _source(row: dict[str, Any], eps: float) -> str:
+    """Which cell a robustness entry at `eps` comes from: its attack, and its eps where smaller."""
+    if row["eps"] is None:
+        return "clean: no attack hurt more"
+    return row["attack"] if float(row["eps"]) == eps else f"{row['attack']} at ε {number_name(float(row['eps']))}"
+
+
 def robustness_markdown(rows: list[dict[str, Any]]) -> str:
-    """Return under the strongest attack per eps (which attack, in brackets); policies that
-    do not read the observation have one value, whatever the eps."""
+    """Return under the strongest attack inside each eps-ball (which attack, in brackets; its eps
+    where a smaller one's was stronger); policies that do not read the observation have one value,
+    whatever the eps."""
     table = strongest(rows)
     eps_values = sorted({e for cells in table.values() for e in cells if e > 0})
     lines = ["| Policy | Clean | " + " | ".join(f"ε {number_name(e)}" for e in eps_values) + " |",
@@ -217,7 +235,7 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
     for system, cells in table.items():
         clean = cells[0.0]
         values = [f"{clean['mean_return']:.1f} (ignores its input)" if _ignores_input(clean)
-                  else f"{cells[e]['mean_return']:.1f} ({cells[e]['attack']}, {cells[e]['mean_speed']:.1f} m/s)"
+                  else f"{cells[e]['mean_return']:.1f} ({_source(cells[e], e)}, {cells[e]['mean_speed']:.1f} m/s)"
                   if e in cells else "–" for e in eps_values]
         lines.append(f"| {system} | {clean['mean_return']:.1f} ({clean['mean_speed']:.1f} m/s) | " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"

@@ -106,10 +106,11 @@ def robustness_section(out: Path, episodes: int) -> tuple[str, str, Path | None]
     folder = out / "robustness"
     if not episodes or not (folder / "robustness.md").is_file():
         return "", "", None
-    intro = (f"Return under the strongest attack per ε ({_episodes(episodes)}): black-box random search, its defense-aware form that "
+    intro = (f"Return under the strongest attack inside each ε-ball, at that ε or a smaller one, so that it never rises "
+             f"with ε ({_episodes(episodes)}): black-box random search, its defense-aware form that "
              "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box PGD "
-             "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most, and the "
-             "speed. dqn-robust and ddpg-robust are the defended agents, dqn-sa (SA-DQN) and dqn-at (Algorithm 2) the "
+             "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most (and its ε "
+             "where smaller), and the speed. dqn-robust and ddpg-robust are the defended agents, dqn-sa (SA-DQN) and dqn-at (Algorithm 2) the "
              "other training defenses (their cards say how each was made); "
              "baseline:robust-rules@0.02 is the observation rules made pessimistic for ε 0.02; the constant SLOWER "
              "and the constant brake ignore their input and are the floor a defense must beat. Cells: robustness/table.md.")
