@@ -111,7 +111,7 @@ def _cells(out: Path) -> list[dict[str, Any]]:
 
 
 def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -> dict[str, Any]:
-    """The row of a finished bench folder: clean figures, the strongest black-box attack per ε, PGD
+    """The row of a finished bench folder: clean figures, the strongest black-box attack in each ε-ball, PGD
     apart, the robustness area, the ε where collisions pass the brake's, queries to a crash.
 
     The return at ε is the worst over every cell the ε-ball holds: each black-box attack at every
