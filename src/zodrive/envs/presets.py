@@ -22,7 +22,7 @@ import numpy as np
 
 from zodrive.config import available, check_keys, config_root, load_config, read_text
 from zodrive.envs.traffic import KeepTraffic, restore_defaults
-from zodrive.errors import ZodriveError
+from zodrive.errors import ZodriveError, cause
 
 ENV_ID = "zodrive/highway-v0"
 ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-v0's DiscreteMetaAction
@@ -364,7 +364,7 @@ def make_env(config: dict[str, Any], render_mode: str | None = None) -> gym.Env:
         raise ZodriveError(f"preset {config.get('name', env_id)!r}: {exc}") from None
     except (TypeError, ValueError, KeyError, AssertionError) as exc:
         raise ZodriveError(f"preset {config.get('name', '?')!r} is not a valid config for {env_id}: "
-                           f"{type(exc).__name__}: {exc}") from exc
+                           f"{cause(exc)}") from exc
     if "other_vehicles_type" in (getattr(env.unwrapped, "config", None) or {}):  # highway-env's traffic
         env = KeepTraffic(env)
     return env

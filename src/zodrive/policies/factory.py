@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from zodrive.errors import ZodriveError
+from zodrive.errors import ZodriveError, cause
 
 if TYPE_CHECKING:
     from zodrive.attacks.victim import Victim
@@ -60,7 +60,7 @@ def build(model: str) -> Any:
     except SystemExit as exc:  # sys.exit() in the user's file would end zodrive with its code and no word
         raise ZodriveError(f"{model}: the policy code called sys.exit({exc.code!r}) while being loaded") from None
     except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
-        raise ZodriveError(f"{model}: the policy code raised {type(exc).__name__}: {exc}") from exc
+        raise ZodriveError(f"{model}: the policy code raised {cause(exc)}") from exc
 
 
 def factory_victim(model: str, preset: dict[str, Any]) -> Victim:

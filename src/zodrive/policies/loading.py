@@ -20,7 +20,7 @@ from stable_baselines3 import DDPG, DQN, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.policies.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
-from zodrive.errors import ZodriveError
+from zodrive.errors import ZodriveError, cause
 from zodrive.policies.folders import model_zip
 
 ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
@@ -141,7 +141,7 @@ def load_model(path: str | Path, preset: dict[str, Any] | None = None, *, trust:
         raise ZodriveError(f"{file} could not be loaded: it names code from module {exc.name!r}, which is not "
                            "importable here (put its folder on PYTHONPATH)") from exc
     except Exception as exc:
-        raise ZodriveError(f"{file} could not be loaded ({type(exc).__name__}: {exc})") from exc
+        raise ZodriveError(f"{file} could not be loaded ({cause(exc)})") from exc
 
 
 def sb3_class(name: str) -> type[BaseAlgorithm]:

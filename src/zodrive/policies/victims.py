@@ -16,7 +16,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from zodrive.policies.safe_load import unscale
 from zodrive.attacks.victim import Victim
 from zodrive.envs import Scenario, scenario
-from zodrive.errors import ZodriveError
+from zodrive.errors import ZodriveError, cause
 
 
 def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
@@ -149,7 +149,7 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
             raise
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - the user's code may raise anything, exit included
             raise ZodriveError(f"{label}: the policy failed on a batch of observations of shape "
-                               f"{tuple(np.shape(obs))}: {type(exc).__name__}: {exc}") from exc
+                               f"{tuple(np.shape(obs))}: {cause(exc)}") from exc
         if env.kind == "discrete" and out.shape[1:] in ((), (1,)):  # actions, not scores: one-hot scores
             out = _one_hot(out.reshape(len(obs)), env.n_actions, label)
         if out.shape != (len(obs), env.n_actions):

@@ -22,7 +22,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from zodrive.compute import one_torch_thread
 from zodrive.config import check_keys, load_config, read_yaml
 from zodrive.envs import action_kind, load_preset, make_env
-from zodrive.errors import ZodriveError
+from zodrive.errors import ZodriveError, cause
 from zodrive.policies.loading import ALGOS
 from zodrive.runinfo import command_line, read_json, write_atomic, write_json, write_run_info
 from zodrive.signing import signature
@@ -335,7 +335,7 @@ def train(
             shutil.rmtree(out, ignore_errors=True)  # leave no half-made run folder behind
         if isinstance(exc, ZodriveError):
             raise
-        raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({type(exc).__name__}: {exc})") from exc
+        raise ZodriveError(f"recipe {recipe.get('algo')}: invalid setting ({cause(exc)})") from exc
 
 
 def check_n_step_buffer(model: Any, recipe: dict[str, Any]) -> None:
