@@ -140,7 +140,7 @@ def test_rows_of_two_protocol_versions_never_share_a_table() -> None:
                               "pgd_return": None}], "robustness_area": 1.0, "eps_collisions_pass_brake": None}
 
     text = leaderboard_markdown([row("merge-v1"), row("merge-v2")])
-    assert "## merge (protocol merge-v1)" in text and "## merge (protocol merge-v2)" in text
+    assert "## merge (protocol merge-v1) — an earlier version" in text and "## merge (protocol merge-v2)\n" in text
 
 
 def test_eps_is_stated_in_the_scenarios_units() -> None:

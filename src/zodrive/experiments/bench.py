@@ -255,7 +255,11 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
         group = sorted((r for r in rows if r["protocol"] == proto),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
         eps = [p["eps"] for p in group[0]["attacked"]]
-        lines += [f"## {group[0]['scenario']} (protocol {proto})", "",
+        title = f"## {group[0]['scenario']} (protocol {proto})"
+        if not proto.endswith(f"-v{VERSION}"):
+            title += (f" — an earlier version: `zodrive bench` with each row's own command rebuilds it under "
+                      f"v{VERSION} from its cells")
+        lines += [title, "",
                   "| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
