@@ -14,7 +14,6 @@ Run: PYTHONPATH=zoo python zoo/q_ensemble.py RUN [RUN ...] OUT [--steps 42000 48
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,6 +25,8 @@ from ego_attention import EgoAttention  # zoo/ego_attention.py: the members' ext
 from stable_baselines3 import DQN
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, create_mlp
 from torch import nn
+
+from zodrive.runinfo import sha256
 
 STEPS = (42_000, 48_000, 54_000, 60_000)  # the checkpoints after exploration ends (zoo/train.py: 70 % of 60,000)
 
@@ -77,7 +78,7 @@ def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path
     model.save(out / "model.zip")
     (out / "build.json").write_text(json.dumps(
         {"script": "zoo/q_ensemble.py", "runs": [str(run) for run in runs], "steps": list(steps),
-         "members": {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}}, indent=2) + "\n")
+         "members": {str(p): sha256(p) for p in paths}}, indent=2) + "\n")
     return out / "model.zip"
 
 

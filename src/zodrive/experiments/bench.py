@@ -123,25 +123,14 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in proto.black_box]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
-    inside = _inside(black_box, clean, proto.eps) if black_box else {}
-    pgd_inside = _inside(white_box, clean, proto.eps) if white_box else {}
-    per_eps: list[dict[str, Any]] = []
-    for eps in proto.eps:
-        if not black_box:  # a policy no observation attack reaches (a constant or simulator-reading driver)
-            per_eps.append({"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
-                            "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None})
-            continue
-        worst, pgd = inside[eps], pgd_inside.get(eps)
-        attacked = worst["eps"] is not None
-        per_eps.append({
-            "eps": eps, "return": worst["mean_return"], "ci95": [worst["ci95_low"], worst["ci95_high"]],
-            "collision_rate": worst["collision_rate"], "attack": worst["attack"] if attacked else None,
-            "attack_eps": worst["eps"] if attacked else 0.0,
-            "queries_per_step": worst["queries_per_step"] if attacked else None,
-            "queries_to_crash": _median_queries_to_crash(out, worst) if attacked else None,
-            "pgd_return": pgd["mean_return"] if pgd else None,
-            "pgd_collision_rate": pgd["collision_rate"] if pgd else None,
-        })
+    if black_box:
+        inside = _inside(black_box, clean, proto.eps)
+        pgd_inside = _inside(white_box, clean, proto.eps) if white_box else {}
+        per_eps = [_attacked(out, eps, inside[eps], pgd_inside.get(eps)) for eps in proto.eps]
+    else:  # a policy no observation attack reaches (a constant or simulator-reading driver)
+        per_eps = [{"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
+                    "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None}
+                   for eps in proto.eps]
     returns = [clean["mean_return"], *(p["return"] for p in per_eps)]
     grid = [0.0, *proto.eps]
     area = float(np.trapezoid(returns, grid) / (grid[-1] * clean["mean_return"])) if clean["mean_return"] > 0 else None
@@ -158,6 +147,17 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
         "vs_brake": brake_margin(out), "eps_units": physical_eps(proto),
     }
+
+
+def _attacked(out: Path, eps: float, worst: dict[str, Any], pgd: dict[str, Any] | None) -> dict[str, Any]:
+    """A row's entry at ε from the strongest cell inside the ε-ball (clean where no attack hurt more)."""
+    attack = {"attack": worst["attack"], "attack_eps": worst["eps"], "queries_per_step": worst["queries_per_step"],
+              "queries_to_crash": _median_queries_to_crash(out, worst)} if worst["eps"] is not None else \
+        {"attack": None, "attack_eps": 0.0, "queries_per_step": None, "queries_to_crash": None}
+    return {"eps": eps, "return": worst["mean_return"], "ci95": [worst["ci95_low"], worst["ci95_high"]],
+            "collision_rate": worst["collision_rate"], **attack,
+            "pgd_return": pgd["mean_return"] if pgd else None,
+            "pgd_collision_rate": pgd["collision_rate"] if pgd else None}
 
 
 def _inside(attacked: list[dict[str, Any]], clean: dict[str, Any], grid: tuple[float, ...]) -> dict[float, dict[str, Any]]:
