@@ -6,9 +6,15 @@ of tuning seeds. The zip is a plain SB3 DQN: its features extractor (`QEnsemble`
 members, each a whole Q-network of the run's architecture with its own weights, and outputs their
 mean Q-values; the Q-head after it is the identity. Nothing is trained and no seed is read.
 
+`--pessimism K` makes it act on the mean less K times the members' standard deviation (a lower
+confidence bound): where the members disagree, it prefers the action they agree is good. K = 0,
+the default, writes the plain mean's weights (`policy.pth`), byte for byte. `--from ENSEMBLE` recombines the members
+held in an ensemble's own zip (the run checkpoints are not in the repository).
+
 Its zips load in zodrive with `zoo/` on PYTHONPATH and `--trust-model`, as the attention runs do.
 
-Run: PYTHONPATH=zoo python zoo/q_ensemble.py RUN [RUN ...] OUT [--steps 42000 48000 54000 60000]
+Run: PYTHONPATH=zoo python zoo/q_ensemble.py RUN [RUN ...] OUT [--steps 42000 48000 54000 60000] [--pessimism 0]
+     PYTHONPATH=zoo python zoo/q_ensemble.py --from ENSEMBLE OUT --pessimism K
 """
 
 from __future__ import annotations
@@ -44,18 +50,23 @@ class Member(nn.Module):
 
 
 class QEnsemble(BaseFeaturesExtractor):
-    """(batch, vehicles, features) -> (batch, actions): the members' mean Q-values."""
+    """(batch, vehicles, features) -> (batch, actions): the members' mean Q-values, less `pessimism`
+    times their standard deviation (over members, population form)."""
 
     def __init__(self, observation_space: gym.spaces.Box, members: int = 4, net_arch: Sequence[int] = (64, 64),
-                 actions: int = 3) -> None:
+                 actions: int = 3, pessimism: float = 0.0) -> None:
         super().__init__(observation_space, features_dim=actions)
         self.members = nn.ModuleList(Member(observation_space, net_arch, actions) for _ in range(members))
+        self.pessimism = pessimism
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return torch.stack([member(obs) for member in self.members]).mean(dim=0)
+        q = torch.stack([member(obs) for member in self.members])
+        if not self.pessimism:
+            return q.mean(dim=0)
+        return q.mean(dim=0) - self.pessimism * q.std(dim=0, correction=0)
 
 
-def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path:
+def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS, pessimism: float = 0.0) -> Path:
     """Write OUT/model.zip (the ensemble of each run's checkpoints at `steps`) and OUT/build.json."""
     paths = [run / "checkpoints" / f"step_{step}_steps.zip" for run in runs for step in steps]
     sources = [DQN.load(p, device="cpu") for p in paths]
@@ -65,8 +76,7 @@ def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path
         raise SystemExit(f"{', '.join(map(str, runs))}: not one scenario, network and discount")
     actions = int(first.action_space.n)
     shape = {"members": len(paths), "net_arch": first.policy_kwargs["net_arch"], "actions": actions}
-    model = DQN("MlpPolicy", gym.make(env_ids.pop()), gamma=first.gamma, device="cpu", seed=0, policy_kwargs={
-        "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": shape})
+    model = _ensemble(env_ids.pop(), first.gamma, shape, pessimism)
     with torch.no_grad():
         for network in (model.policy.q_net, model.policy.q_net_target):
             for member, source in zip(network.features_extractor.members, sources, strict=True):
@@ -74,24 +84,60 @@ def build(runs: Sequence[Path], out: Path, steps: Sequence[int] = STEPS) -> Path
             head = network.q_net[0]  # net_arch=[]: one Linear(actions, actions)
             head.weight.copy_(torch.eye(actions))
             head.bias.zero_()
+    return _save(model, out, {"script": "zoo/q_ensemble.py", "runs": [str(run) for run in runs], "steps": list(steps),
+                              "members": {str(p): sha256(p) for p in paths}}, pessimism)
+
+
+def recombine(ensemble: Path, out: Path, pessimism: float) -> Path:
+    """Write OUT/model.zip: the members of ENSEMBLE (a folder `build` wrote) under `pessimism`."""
+    record = json.loads((ensemble / "build.json").read_text())
+    source = DQN.load(ensemble / "model.zip", device="cpu")
+    shape = {k: v for k, v in source.policy_kwargs["features_extractor_kwargs"].items() if k != "pessimism"}
+    env_id = json.loads((Path(record["runs"][0]) / "train.json").read_text())["env_id"]
+    model = _ensemble(env_id, source.gamma, shape, pessimism)
+    model.policy.load_state_dict(source.policy.state_dict())
+    record |= {"from": str(ensemble), "from_sha256": sha256(ensemble / "model.zip")}
+    record.pop("pessimism", None)
+    return _save(model, out, record, pessimism)
+
+
+def _ensemble(env_id: str, gamma: float, shape: dict, pessimism: float) -> DQN:
+    """An untrained DQN whose features extractor is a QEnsemble of `shape` and whose head is the identity's shape."""
+    if pessimism:  # only then, so that K = 0 writes the plain mean's zip as before
+        shape = shape | {"pessimism": pessimism}
+    return DQN("MlpPolicy", gym.make(env_id), gamma=gamma, device="cpu", seed=0, policy_kwargs={
+        "features_extractor_class": QEnsemble, "net_arch": [], "features_extractor_kwargs": shape})
+
+
+def _save(model: DQN, out: Path, record: dict, pessimism: float) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "model.zip")
-    (out / "build.json").write_text(json.dumps(
-        {"script": "zoo/q_ensemble.py", "runs": [str(run) for run in runs], "steps": list(steps),
-         "members": {str(p): sha256(p) for p in paths}}, indent=2) + "\n")
+    record |= {"pessimism": pessimism} if pessimism else {}
+    (out / "build.json").write_text(json.dumps(record, indent=2) + "\n")
     return out / "model.zip"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", type=Path, nargs="+", help="run folders written by zoo/train.py --net attention")
+    parser.add_argument("runs", type=Path, nargs="*", help="run folders written by zoo/train.py --net attention")
     parser.add_argument("out", type=Path)
     parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="each run's checkpoints to average")
+    parser.add_argument("--pessimism", type=float, default=0.0, metavar="K",
+                        help="act on mean - K * std of the members' Q-values (default: %(default)s, the mean)")
+    parser.add_argument("--from", dest="ensemble", type=Path, metavar="ENSEMBLE",
+                        help="recombine the members of an ensemble folder this script wrote, instead of RUNs")
     args = parser.parse_args()
+    if args.pessimism < 0:
+        parser.error("--pessimism must be >= 0")
+    if bool(args.runs) == bool(args.ensemble):
+        parser.error("give RUN folders or --from ENSEMBLE, not both or neither")
     if (args.out / "model.zip").exists():  # never overwritten; zoo/train_all.sh resumes through it
         print(f"{args.out / 'model.zip'} exists: skipped")
         return
-    print(f"wrote {build(args.runs, args.out, args.steps)}")
+    if args.ensemble:
+        print(f"wrote {recombine(args.ensemble, args.out, args.pessimism)}")
+    else:
+        print(f"wrote {build(args.runs, args.out, args.steps, args.pessimism)}")
 
 
 if __name__ == "__main__":
