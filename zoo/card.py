@@ -90,16 +90,25 @@ def ensemble_card(run: Path) -> str:
                         for s, t in zip(sources, trains, strict=True))
     members = ", ".join(f"`{path}` (`{digest[:12]}…`)" for path, digest in build["members"].items())
     steps = " --steps " + " ".join(map(str, build["steps"])) if tuple(build["steps"]) != STEPS else ""
+    k = build.get("pessimism", 0)
+    combined = f"the mean less {k:g} standard deviation{'s' * (k != 1)}" if k else "the mean"
+    flags = steps + (f" --pessimism {k:g}" if k else "")
+    why = "\"An ensemble of a run's last checkpoints\", \"Two runs per seed in one ensemble\"" + (
+        ", \"A pessimistic ensemble\"" if k else "")
     lines = [f"# {run.parent.name} / {run.name}", "",
-             f"An ensemble for `{scenario}` (highway-env `{trains[0]['env_id']}`): one stable-baselines3 DQN zip whose "
-             f"Q-values are the mean of {len(build['members'])} checkpoints of the zoo run{'s' * (len(sources) > 1)} "
-             f"{runs}: {members}. Nothing is trained and no checkpoint is chosen; it was built by",
-             f"`PYTHONPATH=zoo python zoo/q_ensemble.py {' '.join(map(str, sources))} {run.relative_to(ROOT)}{steps}`, "
-             "and loads in zodrive with `zoo/` on `PYTHONPATH` and `--trust-model`. Why: "
-             "`studies/zoo-recipe/README.md`, \"An ensemble of a run's last checkpoints\" and \"Two runs per seed in one "
-             "ensemble\". A rebuild gives the same "
-             "weights (`policy.pth`, byte for byte) in a zip with other bytes: SB3 writes memory addresses into the "
-             "zip's `data`.", ""]
+             (f"An ensemble for `{scenario}` (highway-env `{trains[0]['env_id']}`): one stable-baselines3 DQN zip whose "
+              f"Q-values are {combined} of the Q-values of {len(build['members'])} checkpoints of the zoo "
+              f"run{'s' * (len(sources) > 1)} {runs}: {members}. Nothing is trained and no checkpoint is chosen; it "
+              f"is built by `PYTHONPATH=zoo python zoo/q_ensemble.py {' '.join(map(str, sources))} "
+              f"{run.relative_to(ROOT)}{flags}`, and loads in zodrive with `zoo/` on `PYTHONPATH` and `--trust-model`. "
+              f"Why: `studies/zoo-recipe/README.md`, {why}. A rebuild gives the same weights (`policy.pth`, byte for "
+              "byte) in a zip with other bytes: SB3 writes memory addresses into the zip's `data`.")]
+    if "from" in build:  # recombined from an earlier ensemble's zip, as the checkpoints are not in the repository
+        lines[-1] += (f" This zip was recombined from the members of the ensemble zip with SHA-256 "
+                      f"`{build['from_sha256'][:12]}…` (`PYTHONPATH=zoo python zoo/q_ensemble.py --from {build['from']} "
+                      f"OUT{flags}`; it was `{build['from']}/model.zip` in the repository's history): its `policy.pth` "
+                      "is that zip's, byte for byte.")
+    lines.append("")
     return "\n".join(lines + _bench(run, scenario))
 
 

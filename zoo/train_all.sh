@@ -10,7 +10,8 @@
 # zoo/ego_attention.py, gamma 0.95 and 60,000 steps ("An attention network on intersection"); a
 # second run per seed, intersection-attention-t512 (target update every 512 steps, batch 64), trained
 # only for its checkpoints; and intersection-attention-ensemble, the Q-values of both runs' last four
-# checkpoints averaged by zoo/q_ensemble.py ("Two runs per seed in one ensemble").
+# checkpoints combined by zoo/q_ensemble.py ("Two runs per seed in one ensemble"): the mean Q-value
+# less 0.5 standard deviations over the members ("A pessimistic ensemble").
 # Run: OMP_NUM_THREADS=1 nohup nice -n 19 bash zoo/train_all.sh > zoo/train.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,5 +27,5 @@ for seed in 0 1 2; do
   python zoo/train.py --scenario intersection --seed "$seed" --net attention --gamma 0.95 --steps 60000 --every 6000 \
     --batch 64 --target-update 512 --out "models/zoo/intersection-attention-t512/seed-$seed"
   PYTHONPATH=zoo python zoo/q_ensemble.py "models/zoo/intersection-attention/seed-$seed" \
-    "models/zoo/intersection-attention-t512/seed-$seed" "models/zoo/intersection-attention-ensemble/seed-$seed"
+    "models/zoo/intersection-attention-t512/seed-$seed" "models/zoo/intersection-attention-ensemble/seed-$seed" --pessimism 0.5
 done
