@@ -51,6 +51,29 @@ def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Vi
     return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward, calibrate=query)
 
 
+def portable_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Victim:
+    """`linear_victim`'s network with arithmetic that does not depend on the CPU: weights drawn by numpy
+    (torch's randn of 16 or more numbers takes a vectorized path that differs between instruction sets),
+    computed in float64 and rounded to a 2**-16 grid (straight through, so white-box gradients stay), so
+    that one input gives the same output bits on any x86 machine. For digests of whole attack runs."""
+    rng = np.random.default_rng(seed)
+    out = 5 if kind == "discrete" else 2
+    w1 = torch.from_numpy(rng.standard_normal((hidden, 25)) * 0.8)
+    w2 = torch.from_numpy(rng.standard_normal((out, hidden)) * 0.8)
+    linear = torch.nn.functional.linear
+
+    def forward(x: torch.Tensor) -> torch.Tensor:
+        y = linear(torch.tanh(linear(x.reshape(-1, 25).double(), w1)), w2)
+        y = torch.tanh(y) if kind == "continuous" else y
+        return (y + (torch.round(y * 2**16) / 2**16 - y).detach()).float()
+
+    def query(x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return forward(torch.from_numpy(np.asarray(x, dtype=np.float32))).numpy()
+
+    return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward, calibrate=query)
+
+
 def observations(n: int, seed: int = 1) -> np.ndarray:
     rng = np.random.default_rng(seed)
     x = rng.uniform(-0.6, 0.6, size=(n, 5, 5)).astype(np.float32)
