@@ -2,7 +2,17 @@
 episode: the paper-budget DQN its card, the PPO made by plain stable-baselines3 on highway-fast-v0,
 the DQN and DDPG of Table 1, the continuous rules, their DAgger student (`models/ddpg-imitation`) and
 the TD3 fine-tuned from it (`models/td3-finetuned`), the faster discrete rules and their student
-(`models/dqn-close`) on their first episodes (slow: real highway-env episodes; CI runs these)."""
+(`models/dqn-close`) on their first episodes (slow: real highway-env episodes; CI runs these).
+
+Across CPUs only what does not hang on a float's last bit is asserted. Torch's float32 kernels round
+differently per instruction set (AVX2, AVX-512), so on a machine other than the one that made a cell:
+a clean discrete episode is the same (the argmax does not move), a continuous one differs in its
+last digits (1.6e-6 in a return of 358.88 on an AVX-512 machine; checked to 1e-4), and an attacked one
+takes another path. ZO-SignSGD follows
+the signs of differences of the victim's outputs, so it queries elsewhere and the car crashes at
+another step. There the test asserts that each replayed episode ends as the committed one did
+(crashed or not) and, if attacked, below its clean return. The attack engine's own arithmetic is
+pinned on every CPU by tests/test_perturb_golden.py."""
 
 from __future__ import annotations
 
@@ -75,10 +85,17 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
                  *attack]) == 0
     committed = {r["episode"]: r for r in map(json.loads, (ROOT / "results" / "reproduction" / "cells" / cell
                                                            / "episodes.jsonl").read_text().splitlines())}
+    clean = {r["episode"]: r for r in map(json.loads, (ROOT / "results" / "reproduction" / "cells"
+                                                       / f"{model}-initial" / "episodes.jsonl").read_text().splitlines())}
     for record in map(json.loads, (out / "episodes.jsonl").read_text().splitlines()):
+        theirs = committed[record["episode"]]
+        assert record["crashed"] == theirs["crashed"]
+        if attack:  # the path hangs on last bits (module docstring): it crashes as committed, below clean
+            assert record["return"] < clean[record["episode"]]["return"]
+            continue
         # the committed DDPG cell differs from a rerun in the 12th digit (so does the code it was made with)
-        assert record["return"] == pytest.approx(committed[record["episode"]]["return"], abs=1e-6)
-        assert record["length"] == committed[record["episode"]]["length"]
+        assert record["return"] == pytest.approx(theirs["return"], abs=1e-6 if model == "dqn" else 1e-4)
+        assert record["length"] == theirs["length"]
 
 
 @pytest.mark.slow
@@ -100,4 +117,5 @@ def test_the_rules_and_their_students_reproduce_their_first_episodes(tmp_path: P
                  "--no-progress"]) == 0
     for record, theirs in zip(_records(out / "episodes.jsonl"), committed[:3], strict=True):
         assert (record["seed"], record["length"], record["crashed"]) == (theirs["seed"], theirs["length"], theirs["crashed"])
-        assert record["return"] == pytest.approx(theirs["return"], abs=1e-9)
+        # a continuous actor's float32 output differs across CPUs in its last bits (module docstring)
+        assert record["return"] == pytest.approx(theirs["return"], abs=1e-4 if preset == "continuous" else 1e-9)

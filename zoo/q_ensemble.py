@@ -102,7 +102,8 @@ def recombine(ensemble: Path, out: Path, pessimism: float) -> Path:
 
 
 def _ensemble(env_id: str, gamma: float, shape: dict, pessimism: float) -> DQN:
-    """An untrained DQN whose features extractor is a QEnsemble of `shape` and whose head is the identity's shape."""
+    """An untrained DQN: a QEnsemble of `shape` (under `pessimism`) as its features extractor, then one
+    Linear(actions, actions) as its head."""
     if pessimism:  # only then, so that K = 0 writes the plain mean's zip as before
         shape = shape | {"pessimism": pessimism}
     return DQN("MlpPolicy", gym.make(env_id), gamma=gamma, device="cpu", seed=0, policy_kwargs={
@@ -121,7 +122,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path, nargs="*", help="run folders written by zoo/train.py --net attention")
     parser.add_argument("out", type=Path)
-    parser.add_argument("--steps", type=int, nargs="+", default=list(STEPS), help="each run's checkpoints to average")
+    parser.add_argument("--steps", type=int, nargs="+", help=f"each run's checkpoints to combine (default: {STEPS})")
     parser.add_argument("--pessimism", type=float, default=0.0, metavar="K",
                         help="act on mean - K * std of the members' Q-values (default: %(default)s, the mean)")
     parser.add_argument("--from", dest="ensemble", type=Path, metavar="ENSEMBLE",
@@ -131,13 +132,15 @@ def main() -> None:
         parser.error("--pessimism must be >= 0")
     if bool(args.runs) == bool(args.ensemble):
         parser.error("give RUN folders or --from ENSEMBLE, not both or neither")
+    if args.ensemble and args.steps:
+        parser.error("--steps picks run checkpoints; --from reads the members the ensemble already holds")
     if (args.out / "model.zip").exists():  # never overwritten; zoo/train_all.sh resumes through it
         print(f"{args.out / 'model.zip'} exists: skipped")
         return
     if args.ensemble:
         print(f"wrote {recombine(args.ensemble, args.out, args.pessimism)}")
     else:
-        print(f"wrote {build(args.runs, args.out, args.steps, args.pessimism)}")
+        print(f"wrote {build(args.runs, args.out, args.steps or STEPS, args.pessimism)}")
 
 
 if __name__ == "__main__":
