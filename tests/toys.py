@@ -37,18 +37,7 @@ def linear_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Vi
     # weights laid out (out, in) as nn.Linear's: a row's outputs do not depend on where it sits in a batch
     w1 = (torch.randn(25, hidden, generator=gen) * 0.8).T.contiguous()
     w2 = (torch.randn(hidden, out, generator=gen) * 0.8).T.contiguous()
-    linear = torch.nn.functional.linear
-
-    def forward(x: torch.Tensor) -> torch.Tensor:
-        y = linear(torch.tanh(linear(x.reshape(-1, 25).float(), w1)), w2)
-        return torch.tanh(y) if kind == "continuous" else y
-
-    def query(x: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            return forward(torch.from_numpy(np.asarray(x, dtype=np.float32))).numpy()
-
-    # a network the test built itself: the harness may calibrate on it (as on zodrive's own copy of a model)
-    return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward, calibrate=query)
+    return _mlp_victim(w1, w2, kind)
 
 
 def portable_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> Victim:
@@ -60,17 +49,26 @@ def portable_victim(seed: int = 0, kind: str = "discrete", hidden: int = 16) -> 
     out = 5 if kind == "discrete" else 2
     w1 = torch.from_numpy(rng.standard_normal((hidden, 25)) * 0.8)
     w2 = torch.from_numpy(rng.standard_normal((out, hidden)) * 0.8)
+    return _mlp_victim(w1, w2, kind, grid=2**16)
+
+
+def _mlp_victim(w1: torch.Tensor, w2: torch.Tensor, kind: str, grid: float | None = None) -> Victim:
+    """tanh(x W1) W2 (tanh again for a continuous action) in the weights' dtype, float32 out; `grid`
+    rounds the outputs to multiples of 1/grid."""
     linear = torch.nn.functional.linear
 
     def forward(x: torch.Tensor) -> torch.Tensor:
-        y = linear(torch.tanh(linear(x.reshape(-1, 25).double(), w1)), w2)
+        y = linear(torch.tanh(linear(x.reshape(-1, 25).to(w1.dtype), w1)), w2)
         y = torch.tanh(y) if kind == "continuous" else y
-        return (y + (torch.round(y * 2**16) / 2**16 - y).detach()).float()
+        if grid is not None:
+            y = y + (torch.round(y * grid) / grid - y).detach()
+        return y.float()
 
     def query(x: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             return forward(torch.from_numpy(np.asarray(x, dtype=np.float32))).numpy()
 
+    # a network the test built itself: the harness may calibrate on it (as on zodrive's own copy of a model)
     return Victim(query=query, kind=kind, obs_shape=(5, 5), differentiable=forward, calibrate=query)
 
 
