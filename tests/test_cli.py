@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import zipfile
@@ -28,6 +29,22 @@ def test_train_writes_a_complete_run_folder(tiny_dqn: Path) -> None:
     run = json.loads((tiny_dqn / "run.json").read_text())
     assert run["seed"] == 0 and "stable-baselines3" in run["versions"]
     assert "train --algo dqn" in run["command"]
+
+
+def test_a_run_records_how_this_cpu_rounds_float32() -> None:
+    """Another instruction set gives torch's kernels other last bits (tests/test_slow_reproducible.py):
+    the fingerprint in every run's versions says which. Forcing ATen's scalar path changes it."""
+    import torch
+
+    from zodrive.runinfo import float_fingerprint, versions
+
+    assert versions()["float32"] == float_fingerprint() and len(float_fingerprint()) == 12
+    if torch.backends.cpu.get_cpu_capability() == "DEFAULT":
+        pytest.skip("this CPU already takes ATen's scalar path")
+    code = "from zodrive.runinfo import float_fingerprint; print(float_fingerprint())"
+    scalar = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                            env={**os.environ, "ATEN_CPU_CAPABILITY": "default"}).stdout.strip()
+    assert len(scalar) == 12 and scalar != float_fingerprint()
 
 
 def test_evaluate_writes_summary_and_records(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
