@@ -8,11 +8,11 @@ Across CPUs only what does not hang on a float's last bit is asserted. Torch's f
 differently per instruction set (AVX2, AVX-512), so on a machine other than the one that made a cell:
 a clean discrete episode is the same (the argmax does not move), a continuous one differs in its
 last digits (1.6e-6 in a return of 358.88 on an AVX-512 machine; checked to 1e-4), and an attacked one
-takes another path. ZO-SignSGD follows
-the signs of differences of the victim's outputs, so it queries elsewhere and the car crashes at
-another step. There the test asserts that each replayed episode ends as the committed one did
-(crashed or not) and, if attacked, below its clean return. The attack engine's own arithmetic is
-pinned on every CPU by tests/test_perturb_golden.py."""
+takes another path: ZO-SignSGD follows the signs of differences of the victim's outputs, so it queries
+elsewhere and the car crashes at another step. An attacked replay therefore asserts that each episode
+ends as the committed one did (crashed or not) and below its clean return. The attack engine's own
+arithmetic is pinned on every CPU by tests/test_perturb_golden.py; `versions.float32` in a run's
+records says how the machine that made it rounds (docs/design.md)."""
 
 from __future__ import annotations
 
