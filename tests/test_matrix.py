@@ -7,7 +7,7 @@ the continuous-action algorithms run on highway, intersection and racetrack inst
 scenarios whose continuous variants highway-env supports).
 
 Each cell checks what a user relies on: the zip loads safely, the attack stays inside its
-budget, and every query is counted. Budgets are tiny (a 256-step training, one short
+budget, and every query is counted. Budgets are tiny (a 128-step training, one short
 episode with three attack iterations per step) so the whole matrix runs in the default suite.
 """
 
@@ -54,7 +54,7 @@ def test_train_save_then_attack(tmp_path: Path, algo: str, scenario: str, capsys
         overrides.append("highway.action={type: ContinuousAction}")
     cls, options = ALGOS[algo]
     model = cls("MlpPolicy", make_env(load_preset(scenario, overrides)), seed=0, device="cpu", **options)
-    model.learn(256)
+    model.learn(128)
     model.save(tmp_path / algo)  # plain SB3: no zodrive in the file
     args = ["evaluate", str(tmp_path / f"{algo}.zip"), "--preset", scenario, "--episodes", "1",
             "--attack", "random-search", "--eps", str(EPS), "--steps", "3", "--target", "none",
