@@ -201,10 +201,10 @@ def test_a_model_whose_network_does_not_fit_its_weights_fails_in_one_line(capsys
     """Found by the property test above: SB3 rebuilt arch-null.zip's network with the default layer sizes and
     torch's state-dict error (a dozen lines) reached the user whole. The cause is one line, cut at 240 chars."""
     from zodrive.cli import main
+    from zodrive.errors import cause
 
     code = main(["evaluate", HOSTILE["arch-null.zip"], "--trust-model", "--episodes", "1", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "size mismatch" in err, err
-    from zodrive.errors import cause
     assert cause(RuntimeError("a\n\tb  c")) == "RuntimeError: a b c"
     assert len(cause(ValueError("x" * 1000))) == 240

@@ -83,15 +83,14 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
     out = tmp_path / cell
     assert main(["evaluate", str(ROOT / "models" / model), "--episodes", "2", "--out", str(out), "--no-progress",
                  *attack]) == 0
-    committed = {r["episode"]: r for r in map(json.loads, (ROOT / "results" / "reproduction" / "cells" / cell
-                                                           / "episodes.jsonl").read_text().splitlines())}
-    clean = {r["episode"]: r for r in map(json.loads, (ROOT / "results" / "reproduction" / "cells"
-                                                       / f"{model}-initial" / "episodes.jsonl").read_text().splitlines())}
-    for record in map(json.loads, (out / "episodes.jsonl").read_text().splitlines()):
+    cells = ROOT / "results" / "reproduction" / "cells"
+    committed = {r["episode"]: r for r in _records(cells / cell / "episodes.jsonl")}
+    for record in _records(out / "episodes.jsonl"):
         theirs = committed[record["episode"]]
         assert record["crashed"] == theirs["crashed"]
         if attack:  # the path hangs on last bits (module docstring): it crashes as committed, below clean
-            assert record["return"] < clean[record["episode"]]["return"]
+            clean = {r["episode"]: r["return"] for r in _records(cells / f"{model}-initial" / "episodes.jsonl")}
+            assert record["return"] < clean[record["episode"]]
             continue
         # the committed DDPG cell differs from a rerun in the 12th digit (so does the code it was made with)
         assert record["return"] == pytest.approx(theirs["return"], abs=1e-6 if model == "dqn" else 1e-4)

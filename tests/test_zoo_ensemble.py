@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from stable_baselines3 import DQN
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.append(str(ROOT / "zoo"))  # the zoo's scripts import each other as the zoo runs them
@@ -37,7 +38,5 @@ def test_recombining_keeps_the_weights_and_changes_only_the_rule(tmp_path: Path)
     out = q_ensemble.recombine(source, tmp_path / "mean", 0.0)
     with zipfile.ZipFile(out) as new, zipfile.ZipFile(source / "model.zip") as old:
         assert new.read("policy.pth") == old.read("policy.pth")
-    from stable_baselines3 import DQN
-
     assert DQN.load(out, device="cpu").policy.q_net.features_extractor.pessimism == 0.0
     assert DQN.load(source / "model.zip", device="cpu").policy.q_net.features_extractor.pessimism == 0.5
