@@ -49,7 +49,8 @@ def test_a_run_records_how_this_cpu_rounds_float32() -> None:
 
 def test_evaluate_writes_summary_and_records(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "eval"
-    assert main(["evaluate", str(tiny_dqn), "--episodes", "2", "--seed", "5", "--out", str(out), "--no-progress"]) == 0
+    assert main(["evaluate", str(tiny_dqn), "--episodes", "2", "--seed", "5", "--out", str(out), "--no-progress",
+                 "--env-set", "max_episode_steps=60"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     for key in ("mean_return", "ci95", "pct_of_max", "collision_rate", "episodes", "seed"):
         assert key in summary
@@ -95,7 +96,7 @@ def test_a_folder_made_before_an_option_existed_still_resumes(tiny_dqn: Path, tm
 def test_attacked_summary_has_attack_fields(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "att"
     assert main(["evaluate", str(tiny_dqn), "--episodes", "1", "--no-progress", "--attack", "zo-signsgd",
-                 "--steps", "3", "--n-directions", "4", "--out", str(out)]) == 0
+                 "--steps", "3", "--n-directions", "4", "--out", str(out), "--env-set", "max_episode_steps=60"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     for key in ("attack", "eps", "attack_success_rate", "queries_per_step", "max_linf", "target_base_rate"):
         assert key in summary
@@ -271,7 +272,8 @@ def test_select_picks_a_checkpoint_on_tuning_seeds(tmp_path: Path, capsys) -> No
 def test_compare_over_query_budgets_draws_the_budget_curve(tiny_dqn: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "grid"
     assert main(["compare", str(tiny_dqn), "--attacks", "zo-signsgd", "--query-budgets", "21", "42",
-                 "--episodes", "1", "--out", str(out), "--no-progress", "--plot", str(out / "budget.png")]) == 0
+                 "--episodes", "1", "--out", str(out), "--no-progress", "--plot", str(out / "budget.png"),
+                 "--env-set", "max_episode_steps=60"]) == 0
     rows = json.loads((out / "table.json").read_text())
     assert [r["query_budget"] for r in rows] == [None, 21, 42]
     assert rows[1]["queries_per_step"] <= 21 < rows[2]["queries_per_step"] <= 42
@@ -287,7 +289,7 @@ def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn:
     pgd.write_text("attack: pgd\nsteps: 3\n")
     assert main(["compare", str(tiny_dqn), "baseline:slower", "baseline:rules", "--attacks", "uniform-noise", str(pgd),
                  "--eps", "0.05", "0.2", "--defense", "none", "kinematic", "--episodes", "2", "--out", str(out), "--no-progress",
-                 "--env-set", "max_episode_steps=40",
+                 "--env-set", "max_episode_steps=20",
                  "--plot", str(out / "robustness.png")]) == 0
     rows = json.loads((out / "table.json").read_text())
     model = [r for r in rows if r["model"] == tiny_dqn.name]

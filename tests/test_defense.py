@@ -20,6 +20,17 @@ from zodrive.system import make_attacked_env
 PRESET = load_preset("discrete", ["max_episode_steps=30"])
 
 
+@pytest.fixture(scope="module")
+def base(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A briefly trained DQN run that the defenses continue from (read only)."""
+    from zodrive.cli import main
+
+    out = tmp_path_factory.mktemp("base") / "base"
+    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(out), "--no-progress",
+                 "--set", "hyperparameters.learning_starts=100", "--env-set", "max_episode_steps=30"]) == 0
+    return out
+
+
 def test_replay_buffer_holds_attacked_observations_against_the_live_network() -> None:
     model = DQN("MlpPolicy", make_env(PRESET), learning_starts=0, buffer_size=1000, train_freq=1, seed=0,
                 policy_kwargs={"net_arch": [16]})
@@ -48,15 +59,12 @@ def test_replay_buffer_holds_attacked_observations_against_the_live_network() ->
         np.testing.assert_allclose(after, model.q_net(torch.from_numpy(probe)).numpy(), atol=1e-6)
 
 
-def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, monkeypatch) -> None:
+def test_control_run_is_the_same_training_without_the_attack(base: Path, tmp_path: Path, monkeypatch) -> None:
     from zodrive.cli import main
     from zodrive.system import AttackWrapper
 
-    base = tmp_path / "base"
-    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(base), "--no-progress",
-                 "--set", "hyperparameters.learning_starts=100", "--env-set", "max_episode_steps=30"]) == 0
     control = tmp_path / "control"
-    assert main(["adv-train", str(base), "--no-attack", "--steps", "60", "--out", str(control), "--no-progress",
+    assert main(["adv-train", str(base), "--no-attack", "--steps", "60", "--warmup", "40", "--out", str(control), "--no-progress",
                  "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
     train = json.loads((control / "train.json").read_text())
     assert train["kind"] == "control (no attack)" and train["attack_queries"] == 0
@@ -70,7 +78,7 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, mon
 
     monkeypatch.setattr(AttackWrapper, "observation", feed_clean)
     attacked = tmp_path / "attacked"
-    assert main(["adv-train", str(base), "--attack", "uniform-noise", "--steps", "60", "--out", str(attacked),
+    assert main(["adv-train", str(base), "--attack", "uniform-noise", "--steps", "60", "--warmup", "40", "--out", str(attacked),
                  "--no-progress", "--trust-model", "--env-set", "max_episode_steps=30"]) == 0
     monkeypatch.undo()
     assert json.loads((attacked / "train.json").read_text())["attack_queries"] > 0  # the attack did run
@@ -87,6 +95,8 @@ def test_control_run_is_the_same_training_without_the_attack(tmp_path: Path, mon
     # same settings, same seed, same warm-up, exploration and updates: the very same network, bit for bit
     first, second = read_plain(control / "model.zip")[1], read_plain(attacked / "model.zip")[1]
     assert first.keys() == second.keys() and all(torch.equal(first[k], second[k]) for k in first)
+    start = read_plain(base / "model.zip")[1]
+    assert not all(torch.equal(first[k], start[k]) for k in first)  # ... and the training did change it
 
 
 def test_sa_dqn_regularizer_is_the_worst_case_margin_inside_the_ball() -> None:
@@ -113,12 +123,9 @@ def test_sa_dqn_regularizer_is_the_worst_case_margin_inside_the_ball() -> None:
     assert model.current_eps() == pytest.approx(0.1)
 
 
-def test_robust_train_sa_runs_and_records_its_method(tmp_path: Path) -> None:
+def test_robust_train_sa_runs_and_records_its_method(base: Path, tmp_path: Path) -> None:
     from zodrive.cli import main
 
-    base = tmp_path / "base"
-    assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(base), "--no-progress",
-                 "--set", "hyperparameters.learning_starts=100", "--env-set", "max_episode_steps=30"]) == 0
     out = tmp_path / "sa"
     assert main(["robust-train", str(base), "--method", "sa", "--eps", "0.05", "--steps", "150", "--warmup", "30",
                  "--out", str(out), "--no-progress", "--trust-model", "--env-set", "max_episode_steps=30"]) == 0

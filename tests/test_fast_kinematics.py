@@ -12,18 +12,19 @@ from zodrive.envs.fast_kinematics import FastKinematicObservation
 ALL_FEATURES = ["presence", "x", "y", "vx", "vy", "heading", "cos_h", "sin_h", "cos_d", "sin_d",
                 "long_off", "lat_off", "ang_off"]
 
+# (preset, preset overrides, the observation options compared along one trajectory)
 CASES = [
-    # (preset, preset overrides, observation options)
-    ("discrete", [], {}),
-    ("continuous", [], {}),
-    ("discrete", ["highway.vehicles_count=50", "highway.vehicles_density=1.5"], {"see_behind": True}),
-    ("discrete", ["highway.vehicles_count=0"], {}),  # empty road: presence padding
-    ("continuous", ["highway.vehicles_count=40"], {"absolute": True, "vehicles_count": 8}),
-    ("discrete", [], {"features_range": {"x": [-10, 10], "y": [-2, 2], "vx": [-1, 1], "vy": [-1, 1]}}),
-    ("discrete", [], {"features_range": None}),  # highway-env's own default ranges
-    ("continuous", [], {"normalize": False, "clip": False, "features": ALL_FEATURES}),
-    ("discrete", [], {"order": "shuffled", "observe_intentions": True, "features": ALL_FEATURES}),
-    ("discrete", [], {"clip": False}),
+    ("discrete", [], [
+        {},
+        {"features_range": {"x": [-10, 10], "y": [-2, 2], "vx": [-1, 1], "vy": [-1, 1]}},
+        {"features_range": None},  # highway-env's own default ranges
+        {"order": "shuffled", "observe_intentions": True, "features": ALL_FEATURES},
+        {"clip": False},
+    ]),
+    ("continuous", [], [{}, {"normalize": False, "clip": False, "features": ALL_FEATURES}]),
+    ("discrete", ["highway.vehicles_count=50", "highway.vehicles_density=1.5"], [{"see_behind": True}]),
+    ("discrete", ["highway.vehicles_count=0"], [{}]),  # empty road: presence padding
+    ("continuous", ["highway.vehicles_count=40"], [{"absolute": True, "vehicles_count": 8}]),
 ]
 
 
@@ -33,8 +34,9 @@ def _options(config: dict, extra: dict) -> dict:
     return opts
 
 
-@pytest.mark.parametrize("preset,overrides,extra", CASES)
-def test_fast_observation_matches_stock(preset: str, overrides: list[str], extra: dict) -> None:
+@pytest.mark.parametrize("preset,overrides,extras", CASES)
+def test_fast_observation_matches_stock(preset: str, overrides: list[str], extras: list[dict]) -> None:
+    """Every option set is compared on the same 100+ states: the trajectory is the costly part."""
     config = load_preset(preset, overrides + ["highway.simulation_frequency=5", "highway.policy_frequency=2",
                                               "highway.duration=300",
                                               "highway.offroad_terminal=false"])
@@ -46,15 +48,16 @@ def test_fast_observation_matches_stock(preset: str, overrides: list[str], extra
         env.reset(seed=seed)
         base = env.unwrapped
         env.action_space.seed(seed)
-        stock = KinematicObservation(base, **_options(config, extra))
-        fast = FastKinematicObservation(base, **_options(config, extra))
+        pairs = [(KinematicObservation(base, **_options(config, extra)),
+                  FastKinematicObservation(base, **_options(config, extra))) for extra in extras]
         for _ in range(40):
-            state = base.np_random.bit_generator.state
-            want = stock.observe()
-            base.np_random.bit_generator.state = state  # "shuffled" draws from the env RNG
-            got = fast.observe()
-            assert got.dtype == want.dtype and got.shape == want.shape
-            np.testing.assert_array_equal(got, want)
+            for stock, fast in pairs:
+                state = base.np_random.bit_generator.state
+                want = stock.observe()
+                base.np_random.bit_generator.state = state  # "shuffled" draws from the env RNG
+                got = fast.observe()
+                assert got.dtype == want.dtype and got.shape == want.shape
+                np.testing.assert_array_equal(got, want)
             states += 1
             action = env.action_space.sample()
             if preset == "discrete":
