@@ -1,11 +1,15 @@
-"""highway-env scenarios that also know the `FastKinematics` observation type.
+"""highway-env scenarios that also know the `FastKinematics` observation type, and search lanes faster.
 
 `zodrive/<id>` is highway-env's `<id>` (same class, same defaults, same simulator) whose
 observation factory also accepts `type: FastKinematics`: the exact, pandas-free
-`KinematicObservation` of `fast_kinematics`. Only the observer is swapped.
+`KinematicObservation` of `fast_kinematics`. Its road network answers the closest-lane search of
+every vehicle and step with `fast_lanes`, which measures fewer lanes and gives the same lane. Nothing
+else is swapped.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.highway_env import HighwayEnv, HighwayEnvFast
@@ -15,6 +19,7 @@ from highway_env.envs.racetrack_env import ConnectedLaneRacetrackEnv
 from highway_env.envs.roundabout_env import ConnectedLaneRoundaboutEnv
 
 from zodrive.envs.fast_kinematics import FastKinematicObservation
+from zodrive.envs.fast_lanes import use_fast_lanes
 
 FAST_TYPE = "FastKinematics"
 
@@ -38,27 +43,40 @@ class FastObservationMixin:
         env.observation_space = env.observation_type.space()
 
 
-class ZodriveHighwayEnv(FastObservationMixin, HighwayEnv):
+class FastLanesMixin:
+    """Build the road as highway-env does (`_create_road` on highway, `_make_road` elsewhere), then let
+    its network search lanes with `FastLaneNetwork`, before any vehicle is placed."""
+
+    def _create_road(self, *args: Any, **kwargs: Any) -> None:
+        super()._create_road(*args, **kwargs)  # type: ignore[misc]
+        use_fast_lanes(self.road.network)  # type: ignore[attr-defined]
+
+    def _make_road(self, *args: Any, **kwargs: Any) -> None:
+        super()._make_road(*args, **kwargs)  # type: ignore[misc]
+        use_fast_lanes(self.road.network)  # type: ignore[attr-defined]
+
+
+class ZodriveHighwayEnv(FastObservationMixin, FastLanesMixin, HighwayEnv):
     """`highway-v0` with `observation.type: FastKinematics` available."""
 
 
-class ZodriveHighwayFastEnv(FastObservationMixin, HighwayEnvFast):
+class ZodriveHighwayFastEnv(FastObservationMixin, FastLanesMixin, HighwayEnvFast):
     """`highway-fast-v0` (3 lanes, 5 Hz simulation, 1 decision per second)."""
 
 
-class ZodriveMergeEnv(FastObservationMixin, ConnectedLaneMergeEnv):
+class ZodriveMergeEnv(FastObservationMixin, FastLanesMixin, ConnectedLaneMergeEnv):
     """`merge-v1`: join the highway from an on-ramp."""
 
 
-class ZodriveRoundaboutEnv(FastObservationMixin, ConnectedLaneRoundaboutEnv):
+class ZodriveRoundaboutEnv(FastObservationMixin, FastLanesMixin, ConnectedLaneRoundaboutEnv):
     """`roundabout-v1`: enter and leave a roundabout."""
 
 
-class ZodriveIntersectionEnv(FastObservationMixin, ConnectedLaneIntersectionEnv):
+class ZodriveIntersectionEnv(FastObservationMixin, FastLanesMixin, ConnectedLaneIntersectionEnv):
     """`intersection-v2`: cross an unsignalized intersection (speed actions only)."""
 
 
-class ZodriveRacetrackEnv(FastObservationMixin, ConnectedLaneRacetrackEnv):
+class ZodriveRacetrackEnv(FastObservationMixin, FastLanesMixin, ConnectedLaneRacetrackEnv):
     """`racetrack-v1`: follow a closed track by steering."""
 
 

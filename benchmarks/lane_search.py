@@ -1,0 +1,66 @@
+"""highway-env's closest-lane search against zodrive's FastLaneNetwork, in one run.
+
+Per scenario, the same episodes (same seeds, same actions) are stepped with each search in turn,
+interleaved episode by episode so that load on the machine hits both alike; the trajectories must be
+identical. Prints the environment steps/s of each and ends with one line per scenario:
+<scenario> stock=<steps/s> fast=<steps/s> speedup=<x>
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import zodrive.envs.highway as zodrive_envs
+from zodrive.envs import load_preset, make_env
+
+FAST = zodrive_envs.use_fast_lanes
+
+
+def episode(preset: str, seed: int, fast: bool) -> tuple[list[np.ndarray], float, int]:
+    """One episode of random actions; its observations, its stepping time and its steps."""
+    zodrive_envs.use_fast_lanes = FAST if fast else (lambda network: None)
+    try:
+        env = make_env(load_preset(preset))
+        obs, _ = env.reset(seed=seed)
+    finally:
+        zodrive_envs.use_fast_lanes = FAST
+    env.action_space.seed(seed)
+    trace, wall, steps = [obs], 0.0, 0
+    while True:
+        action = env.action_space.sample()
+        start = time.perf_counter()
+        obs, reward, terminated, truncated, _ = env.step(action)
+        wall += time.perf_counter() - start
+        steps += 1
+        trace += [obs, np.array([reward])]
+        if terminated or truncated:
+            return trace, wall, steps
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenarios", nargs="+", default=["intersection", "roundabout", "merge", "highway-fast"])
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=100000)
+    args = parser.parse_args()
+    for preset in args.scenarios:
+        wall = {True: 0.0, False: 0.0}
+        steps = 0
+        for seed in range(args.seed, args.seed + args.episodes):
+            runs = {}
+            for fast in (False, True):
+                runs[fast], seconds, n = episode(preset, seed, fast)
+                wall[fast] += seconds
+            steps += n
+            assert len(runs[True]) == len(runs[False]) and all(
+                np.array_equal(a, b) for a, b in zip(runs[True], runs[False])), f"{preset} seed {seed} differs"
+        stock, fast = steps / wall[False], steps / wall[True]
+        print(f"{preset} stock={stock:.1f} fast={fast:.1f} speedup={fast / stock:.2f}  "
+              f"({steps} identical steps, {args.episodes} episodes)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

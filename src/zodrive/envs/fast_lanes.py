@@ -1,0 +1,92 @@
+"""highway-env's closest-lane search, exact and without measuring every lane.
+
+Every vehicle asks the road network for its closest lane at every simulation step, and
+`RoadNetwork.get_closest_lane_index` measures its weighted distance to every lane of the map: a third
+of an intersection step and over half of a roundabout step. `FastLaneNetwork` gives the same answer
+while measuring only the lanes that can win. Each lane has a lower bound on its distance (the distance
+to a box around its centre line, less a sine lane's amplitude); lanes are measured by highway-env's
+own `distance_with_heading`, nearest box first, until the next bound exceeds the best distance found.
+A lane left unmeasured is farther than the best by more than float rounding, so it could neither win
+nor tie, and ties go to the first lane in the network's order, as `np.argmin` gives them. Lane types
+without a bound here are always measured. Checked against the stock search in `tests/test_fast_lanes.py`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from highway_env.road.lane import AbstractLane, CircularLane, SineLane, StraightLane
+from highway_env.road.road import LaneIndex, RoadNetwork
+
+SLACK = 1e-6  # [m] a bound must exceed the best distance by this much to skip a lane: float rounding is far less
+MIN_LANES = 8  # on fewer lanes (a highway's 3 or 4) measuring them all is as fast (benchmarks/lane_search.py)
+
+
+def _box(lane: AbstractLane) -> tuple[float, float, float, float, float] | None:
+    """(x_lo, y_lo, x_hi, y_hi, pad): the centre line lies in the box, and the lane's distance to any
+    point is at least the point's distance to the box less `pad`. None: no bound for this lane type."""
+    kind = type(lane)
+    if kind is CircularLane:  # the arc lies on its circle
+        cx, cy, r = float(lane.center[0]), float(lane.center[1]), float(lane.radius)
+        return cx - r, cy - r, cx + r, cy + r, 0.0
+    if kind is StraightLane or kind is SineLane:  # |lateral| + overshoot >= the Euclidean distance
+        (x0, y0), (x1, y1) = lane.start, lane.end
+        pad = abs(float(lane.amplitude)) if kind is SineLane else 0.0  # a sine lane strays this far
+        return float(min(x0, x1)), float(min(y0, y1)), float(max(x0, x1)), float(max(y0, y1)), pad
+    return None
+
+
+class FastLaneNetwork(RoadNetwork):
+    """A `RoadNetwork` whose closest-lane search skips lanes that cannot be the closest."""
+
+    _bounds: tuple[list[LaneIndex], list[AbstractLane], np.ndarray, np.ndarray] | None = None
+
+    def add_lane(self, _from: str, _to: str, lane: AbstractLane) -> None:
+        self._bounds = None
+        super().add_lane(_from, _to, lane)
+
+    def _lane_bounds(self) -> tuple[list[LaneIndex], list[AbstractLane], np.ndarray, np.ndarray] | None:
+        if self._bounds is None:
+            indexes, lanes, boxes = [], [], []
+            for _from, to_dict in self.graph.items():
+                for _to, road_lanes in to_dict.items():
+                    for _id, lane in enumerate(road_lanes):
+                        indexes.append((_from, _to, _id))
+                        lanes.append(lane)
+                        boxes.append(_box(lane) or (-math.inf, -math.inf, math.inf, math.inf, 0.0))
+            table = np.array(boxes, dtype=np.float64).reshape(-1, 5)
+            if not np.isfinite(table[np.isfinite(table[:, 0])]).all():
+                return None  # a lane with a broken geometry: leave every search to highway-env
+            self._bounds = indexes, lanes, table[:, :4], table[:, 4]
+        return self._bounds
+
+    def get_closest_lane_index(self, position: np.ndarray, heading: float | None = None) -> LaneIndex:
+        bounds = self._lane_bounds()
+        x, y = float(position[0]), float(position[1])
+        if bounds is None or not (math.isfinite(x) and math.isfinite(y)) or \
+                (heading is not None and not math.isfinite(heading)):
+            return super().get_closest_lane_index(position, heading)
+        indexes, lanes, box, pad = bounds
+        dx = np.maximum(np.maximum(box[:, 0] - x, x - box[:, 2]), 0.0)
+        dy = np.maximum(np.maximum(box[:, 1] - y, y - box[:, 3]), 0.0)
+        lower = np.where(np.isfinite(box[:, 0]), np.hypot(dx, dy) - pad, -math.inf)
+        best, best_i = math.inf, -1
+        for i in np.argsort(lower, kind="stable").tolist():
+            if lower[i] > best + SLACK:
+                break
+            distance = lanes[i].distance_with_heading(position, heading)
+            if not math.isfinite(distance):
+                return super().get_closest_lane_index(position, heading)  # np.argmin's NaN rule, not ours
+            if distance < best or (distance == best and i < best_i):
+                best, best_i = distance, i
+        return indexes[best_i]
+
+
+def use_fast_lanes(network: Any) -> None:
+    """Make a plain `RoadNetwork` of `MIN_LANES` lanes or more search them with `FastLaneNetwork` (same
+    answers, fewer lanes measured)."""
+    if type(network) is RoadNetwork and sum(len(lanes) for to in network.graph.values()
+                                            for lanes in to.values()) >= MIN_LANES:
+        network.__class__ = FastLaneNetwork
