@@ -51,6 +51,7 @@ def _trained(run: Path, train: dict) -> list[str]:
                       else f" --{k.replace('_', '-')} {train[k]}"
                       for k, v in DEFAULTS.items() if train.get(k, v) != v)  # older runs: defaults
     changed += f" --start-from {train['start_from']}" if "start_from" in train else ""  # a continued run
+    changed += " --fast-env" if train.get("fast_env") else ""  # zodrive's copy of the scenario: same weights
     network = (" with the ego-attention network of `zoo/ego_attention.py` (its zips load in zodrive with "
                "`zoo/` on `PYTHONPATH` and `--trust-model`)") if own_network(train) else ""
     return [f"# {run.parent.name} / {run.name}", "",
