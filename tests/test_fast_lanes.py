@@ -64,6 +64,10 @@ def test_ties_go_to_the_first_lane_and_broken_input_to_highway_env() -> None:
     assert network.get_closest_lane_index(np.array([28.0, 0.0]), 0.0) == ("c", "d", 0)
     nan = np.array([np.nan, 0.0])
     assert network.get_closest_lane_index(nan, 0.0) == RoadNetwork.get_closest_lane_index(network, nan, 0.0)
+    with np.errstate(invalid="ignore"):  # a lane of length 0 measures NaN everywhere, and np.argmin picks it
+        network.add_lane("p", "q", StraightLane([500, 500], [500, 500]))
+        assert network.get_closest_lane_index(np.array([28.0, 0.0]), 0.0) == ("p", "q", 0) == \
+            RoadNetwork.get_closest_lane_index(network, np.array([28.0, 0.0]), 0.0)
 
 
 @pytest.mark.parametrize("name", ["intersection", "roundabout"])

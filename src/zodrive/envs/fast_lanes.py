@@ -24,18 +24,29 @@ SLACK = 1e-6  # [m] a bound must exceed the best distance by this much to skip a
 MIN_LANES = 8  # on fewer lanes (a highway's 3 or 4) measuring them all is as fast (benchmarks/lane_search.py)
 
 
-def _box(lane: AbstractLane) -> tuple[float, float, float, float, float] | None:
+EVERYWHERE = (-math.inf, -math.inf, math.inf, math.inf, 0.0)  # no bound: the lane is always measured
+
+
+def _box(lane: AbstractLane) -> tuple[float, float, float, float, float]:
     """(x_lo, y_lo, x_hi, y_hi, pad): the centre line lies in the box, and the lane's distance to any
-    point is at least the point's distance to the box less `pad`. None: no bound for this lane type."""
+    point is at least the point's distance to the box less `pad`. `EVERYWHERE` for another lane type,
+    or where a distance could be NaN (a parameter not finite, a straight lane of length 0), which
+    highway-env's `np.argmin` would pick wherever it is."""
     kind = type(lane)
     if kind is CircularLane:  # the arc lies on its circle
         cx, cy, r = float(lane.center[0]), float(lane.center[1]), float(lane.radius)
-        return cx - r, cy - r, cx + r, cy + r, 0.0
-    if kind is StraightLane or kind is SineLane:  # |lateral| + overshoot >= the Euclidean distance
+        box = (cx - r, cy - r, cx + r, cy + r, 0.0)
+        numbers = [lane.start_phase, lane.end_phase]
+    elif kind is StraightLane or kind is SineLane:  # |lateral| + overshoot >= the Euclidean distance
         (x0, y0), (x1, y1) = lane.start, lane.end
         pad = abs(float(lane.amplitude)) if kind is SineLane else 0.0  # a sine lane strays this far
-        return float(min(x0, x1)), float(min(y0, y1)), float(max(x0, x1)), float(max(y0, y1)), pad
-    return None
+        box = (float(min(x0, x1)), float(min(y0, y1)), float(max(x0, x1)), float(max(y0, y1)), pad)
+        numbers = [lane.pulsation, lane.phase] if kind is SineLane else []
+        if not lane.length > 0:
+            return EVERYWHERE
+    else:
+        return EVERYWHERE
+    return box if all(math.isfinite(float(v)) for v in [*box, *numbers]) else EVERYWHERE
 
 
 class FastLaneNetwork(RoadNetwork):
@@ -47,7 +58,7 @@ class FastLaneNetwork(RoadNetwork):
         self._bounds = None
         super().add_lane(_from, _to, lane)
 
-    def _lane_bounds(self) -> tuple[list[LaneIndex], list[AbstractLane], np.ndarray, np.ndarray] | None:
+    def _lane_bounds(self) -> tuple[list[LaneIndex], list[AbstractLane], np.ndarray, np.ndarray]:
         if self._bounds is None:
             indexes, lanes, boxes = [], [], []
             for _from, to_dict in self.graph.items():
@@ -55,20 +66,16 @@ class FastLaneNetwork(RoadNetwork):
                     for _id, lane in enumerate(road_lanes):
                         indexes.append((_from, _to, _id))
                         lanes.append(lane)
-                        boxes.append(_box(lane) or (-math.inf, -math.inf, math.inf, math.inf, 0.0))
+                        boxes.append(_box(lane))
             table = np.array(boxes, dtype=np.float64).reshape(-1, 5)
-            if not np.isfinite(table[np.isfinite(table[:, 0])]).all():
-                return None  # a lane with a broken geometry: leave every search to highway-env
             self._bounds = indexes, lanes, table[:, :4], table[:, 4]
         return self._bounds
 
     def get_closest_lane_index(self, position: np.ndarray, heading: float | None = None) -> LaneIndex:
-        bounds = self._lane_bounds()
         x, y = float(position[0]), float(position[1])
-        if bounds is None or not (math.isfinite(x) and math.isfinite(y)) or \
-                (heading is not None and not math.isfinite(heading)):
-            return super().get_closest_lane_index(position, heading)
-        indexes, lanes, box, pad = bounds
+        if not (math.isfinite(x) and math.isfinite(y)) or (heading is not None and not math.isfinite(heading)):
+            return super().get_closest_lane_index(position, heading)  # np.argmin's NaN rule, not ours
+        indexes, lanes, box, pad = self._lane_bounds()
         dx = np.maximum(np.maximum(box[:, 0] - x, x - box[:, 2]), 0.0)
         dy = np.maximum(np.maximum(box[:, 1] - y, y - box[:, 3]), 0.0)
         lower = np.where(np.isfinite(box[:, 0]), np.hypot(dx, dy) - pad, -math.inf)
