@@ -14,11 +14,12 @@ Run: python studies/zoo-recipe/power.py [--board results/bench] [--margin M ...]
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
 import numpy as np
+
+from zodrive.runinfo import read_jsonl
 
 CONSTANTS = ("baseline-slower", "baseline-idle", "baseline-faster")
 Z95, Z80 = 1.959964, 0.841621
@@ -26,8 +27,7 @@ Z95, Z80 = 1.959964, 0.841621
 
 def clean_returns(folder: Path) -> dict[int, float]:
     (cell,) = sorted((folder / "cells").glob("*-none"))
-    rows = [json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line.strip()]
-    return {r["seed"]: r["return"] for r in rows}
+    return {r["seed"]: r["return"] for r in read_jsonl(cell / "episodes.jsonl", needs=("seed", "return"))}
 
 
 def probability(margin: float, sd: float, n: int) -> float:

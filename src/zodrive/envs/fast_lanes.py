@@ -22,8 +22,6 @@ from highway_env.road.road import LaneIndex, RoadNetwork
 
 SLACK = 1e-6  # [m] a bound must exceed the best distance by this much to skip a lane: float rounding is far less
 MIN_LANES = 8  # on fewer lanes (a highway's 3 or 4) measuring them all is as fast (benchmarks/lane_search.py)
-
-
 EVERYWHERE = (-math.inf, -math.inf, math.inf, math.inf, 0.0)  # no bound: the lane is always measured
 
 
@@ -78,7 +76,7 @@ class FastLaneNetwork(RoadNetwork):
         indexes, lanes, box, pad = self._lane_bounds()
         dx = np.maximum(np.maximum(box[:, 0] - x, x - box[:, 2]), 0.0)
         dy = np.maximum(np.maximum(box[:, 1] - y, y - box[:, 3]), 0.0)
-        lower = np.where(np.isfinite(box[:, 0]), np.hypot(dx, dy) - pad, -math.inf)
+        lower = np.hypot(dx, dy) - pad  # 0 for an `EVERYWHERE` lane: a distance is never below 0, so it is measured
         best, best_i = math.inf, -1
         for i in np.argsort(lower, kind="stable").tolist():
             if lower[i] > best + SLACK:
