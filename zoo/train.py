@@ -35,7 +35,8 @@ from stable_baselines3.common.monitor import Monitor
 ENV_IDS = {"highway-fast": "highway-fast-v0", "merge": "merge-v1", "roundabout": "roundabout-v1",
            "intersection": "intersection-v2"}
 
-DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp", "lr": 5e-4, "batch": 32, "target_update": 50}
+DEFAULTS = {"steps": 20_000, "every": 2_000, "gamma": 0.8, "net": "mlp", "lr": 5e-4, "batch": 32, "target_update": 50,
+            "n_steps": 1}
 """The recipe's settings a run may change (zoo/card.py writes the ones a run changed into its command)."""
 
 
@@ -54,6 +55,8 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=DEFAULTS["batch"], help="minibatch size (default: %(default)s)")
     parser.add_argument("--target-update", type=int, default=DEFAULTS["target_update"],
                         help="steps between target-network updates (default: %(default)s)")
+    parser.add_argument("--n-steps", type=int, default=DEFAULTS["n_steps"],
+                        help="decisions per bootstrapped return (SB3's n-step DQN; default: %(default)s)")
     parser.add_argument("--start-from", type=Path,
                         help="continue this finished run's zip for --steps more steps (exploration held at 0.05)")
     parser.add_argument("--fast-env", action="store_true",
@@ -79,13 +82,14 @@ def main() -> None:
     if args.start_from is None:
         model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=args.lr,
                     buffer_size=15_000, learning_starts=200, batch_size=args.batch, gamma=args.gamma, train_freq=1,
-                    gradient_steps=1, target_update_interval=args.target_update, exploration_fraction=0.7,
+                    gradient_steps=1, n_steps=args.n_steps, target_update_interval=args.target_update, exploration_fraction=0.7,
                     seed=args.seed, device="cpu", verbose=0)
     else:  # the same recipe, continued: SB3 rebuilds the schedules from these values
         model = DQN.load(args.start_from, env=env, device="cpu", seed=args.seed, learning_rate=args.lr,
                          exploration_initial_eps=0.05, exploration_final_eps=0.05)
         recipe = {"gamma": (model.gamma, args.gamma), "batch": (model.batch_size, args.batch),
                   "target-update": (model.target_update_interval, args.target_update),
+                  "n-steps": (model.n_steps, args.n_steps),
                   "net": (model.policy_kwargs.get("net_arch"), policy_kwargs["net_arch"])}
         differ = [name for name, (theirs, mine) in recipe.items() if theirs != mine]
         if differ:  # the zip's settings win in SB3's load, so a differing flag would be ignored silently
@@ -99,6 +103,7 @@ def main() -> None:
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario], "fast_env": args.fast_env,
          "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
          "lr": args.lr, "batch": args.batch, "target_update": args.target_update,
+         "n_steps": args.n_steps,
          **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")
