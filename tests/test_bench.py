@@ -25,7 +25,9 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
             "--board", str(board), "--no-progress"]
     assert main(args) == 0
     row = json.loads((board / "highway-fast" / "ppo" / "row.json").read_text())
-    assert row["protocol"] == "highway-fast-v2" and row["official"] is False and row["key"].startswith("sha256:")
+    assert row["protocol"] == PROTOCOLS["highway-fast"].name() and row["official"] is False
+    assert row["key"].startswith("sha256:") and row["clean_episodes"] == row["episodes"] == 2  # a quick look: 2 of each
+    assert not (board / "highway-fast" / "ppo" / "clean").exists()
     table = json.loads((board / "highway-fast" / "ppo" / "table.json").read_text())
     clean = next(c["mean_return"] for c in table if c["attack"] == "none")
     for cell in row["attacked"]:  # the row keeps the cell that hurts most inside each eps-ball
@@ -134,13 +136,14 @@ def test_compare_keeps_the_strongest_attack_inside_each_eps_ball() -> None:
 
 def test_rows_of_two_protocol_versions_never_share_a_table() -> None:
     def row(protocol: str) -> dict:
-        return {"protocol": protocol, "scenario": "merge", "policy": protocol, "official": True, "key": "k",
+        return {"protocol": protocol, "scenario": "merge", "policy": protocol, "official": True, "key": "k", "episodes": 100,
                 "clean": {"return": 1.0, "ci95": [0.0, 2.0], "collision_rate": 0.0, "speed": 20.0},
                 "attacked": [{"eps": 0.01, "return": 1.0, "collision_rate": 0.0, "queries_to_crash": None,
                               "pgd_return": None}], "robustness_area": 1.0, "eps_collisions_pass_brake": None}
 
-    text = leaderboard_markdown([row("merge-v1"), row("merge-v2")])
-    assert "## merge (protocol merge-v1) — an earlier version" in text and "## merge (protocol merge-v2)\n" in text
+    current = PROTOCOLS["merge"].name()
+    text = leaderboard_markdown([row("merge-v1"), row(current)])
+    assert "## merge (protocol merge-v1) — an earlier version" in text and f"## merge (protocol {current})\n" in text
 
 
 def test_eps_is_stated_in_the_scenarios_units() -> None:
@@ -164,12 +167,16 @@ def test_the_committed_leaderboard_is_generated_from_the_committed_rows() -> Non
 def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
     """Δ brake is computed from the row folder's clean and brake episodes, seed by seed: the brake's own row is
     exactly 0, and the committed highway-fast DQN (seed 0) beats the brake by a margin its CI shows."""
-    from zodrive.experiments.bench import brake_margin
+    from zodrive.experiments.bench import brake_margin, clean_folder
 
     board = Path(__file__).resolve().parents[1] / "results" / "bench" / "highway-fast"
-    assert brake_margin(board / "baseline-slower") == [0.0, 0.0, 0.0]
-    mean, low, high = brake_margin(board / "dqn-seed-0")
+    for name in ("baseline-slower", "dqn-seed-0"):
+        row = json.loads((board / name / "row.json").read_text())
+        assert brake_margin(clean_folder(row, board / name), board / name / "brake") == row["vs_brake"]
+    assert brake_margin(board / "baseline-slower" / "clean", board / "baseline-slower" / "brake") == [0.0, 0.0, 0.0]
+    mean, low, high = brake_margin(board / "dqn-seed-0" / "clean", board / "dqn-seed-0" / "brake")
     assert 0 < low < mean < high
+    assert brake_margin(board / "dqn-seed-0", board / "dqn-seed-0" / "brake") is None  # 100 episodes against 300
 
 
 def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same_table() -> None:
@@ -248,3 +255,42 @@ def test_a_network_of_the_users_own_is_benched_only_with_trust_and_its_row_says_
     assert main(["evaluate", str(tmp_path / "copy.zip"), "--preset", "intersection", "--episodes", "1",
                  "--trust-model", "--no-progress"]) == 2
     assert "module 'my_net', which is not importable here" in capsys.readouterr().err
+
+
+def test_more_clean_episodes_than_attacked_ones(tmp_path: Path) -> None:
+    """Version 3: the clean figures come from `clean/`, while the envelope and the area compare the
+    attacks with the clean cell of the same (first) episodes; a row with other counts is unofficial."""
+    from zodrive.experiments.bench import Protocol, bench_row
+
+    proto = Protocol("highway-fast", 100, (0.01, 0.05), clean_episodes=300)
+    cells = [_cell("none", 0.0, 10.0, 0.1), _cell("random-search", 0.01, 11.0), _cell("random-search", 0.05, 6.0, 0.3)]
+    folder = _bench_folder(tmp_path / "a", cells)
+    (folder / "clean").mkdir()
+    (folder / "clean" / "table.json").write_text(json.dumps([_cell("none", 0.0, 8.0, 0.25)]))
+    row = bench_row("m", "k", proto, folder, 100, 300)
+    assert row["clean"]["return"] == 8.0 and row["clean"]["collision_rate"] == 0.25
+    assert row["clean_on_attacked_episodes"] == {"return": 10.0, "collision_rate": 0.1}
+    assert [p["return"] for p in row["attacked"]] == [10.0, 6.0]  # clean of the same episodes, not of 300
+    assert row["robustness_area"] == pytest.approx((0.01 * 10 + 0.04 * 8) / (0.05 * 10))
+    assert row["eps_collisions_pass_brake"] == 0.05  # 10 % clean on these episodes is below the brake's 20 %
+    assert (row["official"], row["clean_seeds"], row["seeds"]) == (True, [100000, 100299], [100000, 100099])
+    assert bench_row("m", "k", proto, folder, 100)["official"] is False  # 100 clean episodes: not the protocol
+
+
+def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path) -> None:
+    """The clean cell of more episodes begins with the attacked grid's own clean episodes, and the brake
+    is paired with it episode by episode."""
+    from zodrive.experiments.bench import Protocol, bench
+
+    proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2)
+    row = bench("baseline:idle", proto, tmp_path, progress=False, envs=1)
+
+    def returns(folder: Path) -> list[float]:
+        (cell,) = (folder / "cells").glob("*-none")
+        return [json.loads(line)["return"] for line in (cell / "episodes.jsonl").read_text().splitlines()]
+
+    assert len(returns(tmp_path / "clean")) == 2 and returns(tmp_path / "clean")[:1] == returns(tmp_path)
+    assert row["clean"]["return"] == pytest.approx(sum(returns(tmp_path / "clean")) / 2)
+    brake = returns(tmp_path / "brake")
+    mean = sum(a - b for a, b in zip(returns(tmp_path / "clean"), brake, strict=True)) / 2
+    assert len(brake) == 2 and row["vs_brake"][0] == pytest.approx(mean)

@@ -22,7 +22,7 @@ def add_parsers(sub: Any) -> None:
     bench.add_argument("--board", type=Path, default=BOARD,
                        help="leaderboard folder: the row goes to BOARD/SCENARIO/NAME (default: results/bench)")
     bench.add_argument("--episodes", type=episode_count, default=None,
-                       help="fewer episodes than the protocol's, for a quick look: the row is marked unofficial "
+                       help="N episodes, clean and attacked alike, for a quick look: the row is marked unofficial "
                             "(default: the protocol's)")
     bench.add_argument("--force", action="store_true", help="replace another bench in the row's folder")
     trust_flag(bench)

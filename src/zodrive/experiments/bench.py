@@ -1,6 +1,7 @@
 """`zodrive bench`: one versioned protocol per scenario, one row per policy, one leaderboard.
 
-A protocol fixes what a row means: the scenario, the evaluation seeds and episodes, the ε grid
+A protocol fixes what a row means: the scenario, the evaluation seeds and episodes (clean, and
+attacked: the first of the clean seeds, since attacks cost hundreds of queries a step), the ε grid
 (normalized units, also stated in metres and m/s), the black-box attack ensemble (every attack
 runs at every ε; the row keeps, per ε, the cell that hurts the policy most among all those inside
 the ε-ball, smaller ε and clean included) and white-box PGD as a
@@ -27,9 +28,11 @@ from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
 
-VERSION = 2
-"""Version 2 (2026-11-27): a row's return at ε is the worst over the ε-ball (attacks at every ε' ≤ ε,
-and clean); version 1 kept the worst attack at ε alone. The protocols' seeds, ε and attacks are unchanged."""
+VERSION = 3
+"""Version 3 (2026-11-27): the clean figures of the four zoo scenarios come from 300 episodes, the
+attacked ones still from the first 100 (docs/bench.md, "Citing a version"); the paper's preset keeps
+version 2. Version 2: a row's return at ε is the worst over the ε-ball (attacks at every ε' ≤ ε, and
+clean); version 1 kept the worst attack at ε alone. Seeds, ε and attacks are unchanged throughout."""
 BLACK_BOX = ("random-search", "zo-signsgd")
 """The ensemble: Square-style random search (the strongest per-step black-box attack on most of the
 committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
@@ -44,6 +47,9 @@ class Protocol:
     scenario: str
     episodes: int
     eps: tuple[float, ...]
+    clean_episodes: int = 0
+    """Clean episodes (0: `episodes`), on seeds that begin with the attacked ones: the margin over
+    the constant actions, the row's first claim, needs more than the attacks can afford."""
     seed: int = EVAL_SEED
     version: int = VERSION
     black_box: tuple[str, ...] = BLACK_BOX
@@ -52,17 +58,24 @@ class Protocol:
     def name(self) -> str:
         return f"{self.scenario}-v{self.version}"
 
+    def counts(self, episodes: int | None = None) -> tuple[int, int]:
+        """(attacked, clean) episodes: the protocol's, or `episodes` for both (a quick, unofficial look)."""
+        if episodes is not None:
+            return episodes, episodes
+        return self.episodes, max(self.clean_episodes, self.episodes)
+
 
 PROTOCOLS = {
-    "highway-fast": Protocol("highway-fast", 100, (0.01, 0.02, 0.05)),
-    "merge": Protocol("merge", 100, (0.01, 0.02, 0.05)),
-    "roundabout": Protocol("roundabout", 100, (0.01, 0.02, 0.05)),
-    "intersection": Protocol("intersection", 100, (0.01, 0.02, 0.05)),
-    "discrete": Protocol("discrete", 30, (0.02, 0.05, 0.2)),
+    "highway-fast": Protocol("highway-fast", 100, (0.01, 0.02, 0.05), clean_episodes=300),
+    "merge": Protocol("merge", 100, (0.01, 0.02, 0.05), clean_episodes=300),
+    "roundabout": Protocol("roundabout", 100, (0.01, 0.02, 0.05), clean_episodes=300),
+    "intersection": Protocol("intersection", 100, (0.01, 0.02, 0.05), clean_episodes=300),
+    "discrete": Protocol("discrete", 30, (0.02, 0.05, 0.2), version=2),  # 450-step episodes, margins in the hundreds
 }
 
 
 def protocol(name: str) -> Protocol:
+    """The current protocol of scenario `name`."""
     if name not in PROTOCOLS:
         raise ZodriveError(f"no bench protocol for scenario {name!r} (protocols: {', '.join(PROTOCOLS)})")
     return PROTOCOLS[name]
@@ -79,20 +92,25 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
           workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8,
           trust: bool = False) -> dict[str, Any]:
     """Run the protocol's cells for `policy` (and the constant brake, the row every table is read
-    against) into `out`, and write its row (`row.json`). `episodes` overrides the protocol's count
-    for a quick look: such a row is marked unofficial. `trust` reads an SB3 zip with SB3's own
-    loader (a network zodrive cannot rebuild safely); the row says so, for whoever reruns it."""
-    n = proto.episodes if episodes is None else episodes
+    against) into `out`, and write its row (`row.json`). The clean cell of more episodes than the
+    attacked ones goes to `out/clean`, beside the attacked grid's own clean cell (the same first
+    episodes). `episodes` overrides both counts for a quick look: such a row is marked unofficial.
+    `trust` reads an SB3 zip with SB3's own loader (a network zodrive cannot rebuild safely); the row
+    says so, for whoever reruns it."""
+    n, n_clean = proto.counts(episodes)
     resolved = resolve(policy)
     attacks = [*proto.black_box, proto.white_box]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs, trust=trust)
+    if n_clean > n:
+        compare([policy], [], [], n_clean, out / "clean", workers=workers, progress=progress, seed=proto.seed,
+                preset=proto.scenario, force=force, envs=envs, trust=trust)
     brake = out / "brake"
-    compare([BRAKE], [], [], n, brake, workers=workers, progress=progress, seed=proto.seed,
+    compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs)
-    row = bench_row(name or resolved.label, resolved.key(), proto, out, n)
+    row = bench_row(name or resolved.label, resolved.key(), proto, out, n, n_clean)
     if trust:
         row["trust_model"] = True
     write_json(out / "row.json", row)
@@ -110,42 +128,52 @@ def _cells(out: Path) -> list[dict[str, Any]]:
         raise ZodriveError(f"{path} is damaged (not JSON): run the bench again with --force") from None
 
 
-def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int) -> dict[str, Any]:
+def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
+              clean_episodes: int | None = None) -> dict[str, Any]:
     """The row of a finished bench folder: clean figures, the strongest black-box attack in each ε-ball, PGD
     apart, the robustness area, the ε where collisions pass the brake's, queries to a crash.
 
     The return at ε is the worst over every cell the ε-ball holds: each black-box attack at every
     ε' ≤ ε, and no perturbation at all (version 2). An attack that finds a point within ε' is an
     attack within ε, so a return that rose with ε (a weaker search in a bigger ball, seen on 15 of 54
-    version-1 rows) only measured the search; the envelope is never above a smaller ε's, nor clean."""
+    version-1 rows) only measured the search; the envelope is never above a smaller ε's, nor clean.
+
+    With more clean episodes than attacked ones (version 3), the clean figures and the margins come
+    from `out/clean`; the envelope, the area and the ε past brake compare the attacks with the clean
+    cell of the same episodes (`clean_on_attacked_episodes`)."""
+    n_clean = episodes if clean_episodes is None else clean_episodes
     cells = _cells(out)
-    clean = next(c for c in cells if c["attack"] == "none")
+    same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
+    clean = same if n_clean == episodes else next(c for c in _cells(out / "clean") if c["attack"] == "none")
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in proto.black_box]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
     if black_box:
-        inside = _inside(black_box, clean, proto.eps)
-        pgd_inside = _inside(white_box, clean, proto.eps) if white_box else {}
+        inside = _inside(black_box, same, proto.eps)
+        pgd_inside = _inside(white_box, same, proto.eps) if white_box else {}
         per_eps = [_attacked(out, eps, inside[eps], pgd_inside.get(eps)) for eps in proto.eps]
     else:  # a policy no observation attack reaches (a constant or simulator-reading driver)
-        per_eps = [{"eps": eps, "return": clean["mean_return"], "collision_rate": clean["collision_rate"],
+        per_eps = [{"eps": eps, "return": same["mean_return"], "collision_rate": same["collision_rate"],
                     "attack": None, "queries_to_crash": None, "pgd_return": None, "pgd_collision_rate": None}
                    for eps in proto.eps]
-    returns = [clean["mean_return"], *(p["return"] for p in per_eps)]
+    returns = [same["mean_return"], *(p["return"] for p in per_eps)]
     grid = [0.0, *proto.eps]
-    area = float(np.trapezoid(returns, grid) / (grid[-1] * clean["mean_return"])) if clean["mean_return"] > 0 else None
+    area = float(np.trapezoid(returns, grid) / (grid[-1] * same["mean_return"])) if same["mean_return"] > 0 else None
     # the smallest ε whose ball holds an attack that collides more often than the brake does clean
-    passes = 0.0 if clean["collision_rate"] > brake["collision_rate"] else \
+    passes = 0.0 if same["collision_rate"] > brake["collision_rate"] else \
         min((c["eps"] for c in black_box if c["collision_rate"] > brake["collision_rate"]), default=None)
     return {
-        "protocol": proto.name(), "official": episodes == proto.episodes, "policy": label, "key": key,
+        "protocol": proto.name(), "official": (episodes, n_clean) == proto.counts(), "policy": label, "key": key,
         "scenario": proto.scenario, "episodes": episodes, "seeds": [proto.seed, proto.seed + episodes - 1],
+        "clean_episodes": n_clean, "clean_seeds": [proto.seed, proto.seed + n_clean - 1],
         "clean": {"return": clean["mean_return"], "ci95": [clean["ci95_low"], clean["ci95_high"]],
                   "collision_rate": clean["collision_rate"], "speed": clean["mean_speed"],
                   "offroad_rate": clean.get("offroad_rate")},
+        "clean_on_attacked_episodes": {"return": same["mean_return"], "collision_rate": same["collision_rate"]},
         "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
-        "vs_brake": brake_margin(out), "eps_units": physical_eps(proto),
+        "vs_brake": brake_margin(out / "clean" if n_clean > episodes else out, out / "brake"),
+        "eps_units": physical_eps(proto),
     }
 
 
@@ -167,15 +195,22 @@ def _inside(attacked: list[dict[str, Any]], clean: dict[str, Any], grid: tuple[f
     return {eps: curve[max(e for e in curve if e <= eps)] for eps in grid}
 
 
-def brake_margin(folder: Path) -> list[float] | None:
-    """The clean return minus the constant brake's, paired on the protocol's seeds (episode by episode),
-    with its bootstrap 95% CI: [mean, low, high]. A policy beats the brake by a margin its CI shows when
-    low > 0. None where a cell's episodes are missing or not on the same seeds."""
-    return _paired(_clean_returns(folder), _clean_returns(folder / "brake"))
+def brake_margin(clean: Path, brake: Path) -> list[float] | None:
+    """The clean return of the comparison folder `clean` minus the constant brake's (folder `brake`),
+    paired on the protocol's seeds (episode by episode), with its bootstrap 95% CI: [mean, low, high].
+    A policy beats the brake by a margin its CI shows when low > 0. None where a cell's episodes are
+    missing or not on the same seeds."""
+    return _paired(_clean_returns(clean), _clean_returns(brake))
+
+
+def clean_folder(row: dict[str, Any], folder: Path) -> Path:
+    """The comparison folder that holds a row's clean cell: `clean/` where the row has more clean
+    episodes than attacked ones (version 3), else the bench folder itself."""
+    return folder / "clean" if row.get("clean_episodes", row["episodes"]) > row["episodes"] else folder
 
 
 def _clean_returns(folder: Path) -> dict[int, float] | None:
-    """Episode -> return of the clean cell of a bench folder (None: no single clean cell)."""
+    """Episode -> return of the clean cell of a comparison folder (None: no single clean cell)."""
     cells = sorted((folder / "cells").glob("*-none"))
     if len(cells) != 1:
         return None
@@ -194,7 +229,7 @@ def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
     `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
     beats every constant by a margin its CI shows when every low end is above 0."""
-    returns = [_clean_returns(folder) for _, folder in rows]  # each row's episodes, read once
+    returns = [_clean_returns(clean_folder(row, folder)) for row, folder in rows]  # each row's episodes, read once
     constants: dict[str, dict[str, dict[int, float] | None]] = {}
     for (row, _), theirs in zip(rows, returns):
         name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
@@ -230,7 +265,7 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
         if "vs_brake" not in row:  # a row written before the column: from its own cells
-            row["vs_brake"] = brake_margin(path.parent)
+            row["vs_brake"] = brake_margin(clean_folder(row, path.parent), path.parent / "brake")
         rows.append((row, path.parent))
     constant_margins(rows)
     return [row for row, _ in rows]
@@ -255,11 +290,19 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
         group = sorted((r for r in rows if r["protocol"] == proto),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
         eps = [p["eps"] for p in group[0]["attacked"]]
-        title = f"## {group[0]['scenario']} (protocol {proto})"
-        if not proto.endswith(f"-v{VERSION}"):
-            title += (f" — an earlier version: `zodrive bench` with each row's own command rebuilds it under "
-                      f"v{VERSION} from its cells")
-        lines += [title, "",
+        scenario = group[0]["scenario"]
+        title = f"## {scenario} (protocol {proto})"
+        current = PROTOCOLS.get(scenario)
+        if current is not None and proto != current.name():
+            title += (f" — an earlier version: `zodrive bench` with each row's own command runs it under "
+                      f"{current.name()}, reusing its finished cells")
+        lines += [title, ""]
+        official = next((r for r in group if r["official"]), group[0])
+        n, n_clean = official["episodes"], official.get("clean_episodes", official["episodes"])
+        if n_clean > n:
+            lines += [f"Clean columns and Δ: {n_clean} episodes; attacked columns, area and ε past brake: the "
+                      f"first {n}, against the clean return of those {n} (`clean_on_attacked_episodes`).", ""]
+        lines += [
                   "| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
@@ -337,8 +380,8 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
         families = sorted({family_and_seed(r["policy"])[0] for r in table})
         colours = plt.get_cmap("tab10" if len(families) <= 10 else "tab20")
         for r in table:
-            eps = [0.0, *(p["eps"] for p in r["attacked"])]
-            ret = [r["clean"]["return"], *(p["return"] for p in r["attacked"])]
+            eps = [0.0, *(p["eps"] for p in r["attacked"])]  # ε 0: the clean return of the attacked episodes
+            ret = [r.get("clean_on_attacked_episodes", r["clean"])["return"], *(p["return"] for p in r["attacked"])]
             style = line_style(r["policy"], families)
             style["color"] = colours(style["color"])
             ax.plot(eps, ret, lw=1.2, ms=4, label=r["policy"], **style)
