@@ -104,8 +104,8 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         (out / "row.json").unlink(missing_ok=True)
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs, trust=trust)
-    if n_clean > n:
-        compare([policy], [], [], n_clean, out / "clean", workers=workers, progress=progress, seed=proto.seed,
+    if clean_folder(out, n, n_clean) != out:
+        compare([policy], [], [], n_clean, clean_folder(out, n, n_clean), workers=workers, progress=progress, seed=proto.seed,
                 preset=proto.scenario, force=force, envs=envs, trust=trust)
     brake = out / "brake"
     compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
@@ -144,7 +144,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     n_clean = episodes if clean_episodes is None else clean_episodes
     cells = _cells(out)
     same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
-    clean = same if n_clean == episodes else next(c for c in _cells(out / "clean") if c["attack"] == "none")
+    clean = next(c for c in _cells(clean_folder(out, episodes, n_clean)) if c["attack"] == "none")
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in proto.black_box]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
@@ -172,7 +172,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
         "clean_on_attacked_episodes": {"return": same["mean_return"], "collision_rate": same["collision_rate"]},
         "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
-        "vs_brake": brake_margin(out / "clean" if n_clean > episodes else out, out / "brake"),
+        "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), out / "brake"),
         "eps_units": physical_eps(proto),
     }
 
@@ -203,10 +203,15 @@ def brake_margin(clean: Path, brake: Path) -> list[float] | None:
     return _paired(_clean_returns(clean), _clean_returns(brake))
 
 
-def clean_folder(row: dict[str, Any], folder: Path) -> Path:
-    """The comparison folder that holds a row's clean cell: `clean/` where the row has more clean
-    episodes than attacked ones (version 3), else the bench folder itself."""
-    return folder / "clean" if row.get("clean_episodes", row["episodes"]) > row["episodes"] else folder
+def clean_folder(out: Path, episodes: int, clean_episodes: int) -> Path:
+    """The comparison folder of bench folder `out` that holds the clean cell: `clean/` where there are
+    more clean episodes than attacked ones (version 3), else `out` itself."""
+    return out / "clean" if clean_episodes > episodes else out
+
+
+def row_clean_folder(row: dict[str, Any], out: Path) -> Path:
+    """`clean_folder` of a written row (rows before version 3 have no `clean_episodes`)."""
+    return clean_folder(out, row["episodes"], row.get("clean_episodes", row["episodes"]))
 
 
 def _clean_returns(folder: Path) -> dict[int, float] | None:
@@ -229,7 +234,7 @@ def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
     `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
     beats every constant by a margin its CI shows when every low end is above 0."""
-    returns = [_clean_returns(clean_folder(row, folder)) for row, folder in rows]  # each row's episodes, read once
+    returns = [_clean_returns(row_clean_folder(row, folder)) for row, folder in rows]  # each row's episodes, read once
     constants: dict[str, dict[str, dict[int, float] | None]] = {}
     for (row, _), theirs in zip(rows, returns):
         name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
@@ -265,7 +270,7 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
         if "vs_brake" not in row:  # a row written before the column: from its own cells
-            row["vs_brake"] = brake_margin(clean_folder(row, path.parent), path.parent / "brake")
+            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent), path.parent / "brake")
         rows.append((row, path.parent))
     constant_margins(rows)
     return [row for row, _ in rows]
