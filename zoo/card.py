@@ -141,23 +141,18 @@ def _bench(run: Path, scenario: str) -> list[str]:
         return lines + [f"The bench row `{row_path.relative_to(ROOT)}` is of another model file: bench it again.", ""]
     c = row["clean"]
     path, trust = loader_words(row.get("trust_model", False))
+    n, n_clean = row["episodes"], row.get("clean_episodes", row["episodes"])  # version 3: more clean episodes
+    attacked = "" if n == n_clean else (f"; on the first {n} episodes, whose clean return is "
+                                        f"{row['clean_on_attacked_episodes']['return']:.2f}")
     return lines + [f"Bench row ({row['protocol']}, `{path}zodrive bench {run.relative_to(ROOT)} --scenario {scenario} "
-                    f"--name {name}{trust}`): clean return {c['return']:.2f} ({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), "
-                    f"{100 * c['collision_rate']:.0f}% collisions, {c['speed']:.1f} m/s; the constant brake "
-                    f"{row['brake']['return']:.2f} ({100 * row['brake']['collision_rate']:.0f}% collisions)"
-                    + _episodes(row) + ". Under the strongest black-box attack inside each ε-ball (docs/bench.md): "
+                    f"--name {name}{trust}`): over {n_clean} episodes, clean return {c['return']:.2f} "
+                    f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}), {100 * c['collision_rate']:.0f}% collisions, "
+                    f"{c['speed']:.1f} m/s; the constant brake {row['brake']['return']:.2f} "
+                    f"({100 * row['brake']['collision_rate']:.0f}% collisions). Under the strongest black-box attack "
+                    f"inside each ε-ball (docs/bench.md{attacked}): "
                     + ", ".join(
                         f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
                     + ".", ""]
-
-
-def _episodes(row: dict) -> str:
-    """How many episodes the clean and the attacked figures come from, where they differ (protocol v3)."""
-    n, n_clean = row["episodes"], row.get("clean_episodes", row["episodes"])
-    if n_clean == n:
-        return ""
-    return (f", over {n_clean} episodes; the attacks run on the first {n}, whose clean return is "
-            f"{row['clean_on_attacked_episodes']['return']:.2f}")
 
 
 def main() -> None:
