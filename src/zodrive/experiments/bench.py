@@ -305,10 +305,9 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
         official = next((r for r in group if r["official"]), group[0])
         n, n_clean = official["episodes"], official.get("clean_episodes", official["episodes"])
         if n_clean > n:
-            lines += [f"Clean columns and Δ: {n_clean} episodes; attacked columns, area and ε past brake: the "
-                      f"first {n}, against the clean return of those {n} (`clean_on_attacked_episodes`).", ""]
-        lines += [
-                  "| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
+            lines += [(f"Clean columns and Δ: {n_clean} episodes; attacked columns, area and ε past brake: the "
+                       f"first {n}, against the clean return of those {n} (`clean_on_attacked_episodes`)."), ""]
+        lines += ["| Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | Collisions | Speed (m/s) | "
                   + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
                   + " | PGD ε " + f"{eps[-1]:g}" + " | Area | ε past brake | Queries to crash |",
                   "|---" * (9 + len(eps)) + "|"]
