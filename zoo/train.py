@@ -82,8 +82,8 @@ def main() -> None:
     if args.start_from is None:
         model = DQN("MlpPolicy", env, policy_kwargs=policy_kwargs, learning_rate=args.lr,
                     buffer_size=15_000, learning_starts=200, batch_size=args.batch, gamma=args.gamma, train_freq=1,
-                    gradient_steps=1, n_steps=args.n_steps, target_update_interval=args.target_update, exploration_fraction=0.7,
-                    seed=args.seed, device="cpu", verbose=0)
+                    gradient_steps=1, n_steps=args.n_steps, target_update_interval=args.target_update,
+                    exploration_fraction=0.7, seed=args.seed, device="cpu", verbose=0)
     else:  # the same recipe, continued: SB3 rebuilds the schedules from these values
         model = DQN.load(args.start_from, env=env, device="cpu", seed=args.seed, learning_rate=args.lr,
                          exploration_initial_eps=0.05, exploration_final_eps=0.05)
@@ -102,8 +102,7 @@ def main() -> None:
     (args.out / "train.json").write_text(json.dumps(
         {"script": "zoo/train.py", "scenario": args.scenario, "env_id": ENV_IDS[args.scenario], "fast_env": args.fast_env,
          "algo": "dqn", "steps": args.steps, "every": args.every, "seed": args.seed, "gamma": args.gamma, "net": args.net,
-         "lr": args.lr, "batch": args.batch, "target_update": args.target_update,
-         "n_steps": args.n_steps,
+         "lr": args.lr, "batch": args.batch, "target_update": args.target_update, "n_steps": args.n_steps,
          **({"start_from": str(args.start_from), "total_steps": model.num_timesteps} if args.start_from else {}),
          "wall_time_s": round(time.perf_counter() - start, 1)}, indent=2) + "\n")
     print(f"saved {args.out / 'model.zip'}")

@@ -104,8 +104,9 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         (out / "row.json").unlink(missing_ok=True)
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs, trust=trust)
-    if clean_folder(out, n, n_clean) != out:
-        compare([policy], [], [], n_clean, clean_folder(out, n, n_clean), workers=workers, progress=progress, seed=proto.seed,
+    clean_out = clean_folder(out, n, n_clean)
+    if clean_out != out:
+        compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
                 preset=proto.scenario, force=force, envs=envs, trust=trust)
     brake = out / "brake"
     compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
