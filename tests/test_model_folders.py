@@ -144,28 +144,109 @@ def test_an_image_observation_with_tuple_settings_builds() -> None:
     assert where.obs_shape == (2, 36, 18) and where.bounds == (0.0, 255.0)  # the image's declared box
 
 
-def test_the_scenario_comes_from_the_folder_or_is_said_to_be_a_default(caplog, tmp_path: Path) -> None:
+def test_the_scenario_comes_from_the_folder_or_is_refused(caplog, tmp_path: Path) -> None:
     import logging
 
     root = Path(__file__).resolve().parents[1] / "models"
     with caplog.at_level(logging.INFO, logger="zodrive"):
         assert resolve_preset(str(root / "dqn-driver"), None)["name"] == "discrete"  # its config.yaml
         assert resolve_preset(str(root / "ppo-highway-fast"), None)["name"] == "highway-fast"  # its train.json
-    assert "a default" not in caplog.text
-    caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="zodrive"):
-        shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
-        resolve_preset(str(tmp_path / "model.zip"), None)  # a bare zip says nothing: the default, said
-    assert "scenario: discrete, a default" in caplog.text
+    shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
+    with pytest.raises(ZodriveError, match="does not say where it was trained.*--preset or --env-id"):
+        resolve_preset(str(tmp_path / "model.zip"), None)  # a bare zip says nothing: no default is guessed
+    assert resolve_preset("baseline:slower", None)["name"] == "discrete"  # zodrive's own: its kind's preset
 
 
-def test_summary_json_says_where_an_unnamed_scenario_came_from(tmp_path: Path) -> None:
+def test_summary_json_says_where_an_unnamed_scenario_came_from(tmp_path: Path, capsys) -> None:
     from zodrive.cli import main
 
     root = Path(__file__).resolve().parents[1] / "models"
     shutil.copy(root / "dqn" / "model.zip", tmp_path / "model.zip")
     args = ["--episodes", "1", "--env-set", "max_episode_steps=2", "--no-progress"]
-    assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--out", str(tmp_path / "a")]) == 0
-    assert json.loads((tmp_path / "a" / "summary.json").read_text())["scenario_source"].startswith("a default")
+    assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not say where it was trained" in err[0]  # one line, no warning before it
+    assert not (tmp_path / "a").exists()
+    shutil.copy(root / "dqn" / "config.yaml", tmp_path / "config.yaml")  # now its run folder says where
+    assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--out", str(tmp_path / "c")]) == 0
+    assert "config.yaml" in json.loads((tmp_path / "c" / "summary.json").read_text())["scenario_source"]
     assert main(["evaluate", str(tmp_path / "model.zip"), *args, "--preset", "discrete", "--out", str(tmp_path / "b")]) == 0
     assert "scenario_source" not in json.loads((tmp_path / "b" / "summary.json").read_text())  # named by the user
+
+
+HF_KWARGS = {"config": {"lanes_count": 4, "vehicles_count": 30, "duration": 20, "vehicles_density": 1.5}}
+
+
+@pytest.fixture(scope="module")
+def zoo_run(tmp_path_factory) -> Path:
+    """An rl-zoo3 *run* folder (`logs/ppo/highway-fast-v0_1/`): training writes the user's --env-kwargs into
+    `highway-fast-v0/args.yml`; `env_kwargs.yml` appears only when a model is pushed. The PPO is untrained:
+    only where it drives is checked here."""
+    import yaml
+
+    run = tmp_path_factory.mktemp("logs") / "ppo" / "highway-fast-v0_1"
+    (run / "highway-fast-v0").mkdir(parents=True)
+    model = PPO("MlpPolicy", gym.make("highway-fast-v0", config=HF_KWARGS["config"]), n_steps=64, seed=0, device="cpu")
+    model.save(run / "highway-fast-v0")
+    (run / "highway-fast-v0" / "args.yml").write_text(
+        "!!python/object/apply:collections.OrderedDict\n- - - algo\n    - ppo\n  - - env\n    - highway-fast-v0\n"
+        "  - - env_kwargs\n    - " + yaml.safe_dump(HF_KWARGS, default_flow_style=True))
+    return run
+
+
+def test_an_rl_zoo3_run_folder_drives_its_args_yml_env_kwargs(zoo_run: Path) -> None:
+    preset = resolve_preset(str(zoo_run), None)
+    assert preset["env_id"] == "zodrive/highway-fast-v0"
+    assert {k: preset["highway"][k] for k in HF_KWARGS["config"]} == HF_KWARGS["config"]
+    (zoo_run / "highway-fast-v0" / "env_kwargs.yml").write_text("config: {lanes_count: 5}\n")
+    try:  # two files that disagree: zodrive cannot tell which the model was trained with
+        with pytest.raises(ZodriveError, match="give different env_kwargs"):
+            resolve_preset(str(zoo_run), None)
+    finally:
+        (zoo_run / "highway-fast-v0" / "env_kwargs.yml").unlink()
+
+
+def test_a_named_preset_that_drops_the_models_config_is_refused_unless_shifted(zoo_run: Path, tmp_path: Path,
+                                                                                capsys) -> None:
+    from zodrive.cli import main
+    from zodrive.policies.resolve import resolve_scenario
+
+    with pytest.raises(ZodriveError, match="highway-fast differs from where .*args.yml says .* was trained "
+                                           r"\(duration 30, not 20; lanes_count 3, not 4; vehicles_count 20, not 30; "
+                                           r"vehicles_density 1, not 1.5\)"):
+        resolve_preset(str(zoo_run), "highway-fast")
+    config, source = resolve_scenario(str(zoo_run), "highway-fast", shifted=True)
+    assert config["highway"].get("lanes_count") is None and source.startswith("shifted: highway-fast differs")
+    ok = resolve_scenario(str(zoo_run), "highway-fast", [f"highway.{k}={v}" for k, v in HF_KWARGS["config"].items()])
+    assert ok[1] is None  # the preset made equal to the training config is not shifted
+    args = ["--episodes", "1", "--env-set", "max_episode_steps=2", "--no-progress"]
+    assert main(["evaluate", str(zoo_run), "--preset", "highway-fast", *args, "--out", str(tmp_path / "a")]) == 2
+    assert "--shifted" in capsys.readouterr().err
+    assert main(["evaluate", str(zoo_run), "--shifted", *args, "--out", str(tmp_path / "b")]) == 2  # nothing shifted
+    assert "--shifted applies to a scenario named by --preset" in capsys.readouterr().err
+    assert main(["evaluate", str(zoo_run), "--preset", "highway-fast", "--shifted", *args,
+                 "--out", str(tmp_path / "c")]) == 0
+    assert json.loads((tmp_path / "c" / "summary.json").read_text())["scenario_source"].startswith("shifted:")
+
+
+def test_another_version_of_the_environment_is_refused(tmp_path: Path) -> None:
+    from zodrive.policies.folders import trained_in_memory
+    from zodrive.policies.resolve import resolve_scenario
+
+    model = PPO("MlpPolicy", gym.make("merge-v0"), n_steps=64, seed=0, device="cpu")
+    with pytest.raises(ZodriveError, match="environment merge-v1, not merge-v0"):
+        zodrive.evaluate(model, "merge", episodes=1)  # the model still holds the merge-v0 it was trained on
+    assert resolve_scenario("memory:ppo", None, said=trained_in_memory(model))[0]["env_id"] == "merge-v0"
+    folder = tmp_path / "exit"
+    folder.mkdir()
+    model.save(folder / "ppo-exit-v0")  # a Hugging Face name: the zip's name says exit-v0
+    with pytest.raises(ZodriveError, match="environment exit-v1, not exit-v0"):
+        resolve_preset(str(folder), "exit")
+    assert resolve_preset(str(folder), None)["env_id"] == "exit-v0"
+
+
+def test_a_scenario_mapping_is_checked_as_a_preset_file_is() -> None:
+    with pytest.raises(ZodriveError, match="needs a 'name'"):
+        zodrive.evaluate("baseline:slower", {"foo": 1}, episodes=1)
+    with pytest.raises(ZodriveError, match="foo"):
+        zodrive.evaluate("baseline:slower", {"name": "mine", "foo": 1}, episodes=1)

@@ -22,12 +22,14 @@ import numpy as np
 
 from zodrive.attacks.base import AttackResult
 from zodrive.attacks.spec import AttackSpec, load_attack
-from zodrive.envs import Scenario, gym_preset, load_preset, scenario_of_env
+from zodrive.envs import Scenario, scenario_of_env
 from zodrive.envs import scenario as scenario_of
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
 from zodrive.evaluation.rollout import run_episode, run_lockstep
+from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
+from zodrive.policies.resolve import resolve_scenario
 from zodrive.seeds import EVAL_SEED
 from zodrive.system import AttackWrapper as _AttackWrapper, attack_observations, build_attacker, load_policy, \
     make_policy_env
@@ -80,17 +82,17 @@ class Result:
         return ax
 
 
-def _preset(scenario_name: str | dict[str, Any] | None, env_id: str | None) -> dict[str, Any]:
-    if isinstance(scenario_name, dict):
-        return scenario_name
-    if env_id is not None:
-        if scenario_name is not None:
-            raise ZodriveError("scenario and env_id both say where the policy drives: give one")
-        return gym_preset(env_id)
-    if scenario_name is None:
-        raise ZodriveError("say where the policy drives: scenario='discrete', 'highway-fast', ... "
-                           "(`zodrive env` lists them) or env_id='CartPole-v1'")
-    return load_preset(scenario_name)
+def _scenario(policy: Policy, scenario: str | dict[str, Any] | None, env_id: str | None,
+              shifted: bool) -> tuple[dict[str, Any], str | None]:
+    """Where `policy` drives, by the CLI's rules (`resolve_scenario`): the scenario named, else
+    where its files (or the environment an SB3 model holds) say it was trained; a named scenario
+    that differs from that is refused unless `shifted`."""
+    said = trained_in_memory(policy.obj) if policy.kind == "sb3" else None
+    found = resolve_scenario(policy.ref, scenario, None, env_id, shifted=shifted, said=said)
+    if shifted and not (found[1] or "").startswith("shifted:"):
+        raise ZodriveError(f"shifted=True: {found[0]['name']} is not shifted from where {policy.label} says it was "
+                           "trained (or it says nothing)")
+    return found
 
 
 def _spec(attack: str | AttackSpec | None, where: Scenario, options: dict[str, Any]) -> AttackSpec | None:
@@ -115,11 +117,12 @@ def _paper_target_fits(where: Scenario) -> bool:
 def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: str | AttackSpec | None = None, *,
              defense: str | None = None, episodes: int = 10, seed: int = EVAL_SEED, envs: int = 1,
              env_id: str | None = None, out: str | Path | None = None, force: bool = False,
-             trust_model: bool = False, progress: bool = False, **options: Any) -> Result:
+             trust_model: bool = False, progress: bool = False, shifted: bool = False, **options: Any) -> Result:
     """Drive `episodes` episodes from seeds `seed`, `seed + 1`, ..., clean or under `attack`.
 
     :param policy: a model path, `baseline:NAME`, `FILE.py:NAME`, an SB3 model, a torch module or a callable.
-    :param scenario: a preset name (`zodrive env` lists them) or a preset mapping.
+    :param scenario: a preset name (`zodrive env` lists them) or a preset mapping; default: where the model's
+        files (or the environment an SB3 model holds) say it was trained.
     :param attack: an attack name (`random-search`, `zo-signsgd`, ...), a config name or an `AttackSpec`.
     :param defense: a runtime defense (`shield`, `shield@0.05`, `kinematic`).
     :param episodes: how many episodes.
@@ -130,17 +133,19 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     :param force: replace another evaluation in `out` (only its own files).
     :param trust_model: read an SB3 zip with SB3's own loader (unpickles: only for files you trust).
     :param progress: show a progress bar.
+    :param shifted: measure the policy on `scenario` although its files say it was trained on another one.
     :param options: the attack's options (`eps=0.05`, `steps=50`, ...).
     :returns: the `Result`.
     """
     resolved = resolve(policy)
-    preset = _preset(scenario, env_id)
+    preset, source = _scenario(resolved, scenario, env_id, shifted)
     spec = _spec(attack, scenario_of(preset), options)
     if not isinstance(episodes, int) or episodes < 1:
         raise ZodriveError(f"episodes must be a positive integer, not {episodes!r}")
     attack_dict = spec.to_dict() if spec is not None else None
     if not resolved.in_memory:
-        job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model)
+        job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model,
+                      scenario_source=source)
         records: list[dict[str, Any]] = []
         summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress,
                                  records=records, force=force)
@@ -148,7 +153,7 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     if out is not None:
         raise ZodriveError(f"{resolved.label} lives in memory: a run folder is keyed on a model's content; "
                        "save the model and pass its path to write and resume a run folder")
-    job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense)
+    job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, scenario_source=source)
     records = [r.to_dict() for r in _drive(resolved, preset, spec, defense, episodes, seed, envs)]
     return Result(summarize(records, job), records)
 
@@ -175,7 +180,7 @@ def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defe
 
 def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any] | None = None,
            attack: str | AttackSpec = "random-search", *, env_id: str | None = None, seed: int = 0,
-           **options: Any) -> AttackResult:
+           shifted: bool = False, **options: Any) -> AttackResult:
     """Attack a batch of clean observations once (each row its own problem, as one environment
     step of `observations.shape[0]` environments).
 
@@ -185,11 +190,12 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
     :param attack: the attack's name or `AttackSpec`.
     :param env_id: any gymnasium id instead of `scenario`.
     :param seed: the attack's random stream.
+    :param shifted: as in `evaluate`.
     :param options: the attack's options (`eps=0.05`, ...).
     :returns: `AttackResult`: `x_adv` (what the policy would see), per-row `success`, `queries`, `linf`, ...
     """
     resolved = resolve(policy)
-    preset = _preset(scenario, env_id)
+    preset, _ = _scenario(resolved, scenario, env_id, shifted)
     where = scenario_of(preset)
     obs = np.asarray(observations, dtype=np.float32)
     if obs.shape == where.obs_shape:

@@ -126,14 +126,17 @@ MODEL_HELP = ("SB3 / sb3-contrib zip, model folder, ONNX file, FILE.py:NAME (run
 
 def scenario_flags(parser: argparse.ArgumentParser, *, trust: bool = True) -> None:
     """Where a policy drives: a preset or any gymnasium id; and how to read an SB3 zip."""
-    parser.add_argument("--preset", help="preset (`zodrive env list`; default: the paper's preset of the model's "
-                                         "action kind: discrete or continuous)")
+    parser.add_argument("--preset", help="preset (`zodrive env list`; default: where the model's folder says it was "
+                                         "trained; a baseline: the paper's preset of its kind)")
     parser.add_argument("--env-id", metavar="ID",
                         help="any gymnasium environment with a Box observation, instead of --preset")
     parser.add_argument("--obs-bounds", type=obs_bounds, metavar="LOW,HIGH",
                         help="with --env-id: the range of a clean observation value, when the env does not "
                              "declare one finite interval (the attack's box)")
     env_set_flag(parser)
+    parser.add_argument("--shifted", action="store_true",
+                        help="run on --preset / --env-id although the model's files say it was trained on another "
+                             "scenario (a distribution-shift measurement; without it that is refused)")
     if trust:
         trust_flag(parser)
 
@@ -251,7 +254,7 @@ def check_model_paths(args: argparse.Namespace) -> None:
 
 
 def preset_of(args: argparse.Namespace) -> dict[str, Any]:
-    """Where `args.model` drives: --preset, --env-id (with --obs-bounds) or its action kind's preset."""
+    """Where `args.model` drives: --preset, --env-id (with --obs-bounds) or where its files say (`scenario_of`)."""
     return scenario_of(args)[0]
 
 
@@ -259,8 +262,13 @@ def scenario_of(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
     """`preset_of` and where a scenario the user did not name came from (`resolve_scenario`)."""
     from zodrive.policies.resolve import resolve_scenario
 
-    return resolve_scenario(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
-                            getattr(args, "obs_bounds", None))
+    shifted = getattr(args, "shifted", False)
+    found = resolve_scenario(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
+                             getattr(args, "obs_bounds", None), shifted=shifted)
+    if shifted and not (found[1] or "").startswith("shifted:"):
+        raise ZodriveError(f"--shifted: {found[0]['name']} is not shifted from where {args.model} says it was "
+                           "trained (or it says nothing): drop --shifted")
+    return found
 
 
 def check_trust(args: argparse.Namespace) -> None:

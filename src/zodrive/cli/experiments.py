@@ -107,6 +107,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                    workers=args.workers, progress=not args.no_progress, query_budgets=args.query_budgets,
                    backend=args.backend, address=args.address, defenses=defenses, env_set=args.env_set,
                    attack_set=args.attack_set, preset=args.preset, env_id=args.env_id, obs_bounds=args.obs_bounds,
+                   shifted=args.shifted,
                    force=args.force, envs=envs_of(args))
     print(markdown(rows), end="")
     if args.plot:

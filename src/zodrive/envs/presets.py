@@ -153,6 +153,77 @@ def preset_for_env(env_id: str, env_kwargs: dict[str, Any] | None = None,
     return config
 
 
+DISPLAY_KEYS = frozenset({"screen_width", "screen_height", "centering_position", "scaling", "show_trajectories",
+                          "render_agent", "offscreen_rendering", "real_time_rendering", "manual_control"})
+"""highway-env settings that change only what is drawn, never what the policy observes or the episode."""
+
+
+def differences_from_training(config: dict[str, Any], env_id: str, env_kwargs: dict[str, Any]) -> list[str]:
+    """Where the preset `config` differs from what a model says it was trained on (`env_id` with
+    `env_kwargs`): another environment id (`merge-v1` is not `merge-v0`), or a setting the model
+    states with another value than the preset runs (the preset's own, else the environment's
+    default). One short phrase per difference; empty when the preset is where the model drove."""
+    from zodrive.config import deep_merge
+
+    ran = str(config.get("env_id", ENV_ID)).removeprefix("zodrive/")
+    if ran != env_id:
+        return [f"environment {ran}, not {env_id}"]
+    if "highway" in config:
+        cls = _env_class(config.get("env_id", ENV_ID))
+        runs = deep_merge(cls.default_config() if cls is not None else {}, config["highway"])
+        stated = env_kwargs.get("config") or {}
+    else:
+        runs, stated = config.get("env_kwargs") or {}, env_kwargs
+    found: list[str] = []
+
+    def walk(want: Any, have: Any, path: str) -> None:
+        if isinstance(want, dict) and isinstance(have, dict):
+            for key, value in want.items():
+                if path or key not in DISPLAY_KEYS:
+                    walk(value, have.get(key, _MISSING), f"{path}.{key}" if path else str(key))
+        elif have is _MISSING or not _same(_observer(path, want), _observer(path, have)):
+            found.append(f"{path} {'unset' if have is _MISSING else _short(have)}, not {_short(want)}")
+
+    walk(stated, runs, "")
+    return found
+
+
+_MISSING = object()
+
+
+def _observer(path: str, value: Any) -> Any:
+    """zodrive's FastKinematics observer gives Kinematics' observation exactly: the same setting."""
+    return "Kinematics" if path == "observation.type" and value == "FastKinematics" else value
+
+
+def changed_settings(env_id: str, config: dict[str, Any]) -> dict[str, Any]:
+    """The settings of a live highway-env `config` that differ from `env_id`'s defaults (display aside)."""
+    cls = _env_class(env_id)
+    defaults = cls.default_config() if cls is not None else {}
+    return {key: value for key, value in config.items()
+            if key not in DISPLAY_KEYS and (key not in defaults or not _same(defaults[key], value))}
+
+
+def _plain(value: Any) -> Any:
+    """Values as YAML and JSON give them (tuples as lists), so that (4, 5) equals [4, 5]."""
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal as data (numpy arrays and tuples as lists, 4 and 4.0 alike)."""
+    as_data = (lambda v: json.loads(json.dumps(_plain(v), default=lambda x: getattr(x, "tolist", lambda: str(x))())))
+    return as_data(a) == as_data(b)
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(_plain(value), default=lambda x: getattr(x, "tolist", lambda: str(x))())
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def validate_preset(config: dict[str, Any], name: str) -> None:
     """Catch config mistakes up front, before highway-env turns them into tracebacks."""
     check_keys(config, PRESET_KEYS, f"preset {name!r}")

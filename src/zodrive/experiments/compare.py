@@ -18,7 +18,7 @@ from typing import Any
 
 from zodrive.drivers.baselines import get_baseline
 from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import resolve_preset
+from zodrive.policies.resolve import resolve_scenario
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
@@ -32,7 +32,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             query_budgets: list[int | None] | None = None, backend: str = "local",
             address: str | None = None, defenses: list[str | None] | None = None,
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
-            env_id: str | None = None, obs_bounds: tuple[float, float] | None = None,
+            env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, shifted: bool = False,
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
             trust: bool = False) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
@@ -52,8 +52,10 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     cells: list[Cell] = []
     policies = [resolve(model) for model in models]
     names = policy_names([p.label for p in policies], [p.key() for p in policies])
-    for model, policy, name in zip(models, policies, names):
-        model_preset = resolve_preset(model, preset, env_set, env_id, obs_bounds)
+    sources = [resolve_scenario(model, preset, env_set, env_id, obs_bounds, shifted=shifted) for model in models]
+    if shifted and not any((source or "").startswith("shifted:") for _, source in sources):
+        raise ZodriveError("--shifted: no model says it was trained elsewhere than this scenario: drop --shifted")
+    for model, policy, name, (model_preset, source) in zip(models, policies, names, sources):
         policy.check(model_preset)
         ref, gradients = policy.ref, policy.gradients
         reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
@@ -72,7 +74,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                                               + ("" if eps is None else f"-eps{number_name(eps)}")
                                               + ("" if budget is None else f"-qb{budget}"))
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
-                                  defense=defense, trust=trust)
+                                  defense=defense, trust=trust, scenario_source=source)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack, spec and spec.attack), "eps": eps, "query_budget": budget})
                     cells.append(Cell(job, episodes, folder, force=force))

@@ -87,11 +87,16 @@ def trained_with(model: Path) -> TrainedWith:
             if isinstance(args, dict) and isinstance(args.get("env"), str):
                 env_id = args["env"]
                 said.append(str(args_file))
-        if kwargs_file.is_file() and not env_kwargs:
-            kwargs = read_zoo_yaml(kwargs_file)
-            if kwargs not in (None, {}):
-                if not isinstance(kwargs, dict):
-                    raise ZodriveError(f"{kwargs_file} is not a mapping of keyword arguments")
+                # rl-zoo3's training records --env-kwargs here; env_kwargs.yml appears only when a model is pushed
+                from_args = _kwargs(args.get("env_kwargs"), args_file, "its env_kwargs")
+                if from_args:
+                    env_kwargs = from_args
+        if kwargs_file.is_file():
+            kwargs = _kwargs(read_zoo_yaml(kwargs_file), kwargs_file, "it")
+            if kwargs and env_kwargs and kwargs != env_kwargs:
+                raise ZodriveError(f"{kwargs_file} and the args.yml beside it give different env_kwargs: "
+                                   "zodrive cannot tell which the model was trained with")
+            if kwargs and not env_kwargs:
                 env_kwargs = kwargs
                 said.append(str(kwargs_file))
     if env_id is None and preset is None:
@@ -104,6 +109,39 @@ def trained_with(model: Path) -> TrainedWith:
             said.append(str(model))
     norm = find_normalization(model)
     return TrainedWith(env_id=env_id, env_kwargs=env_kwargs, preset=preset, normalization=norm, said_by=tuple(said))
+
+
+def _kwargs(value: Any, path: Path, what: str) -> dict[str, Any]:
+    """rl-zoo3's env_kwargs as a mapping (none: empty); anything else is refused, naming the file."""
+    if value in (None, {}):
+        return {}
+    if not isinstance(value, dict) or not isinstance(value.get("config", {}), dict):
+        raise ZodriveError(f"{path}: {what} is not a mapping of keyword arguments (with `config` a mapping)")
+    return value
+
+
+def trained_in_memory(model: Any) -> TrainedWith | None:
+    """What an SB3 model in memory says of where it was trained: the id of the environment it still
+    holds, and the settings that environment has changed from its id's defaults (highway-env's
+    `config`). None when it holds none (loaded without `env=`) or holds several different ones."""
+    env = model.get_env()
+    if env is None:
+        return None
+    try:
+        specs, configs = env.get_attr("spec"), env.get_attr("config")
+    except AttributeError:  # not a highway-env scenario: its id only
+        specs, configs = env.get_attr("spec"), None
+    ids = {getattr(spec, "id", None) for spec in specs}
+    if len(ids) != 1 or None in ids:
+        return None
+    env_id = ids.pop()
+    said = ("the environment the model holds in memory",)
+    if configs is None:
+        return TrainedWith(env_id=env_id, env_kwargs=dict(specs[0].kwargs or {}), said_by=said)
+    from zodrive.envs.presets import changed_settings
+
+    changed = changed_settings(env_id, configs[0])
+    return TrainedWith(env_id=env_id, env_kwargs={"config": changed} if changed else {}, said_by=said)
 
 
 def _zodrive_preset(folder: Path) -> str | None:

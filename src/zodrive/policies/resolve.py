@@ -17,7 +17,8 @@ from typing import Any
 from zodrive.attacks.victim import Victim
 from zodrive.drivers import baselines as bl
 from zodrive.drivers.rules import rules_victim
-from zodrive.envs import action_kind, action_names, gym_preset, load_preset, n_actions, observation_shape, preset_for_env
+from zodrive.envs import (action_kind, action_names, differences_from_training, gym_preset, load_preset, n_actions,
+                          observation_shape, preset_for_env)
 from zodrive.errors import ZodriveError
 from zodrive.policies.factory import factory_victim, is_factory, split_factory
 from zodrive.policies.folders import TrainedWith, trained_with
@@ -68,26 +69,46 @@ def policy_label(model: str) -> str:
 
 
 def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
-                   obs_bounds: tuple[float, float] | None = None) -> dict[str, Any]:
+                   obs_bounds: tuple[float, float] | None = None, *, shifted: bool = False) -> dict[str, Any]:
     """Where `model` drives (`resolve_scenario` without the source)."""
-    return resolve_scenario(model, preset, env_set, env_id, obs_bounds)[0]
+    return resolve_scenario(model, preset, env_set, env_id, obs_bounds, shifted=shifted)[0]
 
 
-def resolve_scenario(model: str, preset: str | None, env_set: list[str] | None = None, env_id: str | None = None,
-                     obs_bounds: tuple[float, float] | None = None) -> tuple[dict[str, Any], str | None]:
-    """Where `model` drives: `preset`, `env_id` (any gymnasium id), where the model's folder says
-    it was trained (rl-zoo3 / Hugging Face files, `<env id>.zip`), or else the paper's preset of
-    its action kind (discrete / continuous), said in a warning: a default is never silent. The
-    second value says where a scenario the user did not name came from (for `summary.json`), else None."""
-    if env_id is not None:
-        if preset is not None:
+def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: list[str] | None = None, env_id: str | None = None,
+                     obs_bounds: tuple[float, float] | None = None, *, shifted: bool = False,
+                     said: TrainedWith | None = None) -> tuple[dict[str, Any], str | None]:
+    """Where `model` drives: `preset`, `env_id` (any gymnasium id), or where the model's files say
+    it was trained (`said`, else its run folder, rl-zoo3 / Hugging Face files, `<env id>.zip`); a
+    baseline drives the paper's preset of its kind. A model that says nothing is refused, never
+    given a default, and so is a named scenario that differs from what the model's files say
+    (another env id, a stated setting with another value) unless `shifted` says the shift is meant:
+    a return on a scenario the policy never saw is a wrong number unless asked for. The second value
+    says where a scenario the user did not name came from, or that a named one is shifted (starting
+    `shifted:`; for `summary.json`), else None."""
+    if said is None and not (bl.is_baseline(model) or is_factory(model) or is_onnx(model)
+                             or model.startswith("memory:")):
+        said = _trained_with(model)
+    states = said is not None and (said.preset is not None or said.env_id is not None)
+    if env_id is not None or preset is not None:
+        if env_id is not None and preset is not None:
             raise ZodriveError("--preset and --env-id both say where the policy drives: give one")
-        return gym_preset(env_id, env_set, obs_bounds), None
+        if obs_bounds is not None and env_id is None:
+            raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
+        config = (gym_preset(env_id, env_set, obs_bounds) if env_id is not None
+                  else named_preset(preset) if isinstance(preset, dict) else load_preset(preset, env_set))
+        why = _not_as_trained(config, said) if states else []
+        if not why:  # nothing shifted (a caller refuses a --shifted that shifted no model: it was ignored)
+            return config, None
+        assert said is not None
+        where = f"{config['name']} differs from where {', '.join(said.said_by)} says {model} was trained"
+        if not shifted:
+            raise ZodriveError(f"{where} ({'; '.join(why)}): drop --preset / --env-id to run it there, or pass "
+                               "--shifted to measure it on this scenario anyway")
+        return config, f"shifted: {where} ({'; '.join(why)})"
     if obs_bounds is not None:
         raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
-    if preset is not None:
-        return load_preset(preset, env_set), None
-    said = None if bl.is_baseline(model) or is_factory(model) or is_onnx(model) else _trained_with(model)
+    if shifted:
+        raise ZodriveError("--shifted applies to a scenario named by --preset or --env-id")
     if said is not None and said.preset is not None:
         log.info("scenario: %s, the preset its run folder records", said.preset)
         return load_preset(said.preset, env_set), f"the preset its run folder records ({', '.join(said.said_by)})"
@@ -95,12 +116,33 @@ def resolve_scenario(model: str, preset: str | None, env_set: list[str] | None =
         found = preset_for_env(said.env_id, said.env_kwargs, env_set)
         log.warning("scenario: %s, where %s says the model was trained", found["name"], ", ".join(said.said_by))
         return found, f"where {', '.join(said.said_by)} says the model was trained"
-    default = load_preset(policy_kind(model), env_set)
-    if bl.is_baseline(model):
-        return default, None
-    log.warning("scenario: %s, a default (%s does not say where it was trained): pass --preset or --env-id",
-                default["name"], model)
-    return default, f"a default: the paper's preset of its action kind ({model} does not say where it was trained)"
+    if bl.is_baseline(model):  # a baseline is zodrive's own: it drives the paper's preset of its kind
+        return load_preset(policy_kind(model), env_set), None
+    if model.startswith("memory:"):
+        raise ZodriveError(f"{model.removeprefix('memory:')} holds no environment that says where it was trained: say "
+                           "where it drives: scenario='discrete', 'highway-fast', ... (`zodrive env` lists them) or "
+                           "env_id='CartPole-v1'")
+    raise ZodriveError(f"{model} does not say where it was trained (no run folder, rl-zoo3 or Hugging Face files "
+                       "beside it): say where it drives with --preset or --env-id")
+
+
+def named_preset(config: dict[str, Any]) -> dict[str, Any]:
+    """A preset given as a mapping (Python API): checked as a preset file is, and named."""
+    from zodrive.envs.presets import validate_preset
+
+    name = config.get("name")
+    if not isinstance(name, str) or not name:
+        raise ZodriveError("a scenario given as a mapping needs a 'name' (a preset from load_preset has one)")
+    validate_preset(config, name)
+    return config
+
+
+def _not_as_trained(config: dict[str, Any], said: TrainedWith) -> list[str]:
+    """How the named scenario `config` differs from where `said` says the model was trained."""
+    if said.preset is not None:
+        return [] if config["name"] == said.preset else [f"preset {config['name']}, not {said.preset}"]
+    assert said.env_id is not None
+    return differences_from_training(config, said.env_id, said.env_kwargs)
 
 
 def _trained_with(model: str) -> TrainedWith:
