@@ -126,3 +126,34 @@ def test_any_gymnasium_environment_by_id(tmp_path: Path, algo: str, env_id: str,
     assert summary["preset"] == env_id and summary["max_linf"] <= 0.1 + 1e-6 and summary["queries_per_step"] > 1
     printed = capsys.readouterr().out
     assert "m/s" not in printed  # no driving metrics off a highway-env road
+
+
+def test_the_api_refuses_what_zodrive_cannot_query_in_its_own_words(tmp_path) -> None:
+    """A recurrent policy, a Dict observation and stacked frames: refused in one line that names the reason
+    (the CLI refuses the same zips), never a shape error from torch or a wrong Result."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401
+    from sb3_contrib import RecurrentPPO
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
+
+    import zodrive
+    from zodrive.cli import main
+    from zodrive.errors import ZodriveError
+
+    lstm = RecurrentPPO("MlpLstmPolicy", "CartPole-v1", n_steps=32, seed=0, device="cpu",
+                        policy_kwargs={"lstm_hidden_size": 25})
+    with pytest.raises(ZodriveError, match="recurrent policies are not supported"):
+        zodrive.evaluate(lstm, env_id="CartPole-v1", episodes=1)
+    parking = PPO("MultiInputPolicy", gym.make("parking-v0"), n_steps=32, seed=0, device="cpu")
+    with pytest.raises(ZodriveError, match="observes a Dict"):
+        zodrive.evaluate(parking, env_id="CartPole-v1", episodes=1)
+    parking.save(tmp_path / "parking.zip")
+    assert main(["evaluate", str(tmp_path / "parking.zip"), "--env-id", "CartPole-v1", "--episodes", "1"]) == 2
+    stacked = PPO("MlpPolicy", VecFrameStack(DummyVecEnv([lambda: gym.make("CartPole-v1")]), 4), n_steps=32, seed=0,
+                  device="cpu")
+    with pytest.raises(ZodriveError, match="4 stacked frames"):
+        zodrive.evaluate(stacked, env_id="CartPole-v1", episodes=1)
+    stacked.save(tmp_path / "stacked.zip")  # the zip alone: its shape says 4 times as long
+    with pytest.raises(ZodriveError, match="4 times as long on axis 0: trained on 4 stacked frames"):
+        zodrive.evaluate(str(tmp_path / "stacked.zip"), env_id="CartPole-v1", episodes=1)

@@ -224,7 +224,8 @@ def test_evaluation_is_keyed_on_the_model_content(tiny_dqn: Path, tmp_path: Path
     moved = tmp_path / "moved.zip"
     moved.write_bytes((tiny_dqn / "model.zip").read_bytes())
     out = tmp_path / "eval"
-    args = ["--episodes", "2", "--out", str(out), "--no-progress", "--env-set", "max_episode_steps=20"]
+    args = ["--episodes", "2", "--out", str(out), "--no-progress", "--env-set", "max_episode_steps=20", "--preset",
+            "discrete"]  # the moved zip has no run folder to say where it drives
     assert main(["evaluate", str(tiny_dqn)] + args) == 0
     assert main(["evaluate", str(moved)] + args) == 0  # same bytes elsewhere: the same evaluation
     other = tmp_path / "other"

@@ -203,7 +203,8 @@ def test_a_model_whose_network_does_not_fit_its_weights_fails_in_one_line(capsys
     from zodrive.cli import main
     from zodrive.errors import cause
 
-    code = main(["evaluate", HOSTILE["arch-null.zip"], "--trust-model", "--episodes", "1", "--no-progress"])
+    code = main(["evaluate", HOSTILE["arch-null.zip"], "--preset", "discrete", "--trust-model", "--episodes", "1",
+                 "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "size mismatch" in err, err
     assert cause(RuntimeError("a\n\tb  c")) == "RuntimeError: a b c"

@@ -37,7 +37,7 @@ def test_an_attacked_episode_gives_the_same_numbers_through_both(exported: Path,
     args = ["--episodes", "1", "--no-progress", "--attack", "random-search", "--steps", "10",
             "--env-set", "max_episode_steps=40"]
     assert main(["evaluate", "models/dqn", "--out", str(tmp_path / "zip"), *args]) == 0
-    assert main(["evaluate", str(exported), "--out", str(tmp_path / "onnx"), *args]) == 0
+    assert main(["evaluate", str(exported), "--preset", "discrete", "--out", str(tmp_path / "onnx"), *args]) == 0
     a, b = (json.loads((tmp_path / name / "summary.json").read_text()) for name in ("zip", "onnx"))
     for key in ("mean_return", "attack_success_rate", "queries_per_step", "mean_length"):
         assert a[key] == pytest.approx(b[key], rel=1e-6), key

@@ -55,7 +55,8 @@ def _crafted(tmp_path: Path, source: Path, *, in_data: bool, in_weights: bool) -
 def test_a_crafted_model_runs_no_code(tmp_path: Path, where: str, capsys) -> None:
     crafted, marker = _crafted(tmp_path, ROOT / "models" / "dqn" / "model.zip",
                                in_data=where == "data", in_weights=where == "weights")
-    code = main(["evaluate", str(crafted), "--episodes", "1", "--no-progress", "--env-set", "max_episode_steps=5"])
+    code = main(["evaluate", str(crafted), "--preset", "discrete", "--episodes", "1", "--no-progress", "--env-set",
+                 "max_episode_steps=5"])
     assert not marker.exists()
     if where == "weights":
         assert code == 2 and "corrupt or not a plain" in capsys.readouterr().err

@@ -154,7 +154,8 @@ def preset_for_env(env_id: str, env_kwargs: dict[str, Any] | None = None,
 
 
 DISPLAY_KEYS = frozenset({"screen_width", "screen_height", "centering_position", "scaling", "show_trajectories",
-                          "render_agent", "offscreen_rendering", "real_time_rendering", "manual_control"})
+                          "render_agent", "offscreen_rendering", "real_time_rendering", "manual_control",
+                          "render_mode"})
 """highway-env settings that change only what is drawn, never what the policy observes or the episode."""
 
 

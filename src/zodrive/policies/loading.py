@@ -48,6 +48,9 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
     from zodrive.envs import scenario
 
     env = scenario(preset)
+    if info.get("obs_space") in ("Dict", "Tuple"):
+        raise ZodriveError(f"{path} observes a {info['obs_space']} (a goal-conditioned or multi-part observation, "
+                           "as parking-v0's): zodrive attacks policies that observe one Box")
     if info["kind"] != env.kind:
         raise ZodriveError(
             f"{path} is a {info.get('sb3_class', info['algo'].upper())} policy with {info['kind']} actions; "
@@ -58,7 +61,7 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
                            "zodrive cannot tell which scenario it was trained on")
     if tuple(info["obs_shape"]) != env.obs_shape:
         raise ZodriveError(f"{path} expects observations of shape {info['obs_shape']}; preset "
-                           f"{preset['name']!r} gives {env.obs_shape}")
+                           f"{preset['name']!r} gives {env.obs_shape}{stacking_hint(info['obs_shape'], env.obs_shape)}")
     for which, declared in (("low", env.space_low), ("high", env.space_high)):
         recorded = info.get(f"obs_{which}")
         if recorded is not None and declared and (len(recorded) != len(declared) or not np.all(
@@ -73,6 +76,19 @@ def check_fits(info: dict[str, Any], preset: dict[str, Any], path: Path) -> None
                 or list(map(float, info["action_high"])) != list(env.action_high)):
             raise ZodriveError(f"{path} acts in [{info['action_low']}, {info['action_high']}]; preset "
                                f"{preset['name']!r} takes actions in [{list(env.action_low)}, {list(env.action_high)}]")
+
+
+def stacking_hint(trained: Any, given: tuple[int, ...]) -> str:
+    """When `trained` is `given` with one axis k times longer, the likely reason: stacked frames."""
+    trained = tuple(trained)
+    if len(trained) != len(given) or not given:
+        return ""
+    longer = [i for i, (a, b) in enumerate(zip(trained, given)) if a != b]
+    if len(longer) != 1 or given[longer[0]] == 0 or trained[longer[0]] % given[longer[0]]:
+        return ""
+    k = trained[longer[0]] // given[longer[0]]
+    return (f" ({k} times as long on axis {longer[0]}: trained on {k} stacked frames, as VecFrameStack makes? zodrive "
+            "feeds one observation per step and does not stack frames)") if k > 1 else ""
 
 
 def _short(values: Any) -> str:

@@ -24,10 +24,10 @@ from zodrive.errors import ZodriveError
 from zodrive.policies import resolve as text
 from zodrive.policies.factory import build, is_factory, split_factory
 from zodrive.policies.folders import trained_with
-from zodrive.policies.loading import load_network
+from zodrive.policies.loading import load_network, stacking_hint
 from zodrive.policies.onnx_policy import is_onnx
 from zodrive.policies.normalize import normalized_victim
-from zodrive.policies.victims import network_victim, object_victim, sb3_victim
+from zodrive.policies.victims import check_sb3_model, network_victim, object_victim, sb3_victim
 from zodrive.runinfo import sha256
 
 Kind = Literal["model", "onnx", "factory", "baseline", "sb3", "module", "callable"]
@@ -94,7 +94,8 @@ class Policy:
             victim = sb3_victim(self.obj)
             if tuple(victim.obs_shape) != tuple(env.obs_shape) or victim.kind != env.kind:
                 raise ZodriveError(f"{self.label} reads observations of shape {victim.obs_shape} and acts "
-                                   f"{victim.kind}; preset {preset.get('name')!r} gives {env.obs_shape}, {env.kind}")
+                                   f"{victim.kind}; preset {preset.get('name')!r} gives {env.obs_shape}, {env.kind}"
+                                   + stacking_hint(victim.obs_shape, env.obs_shape))
             return victim
         return object_victim(self.obj, preset, self.label)
 
@@ -132,6 +133,7 @@ def resolve(policy: Any, *, label: str | None = None) -> Policy:
     if isinstance(policy, Policy):
         return policy
     if isinstance(policy, BaseAlgorithm):
+        check_sb3_model(policy)  # at the door: a recurrent, Dict-observing or frame-stacked model, in its words
         name = label or type(policy).__name__.lower()
         return Policy("sb3", f"memory:{name}", name, gradients=True, obj=policy)
     if isinstance(policy, torch.nn.Module):

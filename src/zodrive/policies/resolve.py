@@ -122,6 +122,7 @@ def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: l
         raise ZodriveError(f"{model.removeprefix('memory:')} holds no environment that says where it was trained: say "
                            "where it drives: scenario='discrete', 'highway-fast', ... (`zodrive env` lists them) or "
                            "env_id='CartPole-v1'")
+    policy_kind(model)  # a damaged or foreign file is refused for what it is first
     raise ZodriveError(f"{model} does not say where it was trained (no run folder, rl-zoo3 or Hugging Face files "
                        "beside it): say where it drives with --preset or --env-id")
 

@@ -206,6 +206,7 @@ def describe(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path)
         raise ZodriveError(f"{path}: a {FAMILIES[family]} policy with continuous actions is not an SB3 model")
     observation = data.get("observation_space")
     return {"algo": family, "sb3_class": sb3_class_name(data, family),
+            "obs_space": _space_type(observation) if isinstance(observation, dict) else "",
             "obs_shape": _space_shape(observation), "obs_low": _bounds(observation, "low"),
             "obs_high": _bounds(observation, "high"), **info}
 

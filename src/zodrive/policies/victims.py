@@ -104,9 +104,31 @@ def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torc
     raise TypeError(f"no victim adapter for {name}")
 
 
+def check_sb3_model(model: BaseAlgorithm) -> None:
+    """Refuse, in one line and in its own words, an SB3 model in memory that zodrive cannot query as
+    one observation in, one action out: a recurrent policy (its action depends on a hidden state), a
+    Dict or Tuple observation, or one trained on stacked frames (it holds a VecFrameStack)."""
+    from gymnasium import spaces
+    from stable_baselines3.common.vec_env import VecFrameStack, unwrap_vec_wrapper
+
+    name = type(model).__name__
+    if name == "RecurrentPPO" or hasattr(model.policy, "lstm_actor"):
+        raise ZodriveError(f"{name}: recurrent policies are not supported: the action depends on an LSTM state that "
+                           "zodrive's one-observation queries do not carry")
+    if not isinstance(model.observation_space, spaces.Box):
+        raise ZodriveError(f"{name} observes a {type(model.observation_space).__name__} (a goal-conditioned or "
+                           "multi-part observation, as parking-v0's): zodrive attacks policies that observe one Box")
+    env = model.get_env()
+    stack = unwrap_vec_wrapper(env, VecFrameStack) if env is not None else None
+    if stack is not None:
+        raise ZodriveError(f"{name} was trained on {stack.stacked_obs.n_stack} stacked frames (its environment is a "
+                           "VecFrameStack): zodrive feeds one observation per step and does not stack frames")
+
+
 def sb3_victim(model: BaseAlgorithm) -> Victim:
     """Wrap a loaded SB3 / sb3-contrib model as a black-box victim: a live view of its
     networks (training them changes the victim)."""
+    check_sb3_model(model)
     obs_shape = tuple(model.observation_space.shape)
     model.policy.set_training_mode(False)
     forward_fn, kind = _acting_forward(model)
