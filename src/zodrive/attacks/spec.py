@@ -153,7 +153,12 @@ class AttackSpec(AttackOptions):
             log.warning("the observation box is unbounded (the environment declares none): eps alone bounds the "
                         "perturbation, and a perturbed value may be one the sensor never produces; pass --obs-bounds "
                         "LOW,HIGH if the observations have a range")
-        width = np.min(np.asarray(threat.high) - np.asarray(threat.low))
+        widths = np.asarray(threat.high) - np.asarray(threat.low)
+        width, widest = np.min(widths), np.max(widths)
+        if self.mode == "budgeted" and self.norm == "linf" and self.eps > widest:
+            raise ZodriveError(f"eps={self.eps:g} is more than any observation value can move (the box's widest side "
+                               f"is {widest:g} wide): the run would record eps={self.eps:g} while {widest:g} ran; "
+                               f"pass eps <= {widest:g}")
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box (its narrowest side is %g wide): the budget "
                         "constrains nothing, only the box clips the perturbation", self.eps, width)

@@ -398,6 +398,22 @@ def _progress(total: int, enabled: bool, label: str):
     return tqdm(total=total, desc=f"{label} episodes", unit="ep", dynamic_ncols=True)
 
 
+def eps_means(preset: dict[str, Any], eps: float) -> str:
+    """What `eps` is on `preset`'s observation, in the road's units: eps=0.05 moves a normalized
+    highway-fast x by 10 m, an unnormalized one by 5 cm."""
+    from zodrive.envs import scenario
+
+    where = scenario(preset)
+    if where.road and where.normalized and where.feature_ranges:
+        unit = {"x": "m", "y": "m", "vx": "m/s", "vy": "m/s"}
+        return "normalized to [-1, 1]: up to " + ", ".join(
+            f"{name} {eps * (high - low) / 2:.3g} {unit.get(name, '')}".rstrip()
+            for name, (low, high) in where.feature_ranges.items())
+    if where.road:
+        return f"not normalized: up to {eps:g} m on positions, {eps:g} m/s on velocities"
+    return "in the observation's own units"
+
+
 def summarize(
     records: list[dict[str, Any]], job: EvalJob, steps: list[dict[str, Any]] | None = None
 ) -> dict[str, Any]:
@@ -461,6 +477,8 @@ def summarize(
             max_linf=float(max(r["max_linf"] for r in records)),
             attack_config=job.attack,
         )
+        if summary["eps"] is not None:
+            summary["eps_means"] = eps_means(job.preset, summary["eps"])
         if steps:
             summary.update(
                 mean_linf=float(np.mean([s["linf"] for s in steps])),

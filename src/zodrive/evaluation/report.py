@@ -31,7 +31,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     if summary.get("attack"):
         lines.append(
             f"attack: {summary['attack']} ("
-            + (f"{summary['norm']}, eps={summary['eps']}, budgeted" if summary.get("eps") is not None
+            + (f"{summary['norm']}, eps={summary['eps']}" + (f" ({summary['eps_means']})" if summary.get("eps_means")
+                                                              else "") + ", budgeted" if summary.get("eps") is not None
                else "unconstrained: paper mode, no budget")
             + (f", adversary {(summary.get('attack_config') or {}).get('adversary')})" if summary["attack"] == "learned"
                else f", target={summary['target']}" + _picker(summary) + ")") + _options(summary.get("attack_config") or {})
