@@ -69,9 +69,12 @@ def test_the_wrapper_reads_the_environment(model: DQN) -> None:
             break
 
 
-def test_the_api_refuses_in_one_line(model: DQN) -> None:
-    with pytest.raises(ZodriveError, match="say where the policy drives"):
-        zodrive.evaluate(model)
+def test_the_api_refuses_in_one_line(model: DQN, tmp_path) -> None:
+    model.save(tmp_path / "m")
+    with pytest.raises(ZodriveError, match="holds no environment .* say where it drives"):
+        zodrive.evaluate(DQN.load(tmp_path / "m.zip", device="cpu"))  # loaded without env=: nothing says where
+    with pytest.raises(ZodriveError, match="environment Pendulum-v1, not CartPole-v1"):
+        zodrive.evaluate(model, env_id="Pendulum-v1")  # the CartPole it holds says where it was trained
     with pytest.raises(ZodriveError, match="without an attack"):
         zodrive.evaluate(model, env_id="CartPole-v1", eps=0.05)
     with pytest.raises(ZodriveError, match="in memory"):

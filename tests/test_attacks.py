@@ -320,10 +320,13 @@ def _step_of(built, x):
     return attack.perturb(x, oracle, objective)
 
 
-def test_an_eps_that_covers_the_whole_box_is_reported(caplog) -> None:
+def test_an_eps_that_covers_the_whole_box_is_reported_and_one_past_it_refused(caplog) -> None:
+    low, high = CONTEXT["bounds"]
     with caplog.at_level("WARNING"):
-        AttackSpec(eps=1e6).build(linear_victim(), **CONTEXT)  # the schema's largest eps
+        AttackSpec(eps=high - low).build(linear_victim(), **CONTEXT)
     assert "covers the whole observation box" in caplog.text
+    with pytest.raises(ZodriveError, match="more than any observation value can move"):  # it would record what
+        AttackSpec(eps=1e6).build(linear_victim(), **CONTEXT)  # did not run (the schema's largest eps)
 
 
 def test_an_unbounded_observation_box_is_reported(caplog) -> None:

@@ -37,7 +37,9 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
         assert cell["return"] == min(*attacked, clean)
         assert cell["pgd_return"] is not None  # white-box apart, since the PPO has gradients
     assert row["brake"]["collision_rate"] >= 0 and 0 < row["robustness_area"] <= 1.5
-    assert "ppo*" in (board / "leaderboard.md").read_text()
+    text = (board / "leaderboard.md").read_text()  # an unofficial row: in a table of its own, unranked, never bold
+    ppo = next(line for line in text.splitlines() if line.startswith("| ppo |"))
+    assert text.index("Unofficial rows of highway-fast") < text.index(ppo) and "**" not in ppo
     import zodrive.evaluation.evaluate as evaluation
 
     def no_episode(*args, **kwargs):
@@ -50,6 +52,13 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
     assert main(["leaderboard", "--board", str(board), "--out", str(out), "--plot", str(tmp_path / "b.png")]) == 0
     assert out.read_text() == leaderboard_markdown(read_rows(board))
     assert (tmp_path / "b.png").stat().st_size > 0
+    mine = tmp_path / "notes.md"
+    mine.write_text("my notes\n")  # a file zodrive did not write is replaced only with --force
+    assert main(["leaderboard", "--board", str(board), "--out", str(mine)]) == 2
+    assert mine.read_text() == "my notes\n"
+    assert main(["leaderboard", "--board", str(board), "--out", str(out), "--plot", str(mine)]) == 2
+    assert main(["leaderboard", "--board", str(board), "--out", str(mine), "--force"]) == 0
+    assert main(["leaderboard", "--board", str(board)]) == 2  # no default: the checkout's board only when asked
 
 
 def test_a_forced_bench_drops_the_old_row_before_it_runs(tmp_path: Path, monkeypatch) -> None:
@@ -197,16 +206,21 @@ def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same
 
 
 def test_the_plot_gives_a_family_one_colour_and_each_seed_its_own_marker() -> None:
-    """Merge has 15 rows: drawn in a 10-colour cycle, two policies shared a colour and could not be told apart."""
-    from zodrive.experiments.bench import family_and_seed, line_style
+    """Merge has 15 rows: drawn in a 10-colour cycle, two policies shared a colour and could not be told apart;
+    and colours given by sorted position changed whenever a row was added."""
+    from zodrive.experiments.bench import family_and_seed, family_colours, line_style
 
     assert family_and_seed("dqn-g99-seed-1") == ("dqn-g99", 1)
     assert family_and_seed("baseline-slower") == ("baseline-slower", 0)
-    families = ["baseline-slower", "dqn", "dqn-g99"]
-    one, two = line_style("dqn-g99-seed-1", families), line_style("dqn-g99-seed-2", families)
-    assert one["color"] == two["color"] == 2 and one["marker"] != two["marker"]
-    assert line_style("dqn-seed-1", families)["color"] == 1 != one["color"]
-    assert line_style("baseline-slower", families)["linestyle"] == "--" != one["linestyle"]
+    colours = family_colours(["dqn", "dqn-g99"])
+    one, two = (line_style({"policy": f"dqn-g99-seed-{i}", "key": "sha256:x"}, colours) for i in (1, 2))
+    assert one["color"] == two["color"] and one["marker"] != two["marker"]
+    assert line_style({"policy": "dqn-seed-1", "key": "sha256:y"}, colours)["color"] != one["color"]
+    assert family_colours(["dqn", "dqn-g99", "attention", "imitation"])["dqn-g99"] == colours["dqn-g99"]  # stable
+    assert len(set(family_colours([f"f{i}" for i in range(12)]).values())) == 12  # no colour repeats in a panel
+    brake = line_style({"policy": "baseline-slower", "key": "baseline:slower"}, colours)
+    rules = line_style({"policy": "baseline-rules", "key": "baseline:rules"}, family_colours(["baseline-rules"]))
+    assert brake["linestyle"] == "--" != one["linestyle"] and rules["linestyle"] == "-"  # rules read, and are attacked
 
 
 EXTRACTOR = '''
@@ -248,7 +262,7 @@ def test_a_network_of_the_users_own_is_benched_only_with_trust_and_its_row_says_
     assert main([*args, "--trust-model"]) == 0
     row = json.loads((board / "intersection" / "mine" / "row.json").read_text())
     assert row["trust_model"] is True and row["attacked"][-1]["pgd_return"] is not None
-    assert "| mine*† |" in (board / "leaderboard.md").read_text()
+    assert "| mine† |" in (board / "leaderboard.md").read_text()
     monkeypatch.delitem(sys.modules, "my_net")  # and off the path: the zip names code that is not here
     monkeypatch.setattr(sys, "path", [p for p in sys.path if p != str(tmp_path)])
     (tmp_path / "copy.zip").write_bytes((tmp_path / "mine.zip").read_bytes())

@@ -29,4 +29,4 @@ for scenario in highway-fast merge roundabout intersection; do
       || echo "baseline:$baseline does not drive $scenario"
   done
 done
-zodrive leaderboard --plot docs/leaderboard.png
+zodrive leaderboard --out docs/leaderboard.md --plot docs/leaderboard.png

@@ -31,9 +31,10 @@ def add_parsers(sub: Any) -> None:
 
     board = sub.add_parser("leaderboard", help="the leaderboard's tables and plot, generated from the bench rows")
     board.add_argument("--board", type=Path, default=BOARD, help="folder of bench rows (default: results/bench)")
-    board.add_argument("--out", type=Path, default=Path("docs/leaderboard.md"),
-                       help="the Markdown file to write (default: docs/leaderboard.md)")
+    board.add_argument("--out", type=Path, required=True,
+                       help="the Markdown file to write (the repository's own board: docs/leaderboard.md)")
     board.add_argument("--plot", type=Path, default=None, help="also draw return against eps per scenario (PNG)")
+    board.add_argument("--force", action="store_true", help="replace a --out or --plot file zodrive did not write")
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -59,14 +60,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
           f"[{time.perf_counter() - start:.0f} s]")
     print(f"row: {out / 'row.json'}")
     write_leaderboard(args.board, args.board / "leaderboard.md")
-    print(f"leaderboard: {args.board / 'leaderboard.md'} (zodrive leaderboard writes docs/leaderboard.md)")
+    print(f"leaderboard: {args.board / 'leaderboard.md'}")
     return 0
 
 
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     from zodrive.experiments.bench import write_leaderboard
 
-    write_leaderboard(args.board, args.out, args.plot)
+    write_leaderboard(args.board, args.out, args.plot, force=args.force)
     print(f"wrote {args.out}" + (f" and {args.plot}" if args.plot else ""))
     return 0
 

@@ -23,7 +23,8 @@ from zodrive.errors import ZodriveError
 from zodrive.training.picker import PickerFit  # torch-free
 
 VICTIM_HELP = "SB3 zip or model folder: the victim (fixed)"
-PRESET_HELP = "preset the model trains on (default: the paper's preset of its action kind)"
+PRESET_HELP = ("preset the model trains on (default: where its run folder or rl-zoo3 / Hugging Face files say it was "
+               "trained; a model that says nothing needs it)")
 
 
 def add_parsers(sub: Any) -> None:

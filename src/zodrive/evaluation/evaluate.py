@@ -13,6 +13,7 @@ import logging
 import multiprocessing as mp
 import os
 import queue
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -325,9 +326,12 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
     bar = None  # drawn with the first finished episode: a refusal while building comes first, alone
+    started = time.time()
     for record, steps in run_episodes(job, todo, workers, envs):
         if bar is None:
             bar = _progress(len(todo), progress, label or ("attacked" if job.attack else "clean"))
+            if bar is not None:  # its clock starts with the run, not with the first episode it shows
+                bar.start_t = bar.last_print_t = started
         done[record["episode"]] = record
         if out is not None:
             _append_jsonl(out / "steps.jsonl", steps)

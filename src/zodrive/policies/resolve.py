@@ -102,6 +102,8 @@ def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: l
         assert said is not None
         where = f"{config['name']} differs from where {', '.join(said.said_by)} says {model} was trained"
         if not shifted:
+            if not model.startswith("memory:"):
+                check_policy(model, config)  # a model that cannot drive it at all is refused for that first
             raise ZodriveError(f"{where} ({'; '.join(why)}): drop --preset / --env-id to run it there, or pass "
                                "--shifted to measure it on this scenario anyway")
         return config, f"shifted: {where} ({'; '.join(why)})"
