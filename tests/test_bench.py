@@ -308,3 +308,33 @@ def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path)
     brake = returns(tmp_path / "brake")
     mean = sum(a - b for a, b in zip(returns(tmp_path / "clean"), brake, strict=True)) / 2
     assert len(brake) == 2 and row["vs_brake"][0] == pytest.approx(mean)
+
+
+def test_the_leaderboard_refuses_rows_it_cannot_read_in_one_line(tmp_path: Path, capsys) -> None:
+    """Rows come from strangers: a well-formed JSON of the wrong shape, a FIFO, a link to /dev/zero, a name that
+    breaks the table: one line each, never a traceback, a hang or a MemoryError."""
+    import os
+
+    root = Path(__file__).resolve().parents[1] / "results" / "bench" / "highway-fast" / "baseline-slower" / "row.json"
+    good = json.loads(root.read_text())
+    cases = {"empty": {}, "list": [], "no-attacked": {k: v for k, v in good.items() if k != "attacked"},
+             "many": {**good, "episodes": "many"}, "none-attacked": {**good, "attacked": []},
+             "pipe-name": {**good, "policy": "a|b"}, "newline": {**good, "policy": "a\nb"},
+             "ci": {**good, "clean": {**good["clean"], "ci95": "wide"}}}
+    for name, row in cases.items():
+        board = tmp_path / name
+        (board / "highway-fast" / "x").mkdir(parents=True)
+        (board / "highway-fast" / "x" / "row.json").write_text(json.dumps(row))
+        assert main(["leaderboard", "--board", str(board), "--out", str(tmp_path / f"{name}.md")]) == 2, name
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "is not a bench row" in err, (name, err)
+    for name, make in (("fifo", os.mkfifo), ("zero", lambda p: os.symlink("/dev/zero", p))):
+        board = tmp_path / name
+        (board / "highway-fast" / "x").mkdir(parents=True)
+        make(board / "highway-fast" / "x" / "row.json")
+        assert main(["leaderboard", "--board", str(board), "--out", str(tmp_path / f"{name}.md")]) == 2, name
+        assert "not a regular file" in capsys.readouterr().err
+    for bad in ("", "a|b", "a\nb", ".hidden"):
+        assert main(["bench", "baseline:slower", "--scenario", "highway-fast", "--name", bad, "--board",
+                     str(tmp_path / "b")]) == 2
+        assert "a row's name is one folder name" in capsys.readouterr().err

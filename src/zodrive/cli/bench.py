@@ -40,14 +40,16 @@ def add_parsers(sub: Any) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
-    from zodrive.experiments.bench import bench, protocol, write_leaderboard
+    from zodrive.experiments.bench import ROW_NAME, bench, protocol, write_leaderboard
     from zodrive.policies.policy import resolve
 
     proto = protocol(args.scenario)
     check_trust(args)
-    name = args.name or resolve(args.model).label
-    if not name or "/" in name or name.startswith("."):
-        raise ZodriveError(f"--name {name!r}: a row's name is one folder name")
+    name = resolve(args.model).label if args.name is None else args.name
+    if not ROW_NAME.fullmatch(name):
+        raise ZodriveError(f"--name {name!r}: a row's name is one folder name of letters, digits and ._+@=- (at most "
+                           "100, not starting with one of ._+@=-): tables and plots show it as it is"
+                           + ("" if args.name is not None else "; pass --name"))
     out = args.board / args.scenario / name
     start = time.perf_counter()
     row = bench(args.model, proto, out, name=name, episodes=args.episodes, workers=args.workers,
