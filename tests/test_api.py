@@ -81,6 +81,13 @@ def test_the_api_refuses_in_one_line(model: DQN, tmp_path) -> None:
         zodrive.evaluate(model, env_id="CartPole-v1", out="somewhere")
     with pytest.raises(ZodriveError, match="cannot read a policy"):
         zodrive.evaluate(42, env_id="CartPole-v1")
+    for bad in ({"episodes": 10**12}, {"seed": -1}, {"episodes": 2.5}, {"envs": 0}):  # refused before any allocation
+        with pytest.raises(ZodriveError, match="must be an integer in"):
+            zodrive.evaluate("baseline:slower", "highway-fast", **bad)
+    with pytest.raises(ZodriveError, match="trust_model applies to stable-baselines3 zips"):
+        zodrive.evaluate("baseline:slower", "highway-fast", trust_model=True)  # the CLI refuses --trust-model too
+    with pytest.raises(ZodriveError, match="wraps a gymnasium environment, not a NoneType"):
+        zodrive.AttackWrapper(None, model)
 
 
 class Logger:

@@ -304,3 +304,20 @@ def test_on_merge_the_brake_rear_ends_a_car_that_merged_in_and_brake_escape_does
 
     episode = zodrive.evaluate(baseline, "merge", episodes=1, seed=50032).episodes[0]
     assert episode["crashed"] is crashed
+
+
+def test_a_score_attack_on_a_decision_only_policy_says_what_its_rows_mean(caplog) -> None:
+    """baseline:rules answers one-hot: ZO-SignSGD got identical rows at every eps with no word of why."""
+    import logging
+
+    import zodrive
+
+    with caplog.at_level(logging.WARNING, logger="zodrive"):
+        zodrive.attack("baseline:rules", np.zeros((1, 5, 5), dtype=np.float32), "highway-fast", "zo-signsgd",
+                       eps=0.05, steps=2)
+    assert "answers with its decision alone" in caplog.text and "lower bound" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="zodrive"):
+        zodrive.attack("baseline:rules", np.zeros((1, 5, 5), dtype=np.float32), "highway-fast", "random-search",
+                       eps=0.05, steps=2)
+    assert "decision alone" not in caplog.text  # random search needs only decisions

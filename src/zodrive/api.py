@@ -95,6 +95,16 @@ def _scenario(policy: Policy, scenario: str | dict[str, Any] | None, env_id: str
     return found
 
 
+def _check_counts(*, episodes: int, seed: int, envs: int) -> None:
+    """The API's numbers, checked as the CLI's flags are, before anything is built or allocated."""
+    from zodrive.cli.common import MAX_EPISODES
+
+    for name, value, least, most in (("episodes", episodes, 1, MAX_EPISODES), ("seed", seed, 0, 2**63 - 1),
+                                     ("envs", envs, 1, 1024)):
+        if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:
+            raise ZodriveError(f"{name} must be an integer in [{least:,}, {most:,}], not {value!r}")
+
+
 def _spec(attack: str | AttackSpec | None, where: Scenario, options: dict[str, Any]) -> AttackSpec | None:
     """The attack spec from a name (or spec) and keyword options; the default target is the
     paper's where the scenario has that action, else untargeted."""
@@ -137,11 +147,12 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     :param options: the attack's options (`eps=0.05`, `steps=50`, ...).
     :returns: the `Result`.
     """
+    _check_counts(episodes=episodes, seed=seed, envs=envs)
     resolved = resolve(policy)
+    if trust_model and resolved.kind != "model":
+        raise ZodriveError(f"trust_model applies to stable-baselines3 zips; {resolved.label} is read without it")
     preset, source = _scenario(resolved, scenario, env_id, shifted)
     spec = _spec(attack, scenario_of(preset), options)
-    if not isinstance(episodes, int) or episodes < 1:
-        raise ZodriveError(f"episodes must be a positive integer, not {episodes!r}")
     attack_dict = spec.to_dict() if spec is not None else None
     if not resolved.in_memory:
         job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model,
@@ -222,6 +233,8 @@ class AttackWrapper(_AttackWrapper):
     """
 
     def __init__(self, env: gym.Env, policy: Any, attack: str | AttackSpec = "random-search", **options: Any) -> None:
+        if not isinstance(env, gym.Env):
+            raise ZodriveError(f"AttackWrapper wraps a gymnasium environment, not a {type(env).__name__}")
         where = scenario_of_env(env)
         spec = _spec(attack, where, options)
         super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where))

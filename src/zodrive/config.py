@@ -201,8 +201,12 @@ def resolve_path(name: str, kind: str) -> Path:
         return as_path
     candidate = config_root() / kind / f"{name}.yaml"
     if not candidate.is_file():
-        known = ", ".join(available(kind)) or "none"
-        raise ZodriveError(f"unknown {kind[:-1]} {name!r} (known: {known})")
+        import difflib
+
+        names = available(kind)
+        close = difflib.get_close_matches(name, names, n=1)
+        raise ZodriveError(f"unknown {kind[:-1]} {name!r}" + (f"; did you mean {close[0]!r}?" if close else "")
+                           + f" (known: {', '.join(names) or 'none'})")
     return candidate
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from zodrive.attacks.victim import Victim
-from zodrive.attacks.base import ENGINE_OPTIONS, Attack, needs_fixed_target, refuse_unread
+from zodrive.attacks.base import ENGINE_OPTIONS, Attack, GradientEstimateAttack, needs_fixed_target, refuse_unread
 from zodrive.attacks.hold import PLAIN_CHECK, VertexCheck
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
@@ -163,6 +163,10 @@ class AttackSpec(AttackOptions):
             log.warning("eps=%g covers the whole observation box (its narrowest side is %g wide): the budget "
                         "constrains nothing, only the box clips the perturbation", self.eps, width)
         attack = self._make(threat, load_network)
+        if victim.decisions_only and isinstance(attack, GradientEstimateAttack):
+            log.warning("the policy answers with its decision alone (one-hot), so %s, which follows differences of "
+                        "scores, sees a change only where a probe crosses a decision boundary: its success here is a "
+                        "lower bound (random-search needs only decisions)", self.attack)
         if self.attack == LEARNED:
             attack.check_mask(threat)  # type: ignore[attr-defined]
         self._check_budgets(attack)
@@ -175,7 +179,11 @@ class AttackSpec(AttackOptions):
 
 def _known(spec: AttackOptions) -> None:
     if spec.attack not in ATTACKS and spec.attack != LEARNED:
-        raise ZodriveError(f"unknown attack {spec.attack!r} (known: {', '.join(KNOWN)})")
+        import difflib
+
+        close = difflib.get_close_matches(spec.attack, list(KNOWN), n=1)
+        raise ZodriveError(f"unknown attack {spec.attack!r}" + (f"; did you mean {close[0]!r}?" if close else "")
+                           + f" (known: {', '.join(KNOWN)})")
     if spec.attack == VertexCheck.name and spec.adversary is None:
         raise ZodriveError(PLAIN_CHECK)
 

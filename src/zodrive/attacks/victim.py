@@ -31,6 +31,9 @@ class Victim:
     """White-box access (torch forward with gradients); only the FGSM/PGD baselines use it."""
     reads: Literal["observation", "nothing", "simulator"] = "observation"
     """What the decisions depend on: built-in baselines read nothing or the simulator."""
+    decisions_only: bool = False
+    """Discrete outputs that are the decision alone (one-hot: the rules, a callable that returns actions):
+    no score margin for a gradient-estimating attack to follow."""
     calibrate: QueryFn | None = None
     """A copy of the network that zodrive built itself (from a model file), for the harness's own
     calls (which batch sizes give a row the same outputs). None: the harness never calls the

@@ -11,6 +11,7 @@ there: it loads torch, which `zodrive --help` does not need).
 from __future__ import annotations
 
 import argparse
+import functools
 import types
 import typing
 from dataclasses import dataclass
@@ -121,11 +122,37 @@ ATTACK_FLAGS = {"/".join(f.flag for f in FLAGS if f.dest == dest): dest
 (`--warm-start/--no-warm-start` share one)."""
 
 
+@functools.lru_cache(maxsize=1)
+def _config_values() -> dict[str, dict[str, list[str]]]:
+    """Per option, the shipped attack configs that set it, by the value they set (shown value -> names)."""
+    import yaml
+
+    from zodrive.config import available, resolve_path
+
+    found: dict[str, dict[str, list[str]]] = {}
+    for name in available("attacks"):
+        data = yaml.safe_load(resolve_path(name, "attacks").read_text(encoding="utf-8")) or {}
+        for key, value in data.items() if isinstance(data, dict) else ():
+            if key in FIELDS and key != "attack":
+                found.setdefault(key, {}).setdefault(_shown(value), []).append(name)
+    return found
+
+
+def _default_text(field: str, default: Any) -> str:
+    """"(default: X)", and the configs that run with another value (`--patience`: none in the schema, 10 in the
+    zo-signsgd config), so that the help never hides what an --attack NAME runs with."""
+    other = {value: names for value, names in _config_values().get(field, {}).items() if value != _shown(default)}
+    text = f"default: {_shown(default)}" + "".join(
+        f"; {value} in the {', '.join(names)} config{'s' if len(names) > 1 else ''}" for value, names in other.items())
+    return f"({text})"
+
+
 def add_attack_flags(parser: argparse.ArgumentParser) -> None:
     """`--attack` and one flag per option of the attack schema."""
     group = parser.add_argument_group(
         "attack (black-box unless the name says otherwise)",
-        "options left unset keep the values of the --attack config; the defaults shown are the schema's")
+        "options left unset keep the values of the --attack config: the schema's defaults, and where a shipped config "
+        "sets another, that config's")
     group.add_argument(ATTACK_FLAG, metavar=_extra("attack").get("metavar"), help=FIELDS["attack"].description)
     for f in FLAGS:
         if f.flag == ATTACK_FLAG:
@@ -142,13 +169,13 @@ def add_attack_flags(parser: argparse.ArgumentParser) -> None:
                                help=extra["clear"] + (" (default)" if default is None else ""))
         elif typing.get_origin(kind) is Literal:
             group.add_argument(f.flag, dest=f.dest, choices=typing.get_args(kind), default=None,
-                               help=f"{info.description} (default: {_shown(default)})")
+                               help=f"{info.description} {_default_text(f.field, default)}")
         elif typing.get_origin(kind) is tuple and typing.get_args(kind) == (str, Ellipsis):
             group.add_argument(f.flag, dest=f.dest, type=_names, default=None, metavar=f"{extra.get('metavar', 'NAME')},...",
-                               help=f"{info.description} (default: {_shown(default)})")
+                               help=f"{info.description} {_default_text(f.field, default)}")
         else:
             group.add_argument(f.flag, dest=f.dest, type=option_type(f.field), default=None,
-                               metavar=extra.get("metavar"), help=f"{info.description} (default: {_shown(default)})")
+                               metavar=extra.get("metavar"), help=f"{info.description} {_default_text(f.field, default)}")
 
 
 def attack_spec_from_args(args: argparse.Namespace) -> Any:

@@ -330,4 +330,4 @@ def rules_victim(preset: dict[str, Any], obs_shape: tuple[int, ...], n_actions: 
     def query(obs: np.ndarray) -> np.ndarray:
         return eye[rules.actions(np.asarray(obs).reshape(len(obs), *obs_shape))]
 
-    return Victim(query=query, kind="discrete", obs_shape=obs_shape, reads="observation")
+    return Victim(query=query, kind="discrete", obs_shape=obs_shape, reads="observation", decisions_only=True)
