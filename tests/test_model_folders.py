@@ -250,3 +250,43 @@ def test_a_scenario_mapping_is_checked_as_a_preset_file_is() -> None:
         zodrive.evaluate("baseline:slower", {"foo": 1}, episodes=1)
     with pytest.raises(ZodriveError, match="foo"):
         zodrive.evaluate("baseline:slower", {"name": "mine", "foo": 1}, episodes=1)
+
+
+def test_files_that_would_feed_nan_or_allocate_without_bound_are_refused(trained, tmp_path: Path) -> None:
+    """A VecNormalize file asking numpy for a 93 GiB array, one with variance 0 and epsilon 0, and a zip of NaN
+    weights: one line each, before anything is allocated or driven."""
+    import io
+    import zipfile
+
+    import torch
+
+    class Huge:
+        def __reduce__(self):
+            return (np._core.multiarray._reconstruct, (np.ndarray, (93 * 2**30 // 8,), np.dtype("f8")))
+
+    (tmp_path / "huge.pkl").write_bytes(pickle.dumps(Huge()))
+    with pytest.raises(ZodriveError, match=r"an array of shape \(12482248704,\) is not part of a VecNormalize"):
+        read_normalization(tmp_path / "huge.pkl")
+    folder, _, venv = trained
+    zero = tmp_path / "zero"
+    zero.mkdir()
+    shutil.copy(folder / "model.zip", zero / "model.zip")
+    venv.obs_rms.var, venv.epsilon = venv.obs_rms.var * 0, 0.0
+    try:
+        venv.save(str(zero / "vecnormalize.pkl"))
+    finally:
+        venv.obs_rms.var, venv.epsilon = venv.obs_rms.var + 1.0, 1e-8
+    with pytest.raises(ZodriveError, match="variance 0 with epsilon 0"):
+        read_normalization(zero / "vecnormalize.pkl")
+    nan = tmp_path / "nan.zip"
+    with zipfile.ZipFile(folder / "model.zip") as src, zipfile.ZipFile(nan, "w") as out:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "policy.pth":
+                weights = torch.load(io.BytesIO(data))
+                buffer = io.BytesIO()
+                torch.save({k: v * float("nan") if v.is_floating_point() else v for k, v in weights.items()}, buffer)
+                data = buffer.getvalue()
+            out.writestr(item, data)
+    with pytest.raises(ZodriveError, match="NaN or infinite weights"):
+        zodrive.evaluate(str(nan), env_id=ENV, episodes=1)

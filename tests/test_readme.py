@@ -30,6 +30,7 @@ def test_the_python_api_block_runs(tmp_path: Path) -> None:
     block = next(b for b in python_blocks() if "zodrive.evaluate" in b)
     script = tmp_path / "api.py"
     script.write_text(block)
+    (tmp_path / "models").symlink_to(README.parent / "models")  # the block reads the shipped PPO, as from a checkout
     run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True,
                          timeout=1200, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert run.returncode == 0, run.stderr[-2000:]

@@ -74,7 +74,9 @@ class Result:
         ax.axhline(self.summary["mean_return"], color="0.2", lw=1)
         ax.set_xlabel("episode")
         ax.set_ylabel("return")
-        ax.set_title(repr(self).removeprefix("Result(").removesuffix(")"), fontsize=8)
+        import textwrap
+
+        ax.set_title("\n".join(textwrap.wrap(repr(self).removeprefix("Result(").removesuffix(")"), 70)), fontsize=8)
         ax.legend(fontsize=7, loc="lower right")
         if path is not None:
             ax.figure.tight_layout()

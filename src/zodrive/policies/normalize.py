@@ -64,12 +64,26 @@ _NUMPY = {("numpy", "dtype"), ("numpy", "ndarray"), ("numpy._core.multiarray", "
           ("numpy.core.multiarray", "scalar"), ("collections", "OrderedDict")}
 
 
+def _small_reconstruct(reconstruct: Any) -> Any:
+    """numpy's `_reconstruct`, which allocates the shape it is asked for before the data arrives: a
+    pickle asks for (0,) and fills it from its bytes; a crafted one asked for 93 GiB."""
+    def guarded(subtype: Any, shape: Any, dtype: Any) -> Any:
+        if not isinstance(shape, tuple) or not all(isinstance(n, int) and 0 <= n for n in shape) \
+                or int(np.prod(shape, dtype=np.float64)) > MAX_BYTES:
+            raise pickle.UnpicklingError(f"an array of shape {shape!r} is not part of a VecNormalize file")
+        return reconstruct(subtype, shape, dtype)
+
+    return guarded
+
+
 class _Reader(pickle.Unpickler):
     def find_class(self, module: str, name: str) -> Any:
         if (module, name) in _STATE_CLASSES:
             return _State
         if (module, name) in _STAND_IN_FUNCTIONS:
             return _stand_in
+        if (module, name) in _NUMPY and name == "_reconstruct":
+            return _small_reconstruct(super().find_class(module, name))
         if (module, name) in _NUMPY:
             return super().find_class(module, name)
         raise pickle.UnpicklingError(f"{module}.{name} is not part of a VecNormalize file")
@@ -102,7 +116,8 @@ def read_normalization(path: Path) -> ObsNormalization | None:
         raise ZodriveError(f"{path}: {path.stat().st_size} bytes is more than a VecNormalize file holds")
     try:
         root = _Reader(io.BytesIO(path.read_bytes())).load()
-    except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError, KeyError) as exc:
+    except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError, KeyError,
+            MemoryError, OverflowError) as exc:
         raise ZodriveError(f"{path} is not a VecNormalize file zodrive can read without running code: {exc}") from None
     state = getattr(root, "state", None)
     if not isinstance(state, dict) or "obs_rms" not in state:
@@ -122,6 +137,9 @@ def read_normalization(path: Path) -> ObsNormalization | None:
         raise ZodriveError(f"{path}: its observation statistics are not finite arrays of one shape")
     if not (np.isfinite(clip) and clip > 0 and np.isfinite(epsilon) and epsilon >= 0):
         raise ZodriveError(f"{path}: clip_obs {clip} / epsilon {epsilon} are not usable")
+    if np.any(var + epsilon <= 0):  # (obs - mean) / 0: NaN or infinite observations, fed as if valid
+        raise ZodriveError(f"{path}: {int(np.sum(var + epsilon <= 0))} features have variance 0 with epsilon 0: "
+                           "the normalized observation divides by zero")
     return ObsNormalization(mean, var, epsilon, clip, str(path))
 
 

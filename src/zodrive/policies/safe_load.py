@@ -300,6 +300,10 @@ def network_from(data: dict[str, Any], weights: dict[str, torch.Tensor], path: P
     """The acting network rebuilt from a zip's plain contents (see the module docstring)."""
     info = describe(data, weights, path)
     family = info["algo"]
+    broken = [k for k, v in weights.items() if torch.is_tensor(v) and v.is_floating_point() and not torch.isfinite(v).all()]
+    if broken:
+        raise ZodriveError(f"{path}: {broken[0]} holds NaN or infinite weights ({len(broken)} tensors): its outputs "
+                           "decide nothing (an argmax of NaN is action 0)")
     kwargs = data.get("policy_kwargs", {})
     _check_options(data, kwargs, family, path)
     extractors = [k for k in weights if "features_extractor" in k]

@@ -118,6 +118,9 @@ def check_sb3_model(model: BaseAlgorithm) -> None:
     if not isinstance(model.observation_space, spaces.Box):
         raise ZodriveError(f"{name} observes a {type(model.observation_space).__name__} (a goal-conditioned or "
                            "multi-part observation, as parking-v0's): zodrive attacks policies that observe one Box")
+    broken = [n for n, p in model.policy.named_parameters() if not torch.isfinite(p).all()]
+    if broken:
+        raise ZodriveError(f"{name}: {broken[0]} holds NaN or infinite weights: its outputs decide nothing")
     env = model.get_env()
     stack = unwrap_vec_wrapper(env, VecFrameStack) if env is not None else None
     if stack is not None:
