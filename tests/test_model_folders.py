@@ -290,3 +290,14 @@ def test_files_that_would_feed_nan_or_allocate_without_bound_are_refused(trained
             out.writestr(item, data)
     with pytest.raises(ZodriveError, match="NaN or infinite weights"):
         zodrive.evaluate(str(nan), env_id=ENV, episodes=1)
+
+
+def test_certify_and_export_refuse_a_model_trained_on_normalized_observations(trained, tmp_path: Path) -> None:
+    """They work on the network alone: with the statistics beside it, their bounds or file would not be this
+    policy's (they were computed on the raw network while evaluate applied the statistics)."""
+    from zodrive.cli import main
+
+    folder, _, _ = trained
+    assert main(["certify", str(folder), "--env-id", ENV, "--eps", "0.01", "--episodes", "1"]) == 2
+    assert main(["export", str(folder), "--out", str(tmp_path / "m.onnx")]) == 2
+    assert not (tmp_path / "m.onnx").exists()

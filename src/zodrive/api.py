@@ -73,7 +73,7 @@ class Result:
         ax.axhspan(low, high, color="0.5", alpha=0.25, label="mean, 95% CI")
         ax.axhline(self.summary["mean_return"], color="0.2", lw=1)
         ax.set_xlabel("episode")
-        ax.set_ylabel("return")
+        ax.set_ylabel("episode return")
         import textwrap
 
         ax.set_title("\n".join(textwrap.wrap(repr(self).removeprefix("Result(").removesuffix(")"), 70)), fontsize=8)

@@ -242,11 +242,12 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
                   tol: float = 0.2, attacks: tuple[str, ...] = ()) -> dict[str, Any]:
     """The certified share of a model's clean states at each eps (see `certify`), and for each
     of `attacks` its success on the same states (`sandwich`)."""
-    from zodrive.policies.loading import load_network
+    from zodrive.policies.loading import load_network, raw_network_only
     from zodrive.policies.victims import network_victim
     from zodrive.attacks.spec import AttackSpec
     from zodrive.envs import scenario
 
+    raw_network_only(model, "certify")
     network = load_network(model, preset)  # rebuilt from plain data; nothing unpickled
     env = scenario(preset)
     victim = network_victim(network.net, network.kind, network.obs_shape)  # type: ignore[arg-type]

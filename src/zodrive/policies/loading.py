@@ -96,6 +96,17 @@ def _short(values: Any) -> str:
     return str(values) if len(values) <= 6 else f"[{', '.join(map(str, values[:6]))}, ...]"
 
 
+def raw_network_only(path: str | Path, what: str) -> None:
+    """Refuse `what` (certify, export) on a model trained inside VecNormalize: it works on the network alone,
+    which would give bounds or a file for inputs the policy never sees."""
+    from zodrive.policies.folders import trained_with
+
+    norm = trained_with(model_file(path)).normalization
+    if norm is not None:
+        raise ZodriveError(f"{what} works on the network alone, and {path} was trained on observations normalized "
+                           f"by {norm}: its result would not be this policy's")
+
+
 def load_network(path: str | Path, preset: dict[str, Any] | None = None) -> PolicyNetwork:
     """The acting network of a model file, rebuilt safely; with `preset`, checked to fit it.
 

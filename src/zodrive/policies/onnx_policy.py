@@ -37,7 +37,7 @@ def export_onnx(model: str, out: Path) -> Path:
     """Write `model`'s acting network (safely rebuilt, nothing unpickled) to `out` (.onnx)."""
     import torch
 
-    from zodrive.policies.loading import inspect_model, load_network, model_file
+    from zodrive.policies.loading import inspect_model, load_network, model_file, raw_network_only
     from zodrive.runinfo import sha256
 
     if not str(out).endswith(SUFFIX):
@@ -49,6 +49,7 @@ def export_onnx(model: str, out: Path) -> Path:
                            "(a policy in your own code: export it with torch.onnx.export)")
     file = model_file(model)
     info = inspect_model(file)  # a file that is no model is said so before any extra is asked for
+    raw_network_only(model, "export")
     network = load_network(file)
     onnx = _require("onnx")
     net = torch.nn.Sequential(torch.nn.Flatten(), network.net).eval()
