@@ -338,3 +338,18 @@ def test_the_leaderboard_refuses_rows_it_cannot_read_in_one_line(tmp_path: Path,
         assert main(["bench", "baseline:slower", "--scenario", "highway-fast", "--name", bad, "--board",
                      str(tmp_path / "b")]) == 2
         assert "a row's name is one folder name" in capsys.readouterr().err
+
+
+def test_a_bench_says_how_long_it_has_left(capsys, monkeypatch) -> None:
+    """After its clean cell and first attacked cell, a bench says what is left (a 20-minute row said nothing)."""
+    import zodrive.experiments.bench as bench_module
+
+    now = iter([0.0, 10.0, 40.0, 70.0])  # start, clean cell (10 s), two attacked cells (30 s each)
+    monkeypatch.setattr(bench_module.time, "perf_counter", lambda: next(now))
+    clock = bench_module._Clock(100, 300)
+    clock.cell(1, 5, {"attack": "none"})
+    assert capsys.readouterr().err == ""  # no attacked cell yet: no pace to go by
+    clock.cell(2, 5, {"attack": "random-search"})
+    clock.cell(3, 5, {"attack": "zo-signsgd"})
+    # 2 attacked cells left at 30 s, then 300 clean episodes of the policy and of the brake at 10 s per 100
+    assert capsys.readouterr().err.splitlines()[-1] == "bench: 3/5 cells of the grid in 70 s; about 2 min left"

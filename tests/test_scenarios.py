@@ -160,10 +160,13 @@ def test_a_box_per_dimension_and_a_feature_axis_come_from_the_environment() -> N
     queried = np.concatenate(grids)
     assert (queried[:, 0] == queried[:1, 0]).all() and not (queried[:, 1] == queried[:1, 1]).all()
 
-    with pytest.raises(ZodriveError, match="reach beyond the observation space's box on 2 of its 3"):
-        from zodrive.envs import scenario
+    from zodrive.envs import scenario
 
+    with pytest.raises(ZodriveError, match="change nothing"):  # Pendulum declares every range: nothing to bound
         scenario(gym_preset("Pendulum-v1", obs_bounds=(-8.0, 8.0)))
+    # CartPole declares x and the angle, not the speeds: obs_bounds bound the speeds, the declared ranges stay
+    low, high = scenario(gym_preset("CartPole-v1", obs_bounds=(-5.0, 5.0))).bounds
+    assert low == pytest.approx((-4.8, -5.0, -0.41887903, -5.0)) and high == pytest.approx((4.8, 5.0, 0.41887903, 5.0))
 
 
 def test_a_policy_file_that_exits_or_returns_nan_is_one_line(tmp_path: Path, capsys) -> None:

@@ -45,7 +45,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     proto = protocol(args.scenario)
     check_trust(args)
-    name = resolve(args.model).label if args.name is None else args.name
+    name = resolve(args.model).label.replace(":", "-") if args.name is None else args.name
     if not ROW_NAME.fullmatch(name):
         raise ZodriveError(f"--name {name!r}: a row's name is one folder name of letters, digits and ._+@=- (at most "
                            "100, not starting with one of ._+@=-): tables and plots show it as it is"

@@ -66,6 +66,24 @@ class Scenario:
                 "action_bounds": (self.action_low, self.action_high) if self.kind == "continuous" else None}
 
 
+def _within_declared(name: str, given: tuple[float, float], space: gym.spaces.Box) -> tuple[Any, Any]:
+    """`obs_bounds` met with the space's declared box, value by value: the declared range where it is finite
+    and narrower (CartPole's x in [-4.8, 4.8]), `given` where the environment declares none (its speeds). A
+    range that changes no value is an ignored option, and refused."""
+    low, high = space.low.astype(np.float64).ravel(), space.high.astype(np.float64).ravel()
+    new_low, new_high = np.maximum(low, given[0]), np.minimum(high, given[1])
+    if np.array_equal(new_low, low) and np.array_equal(new_high, high):
+        raise ZodriveError(f"{name}: obs_bounds [{given[0]:g}, {given[1]:g}] change nothing: every value's declared "
+                           "range is already inside them (drop --obs-bounds)")
+    if np.any(new_low >= new_high):
+        i = int(np.flatnonzero(new_low >= new_high)[0])
+        raise ZodriveError(f"{name}: obs_bounds [{given[0]:g}, {given[1]:g}] leave value {i} no range (declared "
+                           f"[{low[i]:g}, {high[i]:g}])")
+    if np.all(new_low == new_low[0]) and np.all(new_high == new_high[0]):
+        return float(new_low[0]), float(new_high[0])
+    return tuple(map(float, new_low)), tuple(map(float, new_high))
+
+
 def register() -> None:
     """Register zodrive's highway-env scenarios with gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
@@ -308,13 +326,7 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
         else:  # a box per dimension (Pendulum: cos, sin in [-1, 1], the speed in [-8, 8])
             bounds = (tuple(map(float, space.low.ravel())), tuple(map(float, space.high.ravel())))
     if config.get("obs_bounds") is not None:
-        bounds = (float(config["obs_bounds"][0]), float(config["obs_bounds"][1]))
-        wider = np.flatnonzero((bounds[0] < space.low.ravel()) | (bounds[1] > space.high.ravel()))
-        if wider.size:  # the declared box holds every observation the environment makes: a wider range is not a sensor's
-            raise ZodriveError(f"{name}: obs_bounds [{bounds[0]:g}, {bounds[1]:g}] reach beyond the observation space's "
-                               f"box on {wider.size} of its {space.low.size} values (value {wider[0]}: "
-                               f"[{space.low.ravel()[wider[0]]:g}, {space.high.ravel()[wider[0]]:g}]); without "
-                               "obs_bounds zodrive keeps each value in its own range")
+        bounds = _within_declared(name, (float(config["obs_bounds"][0]), float(config["obs_bounds"][1])), space)
     if isinstance(actions, gym.spaces.Discrete):
         kind, n = "discrete", int(actions.n)
         names = tuple(core.action_type.actions[i] for i in range(n)) if road and hasattr(

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import json
 import re
+import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -90,6 +92,36 @@ def physical_eps(proto: Protocol) -> dict[str, dict[str, float]]:
             for eps in proto.eps}
 
 
+class _Clock:
+    """What is left of a bench, said on stderr after each cell of its grid: the attacked cells left at the
+    pace of those done, and the extra clean episodes of the policy and the brake at the clean cell's pace."""
+
+    def __init__(self, episodes: int, clean_episodes: int) -> None:
+        self.start = self.last = time.perf_counter()
+        self.episodes, self.clean_episodes = episodes, clean_episodes
+        self.clean_s: float | None = None
+        self.attacked: list[float] = []
+
+    def cell(self, done: int, total: int, cell: dict[str, Any]) -> None:
+        now = time.perf_counter()
+        took, self.last = now - self.last, now
+        if cell["attack"] == "none":
+            self.clean_s = took
+        else:
+            self.attacked.append(took)
+        if not self.attacked or self.clean_s is None:
+            return  # nothing to go by yet: a resumed cell takes no time, the first attacked one says the pace
+        left = (total - done) * float(np.mean(self.attacked))
+        # then the policy's clean cell of more episodes (if the protocol has one) and the brake's, at the clean pace
+        left += self.clean_s * self.clean_episodes / self.episodes * (2 if self.clean_episodes > self.episodes else 1)
+        print(f"bench: {done}/{total} cells of the grid in {_minutes(now - self.start)}; about {_minutes(left)} "
+              "left", file=sys.stderr, flush=True)
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
+
+
 def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, episodes: int | None = None,
           workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8,
           trust: bool = False) -> dict[str, Any]:
@@ -104,8 +136,9 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     attacks = [*proto.black_box, proto.white_box]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
+    clock = _Clock(n, n_clean)
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, force=force, envs=envs, trust=trust)
+            preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell)
     clean_out = clean_folder(out, n, n_clean)
     if clean_out != out:
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,

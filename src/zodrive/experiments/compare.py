@@ -14,7 +14,7 @@ import csv
 import io
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from zodrive.drivers.baselines import get_baseline
 from zodrive.policies.policy import resolve
@@ -34,7 +34,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, shifted: bool = False,
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
-            trust: bool = False) -> list[dict[str, Any]]:
+            trust: bool = False, on_cell: Callable[[int, int, dict[str, Any]], None] | None = None
+            ) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget; one resumable
     evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies
     that do not read the observation (constant and
@@ -95,6 +96,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             "episodes": s["episodes"],
         }
         write_tables([r for r in rows if r is not None], out)  # in grid order, as cells finish
+        if on_cell is not None:
+            on_cell(sum(r is not None for r in rows), len(rows), grid[i])
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done, envs=envs)
     return rows  # type: ignore[return-value]
