@@ -354,3 +354,18 @@ def test_a_reader_that_closes_the_pipe_stops_the_command_quietly() -> None:
     proc.stdout.close()  # the reader is gone before the command writes
     err = proc.stderr.read().decode()
     assert proc.wait() == 141 and err == ""
+
+
+def test_a_failed_write_leaves_no_stray_file(tmp_path: Path, monkeypatch) -> None:
+    """A full disk left `.summary.json.XXXX` behind, and the next run refused the folder for it."""
+    import os
+
+    from zodrive.runinfo import write_atomic
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(OSError):
+        write_atomic(tmp_path / "summary.json", "{}")
+    assert list(tmp_path.iterdir()) == []

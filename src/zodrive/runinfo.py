@@ -70,10 +70,14 @@ def write_atomic(path: Path, text: str) -> None:
     """Write a file so that a reader never sees it half-written."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as handle:
-        handle.write(text)
-    os.chmod(tmp, 0o644)  # mkstemp makes files private; results are meant to be shared
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w") as handle:
+            handle.write(text)
+        os.chmod(tmp, 0o644)  # mkstemp makes files private; results are meant to be shared
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, an interrupt: no half-written stray file is left to confuse the next run
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def to_json(data: Any, indent: int | None = None) -> str:

@@ -77,10 +77,16 @@ def _ray(cells: list[Cell], workers: int, address: str | None, envs: int) -> Ite
     except ImportError:
         raise ZodriveError("--backend ray needs Ray: pip install 'zodrive[ray]'") from None
     if not ray.is_initialized():
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        try:
+            if address:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        except (ConnectionError, RuntimeError, ValueError, OSError, TimeoutError) as exc:
+            from zodrive.errors import cause
+
+            where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+            raise ZodriveError(f"--backend ray: {where} did not start: {cause(exc)}") from None
     task = ray.remote(num_cpus=1)(_run_one)
     pending = {task.remote(cell, envs): i for i, cell in enumerate(cells)}
     while pending:
