@@ -353,3 +353,23 @@ def test_a_bench_says_how_long_it_has_left(capsys, monkeypatch) -> None:
     clock.cell(3, 5, {"attack": "zo-signsgd"})
     # 2 attacked cells left at 30 s, then 300 clean episodes of the policy and of the brake at 10 s per 100
     assert capsys.readouterr().err.splitlines()[-1] == "bench: 3/5 cells of the grid in 70 s; about 2 min left"
+
+
+def test_a_defended_row_attacks_the_defended_system(tmp_path: Path) -> None:
+    """`bench --defense`: every cell queries the defended system, the row's key and name cover the defense,
+    the ensemble adds the attacks that adapt to it, and a policy that reads nothing is refused."""
+    from zodrive.errors import ZodriveError
+    from zodrive.experiments.bench import Protocol, bench, black_box_of, leaderboard_markdown
+
+    proto = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",))
+    row = bench("baseline:rules", proto, tmp_path / "r", progress=False, envs=1, defense="shield@0.02")
+    assert row["defense"] == "shield@0.02" and row["key"].startswith("baseline:rules+defense:shield@0.02:v")
+    cells = sorted(p.name for p in (tmp_path / "r" / "cells").iterdir())
+    assert cells and all("+shield@0.02-" in name for name in cells)
+    summary = json.loads((tmp_path / "r" / "cells" / "baseline-rules+shield@0.02-uniform-noise-eps0.05" /
+                          "summary.json").read_text())
+    assert summary["defense"] == "shield@0.02"
+    assert "| shield@0.02 |" in leaderboard_markdown([row])
+    assert black_box_of(proto, "kinematic") == ("uniform-noise", "random-search-smooth")  # knows the filter
+    with pytest.raises(ZodriveError, match="does not read the observation"):
+        bench("baseline:slower", proto, tmp_path / "s", progress=False, envs=1, defense="shield@0.02")

@@ -239,7 +239,7 @@ def test_another_version_of_the_environment_is_refused(tmp_path: Path) -> None:
     assert resolve_scenario("memory:ppo", None, said=trained_in_memory(model))[0]["env_id"] == "merge-v0"
     folder = tmp_path / "exit"
     folder.mkdir()
-    model.save(folder / "ppo-exit-v0")  # a Hugging Face name: the zip's name says exit-v0
+    PPO("MlpPolicy", gym.make("exit-v0"), n_steps=64, seed=0, device="cpu").save(folder / "ppo-exit-v0")  # HF's name
     with pytest.raises(ZodriveError, match="environment exit-v1, not exit-v0"):
         resolve_preset(str(folder), "exit")
     assert resolve_preset(str(folder), None)["env_id"] == "exit-v0"

@@ -30,7 +30,7 @@ from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import resolve_scenario
-from zodrive.seeds import EVAL_SEED
+from zodrive.seeds import EVAL_SEED, MAX_EPISODES
 from zodrive.system import AttackWrapper as _AttackWrapper, attack_observations, build_attacker, load_policy, \
     make_policy_env
 
@@ -99,8 +99,6 @@ def _scenario(policy: Policy, scenario: str | dict[str, Any] | None, env_id: str
 
 def _check_counts(*, episodes: int, seed: int, envs: int) -> None:
     """The API's numbers, checked as the CLI's flags are, before anything is built or allocated."""
-    from zodrive.cli.common import MAX_EPISODES
-
     for name, value, least, most in (("episodes", episodes, 1, MAX_EPISODES), ("seed", seed, 0, 2**63 - 1),
                                      ("envs", envs, 1, 1024)):
         if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:

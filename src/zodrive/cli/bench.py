@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from zodrive.cli.common import check_trust, episode_count, progress_flag, trust_flag, workers_flag
+from zodrive.cli.common import check_trust, defense_name, episode_count, progress_flag, trust_flag, workers_flag
 from zodrive.errors import ZodriveError
 
 BOARD = Path("results/bench")
@@ -24,6 +24,10 @@ def add_parsers(sub: Any) -> None:
     bench.add_argument("--episodes", type=episode_count, default=None,
                        help="N episodes, clean and attacked alike, for a quick look: the row is marked unofficial "
                             "(default: the protocol's)")
+    bench.add_argument("--defense", type=defense_name, default=None,
+                       help="bench the defended system: the defense stands between the sensor and the policy, every "
+                            "attack queries the defended system, and the ensemble adds the attacks that adapt to it "
+                            "(docs/bench.md); the row's name and key cover both (default name: MODEL+DEFENSE)")
     bench.add_argument("--force", action="store_true", help="replace another bench in the row's folder")
     trust_flag(bench)
     workers_flag(bench)
@@ -45,7 +49,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     proto = protocol(args.scenario)
     check_trust(args)
-    name = resolve(args.model).label.replace(":", "-") if args.name is None else args.name
+    name = (resolve(args.model).label.replace(":", "-") + (f"+{args.defense}" if args.defense else "")
+            if args.name is None else args.name)
     if not ROW_NAME.fullmatch(name):
         raise ZodriveError(f"--name {name!r}: a row's name is one folder name of letters, digits and ._+@=- (at most "
                            "100, not starting with one of ._+@=-): tables and plots show it as it is"
@@ -53,7 +58,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     out = args.board / args.scenario / name
     start = time.perf_counter()
     row = bench(args.model, proto, out, name=name, episodes=args.episodes, workers=args.workers,
-                progress=not args.no_progress, force=args.force, trust=args.trust_model)
+                progress=not args.no_progress, force=args.force, trust=args.trust_model, defense=args.defense)
     clean, worst = row["clean"], row["attacked"][-1]
     print(f"{row['policy']} on {row['protocol']}{'' if row['official'] else ' (unofficial: fewer episodes)'}: "
           f"clean {clean['return']:.2f} ({100 * clean['collision_rate']:.0f}% collisions), at eps {worst['eps']:g} "

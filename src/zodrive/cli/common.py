@@ -16,6 +16,7 @@ from typing import Any, Callable
 
 from zodrive.defense import parse_defense
 from zodrive.errors import ZodriveError
+from zodrive.seeds import MAX_EPISODES
 
 
 # -- the parser ----------------------------------------------------------------------------
@@ -61,7 +62,6 @@ def int_at_least(least: int, what: str, most: int | None = None) -> Callable[[st
     return parse
 
 
-MAX_EPISODES = 1_000_000
 episode_count = int_at_least(1, "a positive integer", MAX_EPISODES)
 """--episodes: bounded before anything is allocated (a million episodes is days of CPU)."""
 

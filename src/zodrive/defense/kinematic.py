@@ -29,6 +29,8 @@ from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
+CALIBRATED = (15.0, 100.0, 20.0)
+"""Where `Tolerances` were measured: decisions per second, and the x and vx ranges of the normalization."""
 
 
 @dataclass(frozen=True)
@@ -62,9 +64,17 @@ class KinematicFilter:
         if features != FEATURES or obs.get("absolute", False) or not obs.get("normalize", True):
             raise ZodriveError("the kinematic filter needs the relative, normalized Kinematics observation "
                                f"with features {', '.join(FEATURES)}")
-        ranges = obs.get("features_range", {})
-        pos, vel = float(ranges.get("x", [-100, 100])[1]), float(ranges.get("vx", [-20, 20])[1])
-        dt = 1.0 / float(preset["highway"].get("policy_frequency", 15))
+        from zodrive.envs import scenario
+
+        where = scenario(preset)  # the ranges and the frequency the environment runs with, not a guess of them
+        pos, vel = float(where.feature_ranges["x"][1]), float(where.feature_ranges["vx"][1])
+        frequency = float(where.policy_frequency or 0)
+        if (frequency, pos, vel) != CALIBRATED:
+            raise ZodriveError(f"the kinematic filter's tolerances were calibrated at {CALIBRATED[0]:g} decisions/s "
+                               f"with x in ±{CALIBRATED[1]:g} m and vx in ±{CALIBRATED[2]:g} m/s (the paper's preset); "
+                               f"{preset.get('name')} runs {frequency:g}/s with ±{pos:g} m and ±{vel:g} m/s: its "
+                               "one-step tolerances are not known there, and a wrong one changes clean decisions")
+        dt = 1.0 / frequency
         self.k = vel / pos * dt  # normalized position change per step per unit of normalized velocity
         self.tol = tol or Tolerances()
         self._width = np.array([0.0, self.tol.x, self.tol.y, self.tol.vx, self.tol.vy], dtype=np.float32)

@@ -54,6 +54,7 @@ class Scenario:
     relative: bool = False             # highway-env rows relative to the ego (not absolute positions)
     normalized: bool = False           # highway-env rows normalized by `feature_ranges`
     lanes: int | None = None           # lanes of a highway-env road
+    policy_frequency: float | None = None  # decisions per second of a highway-env scenario (its live config)
     space_low: tuple[float, ...] = ()  # the observation space's declared box, flattened
     space_high: tuple[float, ...] = ()
     feature_axis: int = -1             # the axis the features are named along (OccupancyGrid: the first)
@@ -347,7 +348,8 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
     if kinematic:
         observed = {"feature_ranges": {k: (float(v[0]), float(v[1])) for k, v in (observer.features_range or {}).items()},
                     "relative": not observer.absolute, "normalized": bool(observer.normalize),
-                    "lanes": core.config.get("lanes_count") or _lanes_at_start(core)}
+                    "lanes": core.config.get("lanes_count") or _lanes_at_start(core),
+                    "policy_frequency": float(core.config["policy_frequency"])}
     return Scenario(name=name, kind=kind, obs_shape=tuple(space.shape), features=features, bounds=bounds,
                     feature_axis=axis, n_actions=n, action_names=names, action_low=low_a, action_high=high_a, road=road,
                     max_return=_max_return(config, core),

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from zodrive.defense import defense_version
 from zodrive.drivers.baselines import BASELINES, PREFIX
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
@@ -42,6 +43,11 @@ BLACK_BOX = ("random-search", "zo-signsgd")
 committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
 WHITE_BOX = "pgd"
 BRAKE = PREFIX + "slower"
+ADAPTIVE = {"kinematic": ("random-search-smooth",)}
+"""The attacks a defended row adds to the ensemble, by defense: a defense is judged by the strongest attack
+that knows it. The kinematic filter clamps each row to its one-step prediction, so the attacker that knows it
+drifts within the filter's tolerances (`random-search-smooth`: each step's change limited, `max_change`). The
+shield is stateless and the ensemble queries the shielded system as it is."""
 
 
 @dataclass(frozen=True)
@@ -122,9 +128,15 @@ def _minutes(seconds: float) -> str:
     return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
 
 
+def black_box_of(proto: Protocol, defense: str | None) -> tuple[str, ...]:
+    """The black-box ensemble of a row: the protocol's, and for a defended row the attacks that adapt to its
+    defense (`ADAPTIVE`)."""
+    return proto.black_box + (ADAPTIVE.get(defense.partition("@")[0], ()) if defense else ())
+
+
 def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, episodes: int | None = None,
           workers: int = 1, progress: bool = True, force: bool = False, envs: int = 8,
-          trust: bool = False) -> dict[str, Any]:
+          trust: bool = False, defense: str | None = None) -> dict[str, Any]:
     """Run the protocol's cells for `policy` (and the constant brake, the row every table is read
     against) into `out`, and write its row (`row.json`). The clean cell of more episodes than the
     attacked ones goes to `out/clean`, beside the attacked grid's own clean cell (the same first
@@ -133,20 +145,27 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     says so, for whoever reruns it."""
     n, n_clean = proto.counts(episodes)
     resolved = resolve(policy)
-    attacks = [*proto.black_box, proto.white_box]
+    if defense is not None and resolved.kind == "baseline" and BASELINES[resolved.ref.removeprefix(PREFIX)
+                                                                          .partition("@")[0]].reads != "observation":
+        raise ZodriveError(f"{resolved.ref} does not read the observation: a defense between its sensor and it "
+                           "changes nothing (bench it without --defense)")
+    attacks = [*black_box_of(proto, defense), proto.white_box]
+    defenses = [defense]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
     clock = _Clock(n, n_clean)
     compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell)
+            preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses)
     clean_out = clean_folder(out, n, n_clean)
     if clean_out != out:
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
-                preset=proto.scenario, force=force, envs=envs, trust=trust)
+                preset=proto.scenario, force=force, envs=envs, trust=trust, defenses=defenses)
     brake = out / "brake"
     compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, force=force, envs=envs)
-    row = bench_row(name or resolved.label, resolved.key(), proto, out, n, n_clean)
+    key = resolved.key() if defense is None else f"{resolved.key()}+defense:{defense}" + (
+        f":v{defense_version(defense)}" if defense_version(defense) is not None else "")
+    row = bench_row(name or resolved.label, key, proto, out, n, n_clean, defense=defense)
     if trust:
         row["trust_model"] = True
     write_json(out / "row.json", row)
@@ -165,7 +184,7 @@ def _cells(out: Path) -> list[dict[str, Any]]:
 
 
 def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
-              clean_episodes: int | None = None) -> dict[str, Any]:
+              clean_episodes: int | None = None, defense: str | None = None) -> dict[str, Any]:
     """The row of a finished bench folder: clean figures, the strongest black-box attack in each ε-ball, PGD
     apart, the robustness area, the ε where collisions pass the brake's, queries to a crash.
 
@@ -182,7 +201,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
     clean = next(c for c in _cells(clean_folder(out, episodes, n_clean)) if c["attack"] == "none")
     brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
-    black_box = [c for c in cells if c["attack"] in proto.black_box]
+    black_box = [c for c in cells if c["attack"] in black_box_of(proto, defense)]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
     if black_box:
         inside = _inside(black_box, same, proto.eps)
@@ -210,6 +229,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
         "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), out / "brake"),
         "eps_units": physical_eps(proto),
+        **({"defense": defense, "black_box": list(black_box_of(proto, defense))} if defense else {}),
     }
 
 
@@ -289,7 +309,9 @@ def _attack(cell: dict[str, Any]) -> str:
 def _median_queries_to_crash(out: Path, cell: dict[str, Any]) -> float | None:
     """Median over the attacked episodes that crashed of the queries spent until the crash (an
     episode ends at its crash, so that is the episode's count)."""
-    folder = out / "cells" / (cell["model"].replace(":", "-") + f"-{_attack(cell)}-eps{number_name(cell['eps'])}")
+    defended = "" if cell.get("defense", "none") == "none" else f"+{cell['defense']}"
+    folder = out / "cells" / (cell["model"].replace(":", "-") + defended
+                              + f"-{_attack(cell)}-eps{number_name(cell['eps'])}")
     records = read_jsonl(folder / "episodes.jsonl", "episode record", needs=("episode",))
     crashed = [r["queries"] for r in records if r.get("crashed")]
     return float(np.median(crashed)) if crashed else None
@@ -384,7 +406,9 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "the attack spent in the episode. Rows marked † load their network with SB3's own loader",
              "(`--trust-model`: code of the model's author, which zodrive does not rebuild). Rows benched with",
              "fewer episodes than the protocol's (`--episodes`) are unofficial: they stand in a table of their own",
-             "under each ranked table, never ranked, never bold.", ""]
+             "under each ranked table, never ranked, never bold. Defense: what stands between the sensor and the",
+             "policy in a defended row (`zodrive bench MODEL --defense NAME`); its attacks query the defended",
+             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md).", ""]
     for proto in sorted({r["protocol"] for r in rows}):  # rows of two versions never share a table
         group = sorted((r for r in rows if r["protocol"] == proto),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
@@ -417,11 +441,11 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
     if split:
         lines += [(f"Clean columns and Δ: {n_clean} episodes; \"Clean, first {n}\", the attacked columns, area and ε "
                    f"past brake: the first {n} (`clean_on_attacked_episodes`)."), ""]
-    lines += ["| " + ("# | " if ranked else "") + "Policy | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
+    lines += ["| " + ("# | " if ranked else "") + "Policy | Defense | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
               "Collisions | Speed (m/s) | " + (f"Clean, first {n} | " if split else "")
               + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
               + f" | PGD ε {eps[-1]:g} | Area | ε past brake | Queries to crash (median) |",
-              "|---" * (9 + len(eps) + int(ranked) + int(split)) + "|"]
+              "|---" * (10 + len(eps) + int(ranked) + int(split)) + "|"]
     for rank, r in enumerate(group, 1):
         c = r["clean"]
         cells = [f"{p['return']:.2f} / {100 * p['collision_rate']:.0f}%" for p in r["attacked"]]
@@ -433,7 +457,8 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
         same = r.get("clean_on_attacked_episodes") or c
         past = ("the brake" if r.get("key") == BRAKE else "–"
                 if r["eps_collisions_pass_brake"] is None else format(r["eps_collisions_pass_brake"], "g"))
-        lines.append("| " + (f"{rank} | " if ranked else "") + f"{r['policy']}{marks} | {c['return']:.2f} "
+        lines.append("| " + (f"{rank} | " if ranked else "") + f"{r['policy']}{marks} | {r.get('defense') or '–'} | "
+                     f"{c['return']:.2f} "
                      f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
                      f"{c['speed']:.1f} | " + (f"{same['return']:.2f} / {100 * same['collision_rate']:.0f}% | "
                                                if split else "")
