@@ -50,6 +50,9 @@ BUILD = textwrap.dedent("""\
     bad = out / "badkw"; bad.mkdir(); hf.save(bad / "ppo-highway-fast-v0"); (bad / "env_kwargs.yml").write_text("config: 5\\n")
     sac = out / "parking"; sac.mkdir()
     SAC("MultiInputPolicy", gym.make("parking-v0"), learning_starts=10, seed=0, device="cpu").save(sac / "sac")
+    raw = out / "raw"; raw.mkdir(); unnormalized = {"observation": {"type": "Kinematics", "normalize": False}}
+    PPO("MlpPolicy", gym.make("highway-fast-v0", config=unnormalized), **kw).save(raw / "ppo-highway-fast-v0")
+    (raw / "env_kwargs.yml").write_text("config: " + json.dumps(unnormalized) + "\\n")
     vn = out / "vecnorm"; vn.mkdir(); venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1")]))
     PPO("MlpPolicy", venv, **kw).save(vn / "model"); venv.save(str(vn / "vecnormalize.pkl"))
     print("built")
@@ -137,8 +140,7 @@ def issue63() -> None:
     R.ex("63.5a", "--eps 5 (recorded eps=5.0 while 2 ran)", ZOD + ["evaluate", "baseline:rules", *hf, "--attack",
          "random-search", "--eps", "5", *FAST], check=refused_with("more than any observation value can move"))
     R.ex("63.5b", "eps on an unnormalized observation says what it moves",
-         ZOD + ["evaluate", "baseline:rules", *hf, "--env-set", "highway.observation.normalize=false",
-                "--attack", "random-search", "--eps", "0.05", "--steps", "2", *FAST],
+         ZOD + ["evaluate", str(i / "raw"), "--attack", "random-search", "--eps", "0.05", "--steps", "2", *FAST],
          expect="either", line_from="grep:eps=0.05", check=printed("up to 0.05 m on positions"))
     # 6. the leaderboard
     R.ex("63.6a", "`zodrive leaderboard` with no --out (rewrote the checkout's docs/leaderboard.md)",
