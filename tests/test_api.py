@@ -155,3 +155,13 @@ def test_export_says_what_it_exports(tmp_path) -> None:
 
     (tmp_path / "p.py").write_text("def make():\n    return lambda obs: obs\n")
     assert main(["export", f"{tmp_path / 'p.py'}:make", "--out", str(tmp_path / "m.onnx")]) == 2
+
+
+def test_the_progress_bar_moves_within_an_episode(capsys) -> None:
+    """Bars sat at 0 % through long episodes and filled in one burst: the bar counts environment steps."""
+    from zodrive.envs import load_preset
+
+    zodrive.evaluate("baseline:rules", load_preset("discrete", ["max_episode_steps=40"]), episodes=1, envs=1,
+                     progress=True)
+    err = capsys.readouterr().err.replace("\r", "\n")
+    assert "0/1" in err and "steps=1" in err  # drawn with the first step, long before the episode's end

@@ -17,7 +17,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -129,7 +129,7 @@ def _episode(index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     record = run_episode(
         env, _WORKER["victim"], episode=index, seed=seed,
         max_return=_max_return(job.preset),
-        on_step=steps.append if job.record_steps else None,
+        on_step=steps.append if job.record_steps else None, on_tick=_WORKER.get("tick"),
     )
     return record.to_dict(), steps
 
@@ -142,12 +142,27 @@ def _lockstep(indices: list[int], done: Any = None) -> Iterator[tuple[dict[str, 
     job: EvalJob = _WORKER["job"]
     steps: dict[int, list[dict[str, Any]]] = {i: [] for i in indices}
     on_step = (lambda row: steps[row["episode"]].append(row)) if job.record_steps else None
+    tick = _WORKER.get("tick") if done is None else _Ticks(done)
     for record in run_lockstep(_WORKER["envs"], _WORKER["victim"], [(i, job.seed + i) for i in indices],
-                               max_return=_max_return(job.preset), attacker=_WORKER["attacker"], on_step=on_step):
+                               max_return=_max_return(job.preset), attacker=_WORKER["attacker"], on_step=on_step,
+                               on_tick=tick):
         item = (record.to_dict(), steps.pop(record.episode))
         if done is not None:
             done.put(item)
         yield item
+
+
+class _Ticks:
+    """A pool worker's environment steps, sent to the parent at most twice a second (its progress bar)."""
+
+    def __init__(self, queue_: Any) -> None:
+        self.queue, self.count, self.sent = queue_, 0, time.monotonic()
+
+    def __call__(self, n: int) -> None:
+        self.count += n
+        if time.monotonic() - self.sent >= 0.5:
+            self.queue.put(("tick", self.count))
+            self.count, self.sent = 0, time.monotonic()
 
 
 def _lockstep_share(indices: list[int], done: Any) -> None:
@@ -179,19 +194,25 @@ def _append_jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
         os.fsync(handle.fileno())
 
 
-def run_episodes(job: EvalJob, indices: list[int], workers: int,
-                 envs: int = 1) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
+def run_episodes(job: EvalJob, indices: list[int], workers: int, envs: int = 1,
+                 tick: Callable[[int], None] | None = None) -> Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]:
     """Yield (episode record, step records) as episodes finish, in any order: `workers`
-    processes, each running `envs` episodes side by side (when `lockstep_blocker` allows)."""
+    processes, each running `envs` episodes side by side (when `lockstep_blocker` allows).
+    `tick(n)`: n more environment steps taken (in this process, or reported by the lockstep
+    workers), for a progress bar that moves within long episodes."""
     envs = 1 if lockstep_blocker(job) else min(envs, max(1, -(-len(indices) // max(workers, 1))))
     if workers <= 1 or len(indices) <= 1:
         with torch_threads(1):  # the caller's torch setting is restored afterwards
             _setup(job, envs)
-            if envs > 1:
-                yield from _lockstep(indices)
-            else:
-                for i in indices:
-                    yield _episode(i)
+            _WORKER["tick"] = tick
+            try:
+                if envs > 1:
+                    yield from _lockstep(indices)
+                else:
+                    for i in indices:
+                        yield _episode(i)
+            finally:
+                _WORKER.pop("tick", None)
         return
     ctx = mp.get_context("forkserver")
     if envs <= 1:
@@ -208,7 +229,12 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int,
         for _ in indices:
             while True:
                 try:
-                    yield done.get(timeout=0.5)
+                    item = done.get(timeout=0.5)
+                    if isinstance(item, tuple) and len(item) == 2 and item[0] == "tick":
+                        if tick is not None:
+                            tick(item[1])
+                        continue
+                    yield item
                     break
                 except queue.Empty:
                     for future in futures:
@@ -325,20 +351,34 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     todo = [i for i in range(episodes) if i not in done]
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
-    bar = None  # drawn with the first finished episode: a refusal while building comes first, alone
+    bar = None  # drawn with the first step or episode: a refusal while building comes first, alone
     started = time.time()
-    for record, steps in run_episodes(job, todo, workers, envs):
+    stepped = [0, 0.0]  # environment steps so far, when the bar last showed them
+
+    def open_bar() -> Any:
+        nonlocal bar
         if bar is None:
             bar = _progress(len(todo), progress, label or ("attacked" if job.attack else "clean"))
             if bar is not None:  # its clock starts with the run, not with the first episode it shows
                 bar.start_t = bar.last_print_t = started
+        return bar
+
+    def tick(n: int) -> None:  # a long episode moves the bar's step count, not only its end
+        stepped[0] += n
+        if open_bar() is not None and time.time() - stepped[1] >= 0.5:
+            bar.set_postfix_str(f"steps={stepped[0]}" + (f", mean_return={np.mean([r['return'] for r in done.values()]):.1f}"
+                                                          if done else ""))
+            stepped[1] = time.time()
+
+    for record, steps in run_episodes(job, todo, workers, envs, tick=tick if progress else None):
+        open_bar()
         done[record["episode"]] = record
         if out is not None:
             _append_jsonl(out / "steps.jsonl", steps)
             _append_jsonl(out / "episodes.jsonl", [record])
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(mean_return=f"{np.mean([r['return'] for r in done.values()]):.1f}")
+            bar.set_postfix_str(f"steps={stepped[0]}, mean_return={np.mean([r['return'] for r in done.values()]):.1f}")
     if bar is not None:
         bar.close()
     ordered = [done[i] for i in range(episodes)]

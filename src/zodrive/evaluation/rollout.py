@@ -153,12 +153,13 @@ def run_episode(
     max_return: float | None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
     policy: Victim | None = None,
+    on_tick: Callable[[int], None] | None = None,
 ) -> EpisodeRecord:
     """Roll out one episode from `env.reset(seed=seed)`.
 
     If `env` is wrapped in an `AttackWrapper`, the policy sees attacked observations and each
     step's attack stats go to `on_step`. `policy` (default: `victim`) chooses the actions.
-    `max_return` None: no percentage of the maximum.
+    `max_return` None: no percentage of the maximum. `on_tick(1)` after every environment step (progress).
     """
     policy = policy or victim
     wrapper = find_attack_wrapper(env)
@@ -178,6 +179,8 @@ def run_episode(
         tracker.stepped(reward, terminated, info)
         pending = info.get("attack") if attacked else None
         done = terminated or truncated
+        if on_tick is not None:
+            on_tick(1)
     return tracker.record(attacked)
 
 
@@ -189,6 +192,7 @@ def run_lockstep(
     max_return: float | None,
     attacker: tuple[Attack, Objective, QueryOracle] | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
+    on_tick: Callable[[int], None] | None = None,
 ) -> Iterator[EpisodeRecord]:
     """Roll out `episodes` ((index, seed) pairs) side by side, one per environment of `envs`;
     an environment whose episode ends starts the next one waiting. Records come out as
@@ -244,6 +248,8 @@ def run_lockstep(
                     start(env, row)
                 else:
                     ended.append(row)
+        if on_tick is not None:
+            on_tick(len(rows))  # environment steps taken side by side (progress)
         if ended:
             keep = np.array([r for r in range(len(rows)) if r not in ended], dtype=np.int64)
             rows[:], obs[:] = [rows[r] for r in keep], [obs[r] for r in keep]
