@@ -94,6 +94,11 @@ def _bench_folder(folder: Path, cells: list[dict], brake_collisions: float = 0.2
     (folder / "table.json").write_text(json.dumps(cells))
     (folder / "brake" / "table.json").write_text(json.dumps([{**_cell("none", 0.0, 5.0, brake_collisions),
                                                                "model": "baseline:slower"}]))
+    brake = folder / "brake" / "cells" / "baseline-slower-none"  # the same rate on every first 5k episodes
+    brake.mkdir(parents=True)
+    brake.joinpath("episodes.jsonl").write_text("".join(
+        json.dumps({"episode": i, "return": 5.0, "crashed": int((i + 1) * brake_collisions) > int(i * brake_collisions)})
+        + "\n" for i in range(300)))
     for c in cells:
         if c["attack"] != "none":
             cell = folder / "cells" / f"m-{c['attack'].split(' ')[0]}-eps{c['eps']:g}"
@@ -373,3 +378,18 @@ def test_a_defended_row_attacks_the_defended_system(tmp_path: Path) -> None:
     assert black_box_of(proto, "kinematic") == ("uniform-noise", "random-search-smooth")  # knows the filter
     with pytest.raises(ZodriveError, match="does not read the observation"):
         bench("baseline:slower", proto, tmp_path / "s", progress=False, envs=1, defense="shield@0.02")
+
+
+def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: Path) -> None:
+    """Version 3 compared a policy's first 100 episodes with the brake's 300 (another set of seeds): the
+    shielded DQN's 4 % of 100 read as past the brake's 3.7 % of 300, where the brake had 4 % on the same 100."""
+    from zodrive.experiments.bench import Protocol, bench_row
+
+    proto = Protocol("highway-fast", 100, (0.05,), clean_episodes=300)
+    folder = _bench_folder(tmp_path / "a", [_cell("none", 0.0, 10.0, 0.1), _cell("random-search", 0.05, 9.0, 0.1)])
+    (folder / "clean").mkdir()
+    (folder / "clean" / "table.json").write_text(json.dumps([_cell("none", 0.0, 10.0, 0.1)]))
+    crashes = [i >= 100 and i % 2 == 0 for i in range(300)]  # none in the first 100, 33 % over 300
+    (folder / "brake" / "cells" / "baseline-slower-none" / "episodes.jsonl").write_text("".join(
+        json.dumps({"episode": i, "return": 5.0, "crashed": c}) + "\n" for i, c in enumerate(crashes)))
+    assert bench_row("m", "k", proto, folder, 100, 300)["eps_collisions_pass_brake"] == 0.0  # 10 % > 0 % there

@@ -214,9 +214,11 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     returns = [same["mean_return"], *(p["return"] for p in per_eps)]
     grid = [0.0, *proto.eps]
     area = float(np.trapezoid(returns, grid) / (grid[-1] * same["mean_return"])) if same["mean_return"] > 0 else None
-    # the smallest ε whose ball holds an attack that collides more often than the brake does clean
-    passes = 0.0 if same["collision_rate"] > brake["collision_rate"] else \
-        min((c["eps"] for c in black_box if c["collision_rate"] > brake["collision_rate"]), default=None)
+    # the smallest ε whose ball holds an attack that collides more often than the brake does clean, on the
+    # same episodes (the brake's first `episodes`, not its 300 clean ones: another set of seeds)
+    brake_rate = _collision_rate(out / "brake", episodes)
+    passes = 0.0 if same["collision_rate"] > brake_rate else \
+        min((c["eps"] for c in black_box if c["collision_rate"] > brake_rate), default=None)
     return {
         "protocol": proto.name(), "official": (episodes, n_clean) == proto.counts(), "policy": label, "key": key,
         "scenario": proto.scenario, "episodes": episodes, "seeds": [proto.seed, proto.seed + episodes - 1],
@@ -276,6 +278,15 @@ def _clean_returns(folder: Path) -> dict[int, float] | None:
     if len(cells) != 1:
         return None
     return {r["episode"]: r["return"] for r in read_jsonl(cells[0] / "episodes.jsonl", needs=("episode", "return"))}
+
+
+def _collision_rate(folder: Path, episodes: int) -> float:
+    """The collision rate of the clean cell of comparison `folder` over its first `episodes` episodes."""
+    (cell,) = sorted((folder / "cells").glob("*-none"))
+    records = [r for r in read_jsonl(cell / "episodes.jsonl", needs=("episode",)) if r["episode"] < episodes]
+    if len(records) != episodes:
+        raise ZodriveError(f"{cell} holds {len(records)} of the first {episodes} episodes: run the bench again")
+    return sum(bool(r.get("crashed")) for r in records) / episodes
 
 
 def _paired(mine: dict[int, float] | None, theirs: dict[int, float] | None) -> list[float] | None:
