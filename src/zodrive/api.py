@@ -29,7 +29,7 @@ from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, sum
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
-from zodrive.policies.resolve import resolve_scenario
+from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.seeds import EVAL_SEED, MAX_EPISODES
 from zodrive.system import AttackWrapper as _AttackWrapper, attack_observations, build_attacker, load_policy, \
     make_policy_env
@@ -91,9 +91,8 @@ def _scenario(policy: Policy, scenario: str | dict[str, Any] | None, env_id: str
     that differs from that is refused unless `shifted`."""
     said = trained_in_memory(policy.obj) if policy.kind == "sb3" else None
     found = resolve_scenario(policy.ref, scenario, None, env_id, shifted=shifted, said=said)
-    if shifted and not (found[1] or "").startswith("shifted:"):
-        raise ZodriveError(f"shifted=True: {found[0]['name']} is not shifted from where {policy.label} says it was "
-                           "trained (or it says nothing)")
+    if shifted:
+        refuse_unused_shift([found[1]], "shifted=True")
     return found
 
 

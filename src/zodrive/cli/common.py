@@ -260,14 +260,13 @@ def preset_of(args: argparse.Namespace) -> dict[str, Any]:
 
 def scenario_of(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
     """`preset_of` and where a scenario the user did not name came from (`resolve_scenario`)."""
-    from zodrive.policies.resolve import resolve_scenario
+    from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 
     shifted = getattr(args, "shifted", False)
     found = resolve_scenario(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
                              getattr(args, "obs_bounds", None), shifted=shifted)
-    if shifted and not (found[1] or "").startswith("shifted:"):
-        raise ZodriveError(f"--shifted: {found[0]['name']} is not shifted from where {args.model} says it was "
-                           "trained (or it says nothing): drop --shifted")
+    if shifted:
+        refuse_unused_shift([found[1]], "--shifted")
     return found
 
 

@@ -224,23 +224,17 @@ def changed_settings(env_id: str, config: dict[str, Any]) -> dict[str, Any]:
             if key not in DISPLAY_KEYS and (key not in defaults or not _same(defaults[key], value))}
 
 
-def _plain(value: Any) -> Any:
-    """Values as YAML and JSON give them (tuples as lists), so that (4, 5) equals [4, 5]."""
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
+def _as_data(value: Any) -> Any:
+    """A value as YAML and JSON give it: tuples and numpy arrays as lists, so that (4, 5) equals [4, 5]."""
+    return json.loads(json.dumps(value, default=lambda x: x.tolist() if hasattr(x, "tolist") else str(x)))
 
 
 def _same(a: Any, b: Any) -> bool:
-    """Equal as data (numpy arrays and tuples as lists, 4 and 4.0 alike)."""
-    as_data = (lambda v: json.loads(json.dumps(_plain(v), default=lambda x: getattr(x, "tolist", lambda: str(x))())))
-    return as_data(a) == as_data(b)
+    return _as_data(a) == _as_data(b)
 
 
 def _short(value: Any) -> str:
-    text = json.dumps(_plain(value), default=lambda x: getattr(x, "tolist", lambda: str(x))())
+    text = json.dumps(_as_data(value))
     return text if len(text) <= 40 else text[:37] + "..."
 
 

@@ -23,7 +23,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from zodrive.defense import defense_version
-from zodrive.drivers.baselines import BASELINES, PREFIX
+from zodrive.drivers.baselines import BASELINES, PREFIX, get_baseline
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.stats import paired_difference_ci
@@ -145,8 +145,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     says so, for whoever reruns it."""
     n, n_clean = proto.counts(episodes)
     resolved = resolve(policy)
-    if defense is not None and resolved.kind == "baseline" and BASELINES[resolved.ref.removeprefix(PREFIX)
-                                                                          .partition("@")[0]].reads != "observation":
+    if defense is not None and resolved.kind == "baseline" and get_baseline(resolved.ref).reads != "observation":
         raise ZodriveError(f"{resolved.ref} does not read the observation: a defense between its sensor and it "
                            "changes nothing (bench it without --defense)")
     attacks = [*black_box_of(proto, defense), proto.white_box]
@@ -375,7 +374,8 @@ def _read_row(path: Path) -> dict[str, Any]:
     try:
         row = json.loads(path.read_text(encoding="utf-8"))
         _Row.model_validate(row)
-        low, high = (float(v) for v in row["clean"]["ci95"])  # two numbers, or a ValueError / TypeError
+        if len([float(v) for v in row["clean"]["ci95"]]) != 2:  # numbers, or a ValueError / TypeError
+            raise ValueError("ci95 is not two numbers")
         float(row["clean"]["speed"])
     except (json.JSONDecodeError, UnicodeDecodeError):
         raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None

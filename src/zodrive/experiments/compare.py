@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 from zodrive.drivers.baselines import get_baseline
 from zodrive.policies.policy import resolve
-from zodrive.policies.resolve import resolve_scenario
+from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
@@ -54,8 +54,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     policies = [resolve(model) for model in models]
     names = policy_names([p.label for p in policies], [p.key() for p in policies])
     sources = [resolve_scenario(model, preset, env_set, env_id, obs_bounds, shifted=shifted) for model in models]
-    if shifted and not any((source or "").startswith("shifted:") for _, source in sources):
-        raise ZodriveError("--shifted: no model says it was trained elsewhere than this scenario: drop --shifted")
+    if shifted:
+        refuse_unused_shift([source for _, source in sources], "--shifted")
     for model, policy, name, (model_preset, source) in zip(models, policies, names, sources):
         policy.check(model_preset)
         ref, gradients = policy.ref, policy.gradients

@@ -140,6 +140,14 @@ def named_preset(config: dict[str, Any]) -> dict[str, Any]:
     return config
 
 
+def refuse_unused_shift(sources: list[str | None], what: str) -> None:
+    """`--shifted` / `shifted=True` that shifted no model was ignored: refused (`sources`: the second values
+    of `resolve_scenario` for each model it applied to)."""
+    if not any((source or "").startswith("shifted:") for source in sources):
+        raise ZodriveError(f"{what}: no model says it was trained elsewhere than this scenario (or it says nothing): "
+                           "drop it")
+
+
 def _not_as_trained(config: dict[str, Any], said: TrainedWith) -> list[str]:
     """How the named scenario `config` differs from where `said` says the model was trained."""
     if said.preset is not None:
