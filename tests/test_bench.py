@@ -393,3 +393,75 @@ def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: P
     (folder / "brake" / "cells" / "baseline-slower-none" / "episodes.jsonl").write_text("".join(
         json.dumps({"episode": i, "return": 5.0, "crashed": c}) + "\n" for i, c in enumerate(crashes)))
     assert bench_row("m", "k", proto, folder, 100, 300)["eps_collisions_pass_brake"] == 0.0  # 10 % > 0 % there
+
+
+def test_a_capped_protocol_caps_its_black_box_attacks_and_not_pgd(tmp_path: Path) -> None:
+    """Version 4: a black-box attack of the row spends at most the protocol's queries on a step; PGD, white-box,
+    runs as before (its cells are those of the earlier version, reused)."""
+    from zodrive.experiments.bench import Protocol, bench
+
+    proto = Protocol("highway-fast", 1, (0.05,), black_box=("random-search",), query_budget=42, version=4)
+    row = bench(str(MODEL), proto, tmp_path / "r", progress=False, envs=1)
+    cells = {p.name: p for p in (tmp_path / "r" / "cells").iterdir()}
+    capped = json.loads((cells["ppo-highway-fast-random-search-eps0.05-qb42"] / "summary.json").read_text())
+    assert 0 < capped["queries_per_step"] <= 42 and capped["attack_config"]["query_budget"] == 42
+    pgd = json.loads((cells["ppo-highway-fast-pgd-eps0.05"] / "summary.json").read_text())
+    assert pgd["attack_config"]["query_budget"] is None
+    assert row["query_budget"] == 42 and row["protocol"] == "highway-fast-v4"
+    assert row["attacked"][0]["queries_to_crash"] is None or row["attacked"][0]["queries_to_crash"] > 0
+
+
+def test_a_row_of_an_earlier_version_gives_way_and_keeps_the_cells_both_share(tmp_path: Path, monkeypatch) -> None:
+    from zodrive.experiments.bench import Protocol, bench
+
+    old = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",), version=3)
+    bench("baseline:rules", old, tmp_path / "r", progress=False, envs=1)
+    import zodrive.evaluation.evaluate as evaluation
+
+    ran: list[object] = []
+    original = evaluation.run_episodes
+    monkeypatch.setattr(evaluation, "run_episodes", lambda job, *a, **k: ran.append(job.attack) or original(job, *a, **k))
+    new = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",), query_budget=7, version=4)
+    row = bench("baseline:rules", new, tmp_path / "r", progress=False, envs=1)
+    assert row["protocol"] == "highway-fast-v4"
+    names = sorted(p.name for p in (tmp_path / "r" / "cells").iterdir())
+    assert names == ["baseline-rules-none", "baseline-rules-uniform-noise-eps0.05-qb7"]  # the uncapped cell is gone
+    assert len(ran) == 1 and ran[0]["query_budget"] == 7  # only the capped cell ran: clean ones were reused
+
+
+def _episodes(folder: Path, returns: list[float]) -> None:
+    folder.mkdir(parents=True)
+    folder.joinpath("episodes.jsonl").write_text("".join(
+        json.dumps({"episode": i, "return": r, "crashed": False, "queries": 1}) + "\n" for i, r in enumerate(returns)))
+
+
+def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) -> None:
+    from zodrive.experiments.bench import _defended, defense_margins
+
+    def row(name: str, key: str, defense: str | None, clean: list[float], attacked: list[float]) -> tuple:
+        folder = tmp_path / name
+        _episodes(folder / "cells" / f"{name}-none", clean)
+        _episodes(folder / "cells" / f"{name}-random-search-eps0.05", attacked)
+        (folder / "table.json").write_text(json.dumps([{**_cell("random-search", 0.05, 1.0), "model": name}]))
+        r = {"protocol": "p-v1", "key": key, "policy": name, "episodes": 4, "clean_episodes": 4,
+             "attacked": [{"eps": 0.05, "attack": "random-search", "attack_eps": 0.05}],
+             **({"defense": defense} if defense else {})}
+        return r, folder
+
+    plain = row("m", "sha256:a", None, [10, 10, 12, 12], [2, 2, 4, 4])
+    guarded = row("m+smooth", "sha256:a+defense:smooth@0.05:v1", "smooth@0.05", [9, 10, 11, 12], [8, 9, 8, 9])
+    other = row("o+smooth", "sha256:b+defense:smooth@0.05:v1", "smooth@0.05", [1, 1, 1, 1], [1, 1, 1, 1])
+    defense_margins([plain, guarded, other])
+    m = guarded[0]["vs_undefended"]
+    assert m["policy"] == "m" and m["clean"][0] == pytest.approx(-0.5) and m["attacked"][0] == pytest.approx(5.5)
+    assert m["clean"][1] <= -0.5 <= m["clean"][2]
+    assert "vs_undefended" not in other[0] and "vs_undefended" not in plain[0]  # no undefended row of its policy
+    text = "\n".join(_defended([plain[0], guarded[0], other[0]]))
+    assert "| m+smooth | smooth@0.05 | m | -0.50 (" in text and "+5.50 (" in text
+
+
+def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:
+    from zodrive.experiments.bench import pareto
+
+    points = [(22.0, 7.0), (20.8, 20.8), (21.5, 21.3), (21.0, 21.0), (7.0, 7.0), (22.0, 6.0)]
+    assert pareto(points) == [2, 0]  # (21.5, 21.3) and (22.0, 7.0); (20.8, 20.8) and (21.0, 21.0) are beaten

@@ -8,7 +8,8 @@ import pytest
 from toys import context, linear_victim
 from zodrive.attacks import AttackSpec
 from zodrive.defense import make_defense
-from zodrive.defense.kinematic import FilterWrapper, KinematicFilter, defended_victim
+from zodrive.defense.kinematic import KinematicFilter
+from zodrive.defense.wrappers import FilterWrapper, defended_victim
 from zodrive.envs import load_preset, make_env
 from zodrive.errors import ZodriveError
 

@@ -24,6 +24,7 @@ from zodrive.attacks.base import AttackResult
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.envs import Scenario, scenario_of_env
 from zodrive.envs import scenario as scenario_of
+from zodrive.defense import keeps_state
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
 from zodrive.evaluation.rollout import run_episode, run_lockstep
@@ -172,7 +173,7 @@ def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defe
            episodes: int, seed: int, envs: int):
     """Episodes of an in-memory policy, in this process."""
     max_return = scenario_of(preset).max_return
-    if envs > 1 and (defense is None or defense.startswith(("shield", "close-shield"))):
+    if envs > 1 and (defense is None or not keeps_state(defense)):
         from zodrive.envs import make_env
 
         victim = load_policy(policy, preset, defense)

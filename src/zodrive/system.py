@@ -19,8 +19,7 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.spec import AttackSpec
 from zodrive.attacks.victim import Victim
 from zodrive.defense import keeps_state, make_defense
-from zodrive.defense.kinematic import FilterWrapper, defended_victim
-from zodrive.defense.shield import shielded_victim
+from zodrive.defense.wrappers import FilterWrapper, defended_victim
 from zodrive.drivers import baselines as bl
 from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape
 from zodrive.errors import ZodriveError
@@ -196,10 +195,10 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
 def load_policy(model: Policy | str | Any, preset: dict[str, Any], defense: str | None = None, *,
                 trust: bool = False) -> Victim:
     """What drives and what the attacker queries when nothing keeps per-episode state: the
-    policy's victim, behind a stateless defense (the shield) if one is named."""
+    policy's victim, behind a stateless defense (a shield, smoothing) if one is named."""
     victim = resolve(model).victim(preset, trust=trust)  # checks that the policy fits the preset
     if defense is None:
         return victim
     if keeps_state(defense):
         raise ZodriveError(f"the {defense} defense tracks an episode: it wraps the environment (make_policy_env)")
-    return shielded_victim(victim, make_defense(defense, preset))
+    return make_defense(defense, preset).guard(victim)  # type: ignore[union-attr]

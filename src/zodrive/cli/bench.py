@@ -38,7 +38,10 @@ def add_parsers(sub: Any) -> None:
     board.add_argument("--out", type=Path, required=True,
                        help="the Markdown file to write (the repository's own board: docs/leaderboard.md)")
     board.add_argument("--plot", type=Path, default=None, help="also draw return against eps per scenario (PNG)")
-    board.add_argument("--force", action="store_true", help="replace a --out or --plot file zodrive did not write")
+    board.add_argument("--frontier", type=Path, default=None,
+                       help="also draw clean return against the return at the largest eps, per table (PNG)")
+    board.add_argument("--force", action="store_true",
+                       help="replace a --out, --plot or --frontier file zodrive did not write")
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -74,8 +77,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     from zodrive.experiments.bench import write_leaderboard
 
-    write_leaderboard(args.board, args.out, args.plot, force=args.force)
-    print(f"wrote {args.out}" + (f" and {args.plot}" if args.plot else ""))
+    write_leaderboard(args.board, args.out, args.plot, frontier=args.frontier, force=args.force)
+    print(f"wrote {', '.join(str(p) for p in (args.out, args.plot, args.frontier) if p is not None)}")
     return 0
 
 

@@ -22,10 +22,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from zodrive.attacks.victim import Victim
+from zodrive.defense import tracks
 from zodrive.errors import ZodriveError
 
 FEATURES = ("presence", "x", "y", "vx", "vy")
@@ -102,10 +101,7 @@ class KinematicFilter:
 
     def _predict(self, state: np.ndarray) -> np.ndarray:
         """Every tracked row one step ahead under constant (relative) velocity."""
-        pred = state.copy()
-        pred[1:, 1] += self.k * pred[1:, 3]  # other vehicles: relative x, y move with relative velocity
-        pred[:, 2] += self.k * pred[:, 4]    # the ego's absolute x is clipped; its y moves with its vy
-        return np.clip(pred, -1.0, 1.0)
+        return tracks.advance(state, 1.0, self.k, self.k, relative=True)
 
     def peek(self, batch: np.ndarray) -> np.ndarray:
         """Filter observations (B, V, 5) against the current state, without changing it."""
@@ -113,23 +109,7 @@ class KinematicFilter:
         if self.state is None:
             return batch.copy()
         pred = self._pred
-        b, v = batch.shape[:2]
-        present = batch[:, :, 0] > 0.5
-        tracked = pred[:, 0] > 0.5
-        # distance of observed row i to tracked row j, others only (the ego row is row 0 in both)
-        dist = np.abs(batch[:, 1:, None, 1:3] - pred[None, None, 1:, 1:3]).sum(axis=-1)
-        dist[~present[:, 1:]] = np.inf
-        dist[:, :, ~tracked[1:]] = np.inf
-        match = np.full((b, v - 1), -1, dtype=np.int64)
-        work = dist.copy()
-        rows = np.arange(b)
-        for _ in range(v - 1):  # greedy one-to-one assignment, nearest pair first, for all B at once
-            flat = work.reshape(b, -1).argmin(axis=1)
-            i, j = np.divmod(flat, v - 1)
-            ok = work[rows, i, j] <= self.tol.gate
-            match[rows[ok], i[ok]] = j[ok]
-            work[rows[ok], i[ok], :] = np.inf
-            work[rows[ok], :, j[ok]] = np.inf
+        match = tracks.match(batch, pred, self.tol.gate)
         out = batch.copy()
         # the ego row always matches the ego track
         out[:, 0] = np.clip(batch[:, 0], pred[0] - self._width, pred[0] + self._width)
@@ -138,42 +118,3 @@ class KinematicFilter:
         out[bi, 1 + oi] = np.clip(batch[bi, 1 + oi], target - self._width, target + self._width)
         out[:, :, 0] = batch[:, :, 0]  # presence is trusted
         return out
-
-
-def defended_victim(victim: Victim, filt: KinematicFilter) -> Victim:
-    """The defended system as the attacker sees it: filter (state frozen) then policy.
-
-    White-box access, when the policy offers it, goes through the filter by BPDA (Athalye,
-    Carlini & Wagner, "Obfuscated Gradients Give a False Sense of Security", ICML 2018): the
-    forward pass is filter then network, the backward pass takes the clamp as the identity,
-    so PGD sees the network's gradient at the filtered point instead of the clamp's zeros."""
-    differentiable = None
-    if victim.differentiable is not None:
-        net = victim.differentiable
-
-        def differentiable(x: Any) -> Any:
-            filtered = x.new_tensor(filt.peek(x.detach().cpu().numpy()))
-            return net(x + (filtered - x).detach())  # value: filtered; gradient: identity
-
-    return Victim(query=lambda batch: victim.query(filt.peek(batch)), kind=victim.kind,
-                  obs_shape=victim.obs_shape, differentiable=differentiable, reads=victim.reads)
-
-
-class FilterWrapper(gym.ObservationWrapper):
-    """Applies the filter to every observation the policy receives (after any attack)."""
-
-    def __init__(self, env: gym.Env, filt: KinematicFilter) -> None:
-        super().__init__(env)
-        self.filt = filt
-        self._fresh = True
-
-    def reset(self, **kwargs: Any):  # type: ignore[override]
-        self._fresh = True
-        self.filt.state = None  # an attack on the first observation must not see the last episode
-        return super().reset(**kwargs)
-
-    def observation(self, observation: np.ndarray) -> np.ndarray:
-        if self._fresh:
-            self._fresh = False
-            return self.filt.reset(observation)
-        return self.filt.update(observation)

@@ -102,6 +102,10 @@ class Shield:
             raise ZodriveError(f"the shield reads what the rules read: {exc}") from None
         self.eps = float(eps)
 
+    def guard(self, victim: Victim) -> Victim:
+        """The shielded policy (`shielded_victim`)."""
+        return shielded_victim(victim, self)
+
     def safe(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """(B, 5) booleans: the actions safe for every true state within eps of each observation."""
         return self.rules.safe_actions(np.asarray(batch), rooms)

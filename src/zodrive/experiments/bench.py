@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -28,26 +29,33 @@ from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
-from zodrive.experiments.compare import compare, strongest
+from zodrive.experiments.compare import cell_folder, compare, strongest
 from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
 
 VERSION = 3
-"""Version 3 (2026-11-27): the clean figures of the four zoo scenarios come from 300 episodes, the
+"""Version 4 (2026-11-28, highway-fast so far): a black-box attack spends at most `QUERY_CAP` queries a step.
+Version 3 (2026-11-27): the clean figures of the four zoo scenarios come from 300 episodes, the
 attacked ones still from the first 100 (docs/bench.md, "Citing a version"); the paper's preset keeps
 version 2. Version 2: a row's return at ε is the worst over the ε-ball (attacks at every ε' ≤ ε, and
 clean); version 1 kept the worst attack at ε alone. Seeds, ε and attacks are unchanged throughout."""
+QUERY_CAP = 500
+"""Version 4's cap on a black-box attack's queries per step (highway-fast): on tuning seeds it keeps 98 % or
+more of the steps each attack of the ensemble wins (`studies/query-cap`), and it bounds a row of a policy
+no attack moves (random search's own bound is 2,002 a step)."""
 BLACK_BOX = ("random-search", "zo-signsgd")
 """The ensemble: Square-style random search (the strongest per-step black-box attack on most of the
 committed cells) and ZO-SignSGD (the paper's attack); each at its shipped settings."""
 WHITE_BOX = "pgd"
 BRAKE = PREFIX + "slower"
-ADAPTIVE = {"kinematic": ("random-search-smooth",)}
+ADAPTIVE = {"kinematic": ("random-search-smooth",), "temporal": ("random-search-smooth",)}
 """The attacks a defended row adds to the ensemble, by defense: a defense is judged by the strongest attack
-that knows it. The kinematic filter clamps each row to its one-step prediction, so the attacker that knows it
-drifts within the filter's tolerances (`random-search-smooth`: each step's change limited, `max_change`). The
-shield is stateless and the ensemble queries the shielded system as it is."""
+that knows it. The kinematic filter clamps each row to its one-step prediction, and the temporal median removes
+what changes from step to step, so the attacker that knows either holds its perturbation and lets it drift
+slowly (`random-search-smooth`: warm start, each step's change limited, `max_change`). The shield and
+randomized smoothing are stateless, and smoothing's noise is a function of the observation: the ensemble
+queries the system as it is, and each answer is already the vote over the noise (docs/bench.md)."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +72,9 @@ class Protocol:
     version: int = VERSION
     black_box: tuple[str, ...] = BLACK_BOX
     white_box: str = WHITE_BOX
+    query_budget: int | None = None
+    """The most victim queries a black-box attack of the row may spend on one step (None: its own
+    settings' bound, 2,002 for random search); PGD, white-box, is not capped."""
 
     def name(self) -> str:
         return f"{self.scenario}-v{self.version}"
@@ -76,7 +87,8 @@ class Protocol:
 
 
 PROTOCOLS = {
-    "highway-fast": Protocol("highway-fast", 100, (0.01, 0.02, 0.05), clean_episodes=300),
+    "highway-fast": Protocol("highway-fast", 100, (0.01, 0.02, 0.05), clean_episodes=300, version=4,
+                             query_budget=QUERY_CAP),
     "merge": Protocol("merge", 100, (0.01, 0.02, 0.05), clean_episodes=300),
     "roundabout": Protocol("roundabout", 100, (0.01, 0.02, 0.05), clean_episodes=300),
     "intersection": Protocol("intersection", 100, (0.01, 0.02, 0.05), clean_episodes=300),
@@ -149,12 +161,20 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         raise ZodriveError(f"{resolved.ref} does not read the observation: a defense between its sensor and it "
                            "changes nothing (bench it without --defense)")
     attacks = [*black_box_of(proto, defense), proto.white_box]
+    capped = {attack: [proto.query_budget] for attack in black_box_of(proto, defense)} if proto.query_budget else None
     defenses = [defense]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
+    earlier = _earlier_version(out, proto)
     clock = _Clock(n, n_clean)
-    compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses)
+    cells = compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
+                    preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
+                    attack_budgets=capped)
+    if earlier:  # cells of the earlier version that this one does not keep (git's history has them)
+        keep = {_cell_folder(out, cell) for cell in cells}
+        for folder in sorted((out / "cells").iterdir()):
+            if folder not in keep:
+                shutil.rmtree(folder)
     clean_out = clean_folder(out, n, n_clean)
     if clean_out != out:
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
@@ -169,6 +189,19 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         row["trust_model"] = True
     write_json(out / "row.json", row)
     return row
+
+
+def _earlier_version(out: Path, proto: Protocol) -> bool:
+    """Whether `out` holds a row of an earlier version of `proto`: then its grid gives way to this version's
+    (the cells both share, clean and PGD, are kept and reused; the others are removed once this one has run)."""
+    try:
+        row = json.loads((out / "row.json").read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+        return False
+    if not isinstance(row, dict) or row.get("scenario") != proto.scenario or row.get("protocol") == proto.name():
+        return False
+    (out / "grid.json").unlink(missing_ok=True)
+    return True
 
 
 def _cells(out: Path) -> list[dict[str, Any]]:
@@ -231,6 +264,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
         "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), out / "brake"),
         "eps_units": physical_eps(proto),
         **({"defense": defense, "black_box": list(black_box_of(proto, defense))} if defense else {}),
+        **({"query_budget": proto.query_budget} if proto.query_budget else {}),
     }
 
 
@@ -312,17 +346,58 @@ def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
                                if row["key"] != PREFIX + name}
 
 
+def _worst_returns(row: dict[str, Any], out: Path) -> dict[int, float] | None:
+    """Episode -> return of the cell a row keeps at its largest ε (the worst black-box attack inside the
+    ball, or the clean cell of the attacked episodes where no attack hurt more); None if it is not there."""
+    last = row["attacked"][-1]
+    if last.get("attack") is None:
+        return _clean_returns(out)
+    try:
+        cells = _cells(out)
+    except ZodriveError:
+        return None
+    cell = next((c for c in cells if c["attack"] == last["attack"] and c["eps"] == last["attack_eps"]), None)
+    if cell is None:
+        return None
+    return {r["episode"]: r["return"] for r in read_jsonl(_cell_folder(out, cell) / "episodes.jsonl",
+                                                           needs=("episode", "return"))}
+
+
+def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
+    """Give each defended row `vs_undefended`: the row of the same policy without the defense (same protocol,
+    the key before `+defense:`), the clean return's difference (defended minus undefended, over the clean
+    episodes) and the difference at the largest ε (the worst attack each row kept, over the attacked
+    episodes), each paired on the same seeds with its bootstrap 95% CI. What a defense costs clean and what
+    it buys under attack, read on one board."""
+    plain = {(row["protocol"], row["key"]): (row, folder) for row, folder in rows if not row.get("defense")}
+    for row, folder in rows:
+        if not row.get("defense"):
+            continue
+        match = plain.get((row["protocol"], row["key"].split("+defense:")[0]))
+        if match is None:
+            continue
+        other, other_folder = match
+        row["vs_undefended"] = {
+            "policy": other["policy"],
+            "clean": _paired(_clean_returns(row_clean_folder(row, folder)),
+                             _clean_returns(row_clean_folder(other, other_folder))),
+            "attacked": _paired(_worst_returns(row, folder), _worst_returns(other, other_folder)),
+            "eps": row["attacked"][-1]["eps"]}
+
+
 def _attack(cell: dict[str, Any]) -> str:
     return str(cell["attack"]).split(" ")[0]  # compare labels white-box attacks: "pgd (white-box)"
+
+
+def _cell_folder(out: Path, cell: dict[str, Any]) -> Path:
+    """The folder of a row's cell (a `table.json` entry)."""
+    return cell_folder(out, cell["model"], cell.get("defense"), _attack(cell), cell["eps"], cell.get("query_budget"))
 
 
 def _median_queries_to_crash(out: Path, cell: dict[str, Any]) -> float | None:
     """Median over the attacked episodes that crashed of the queries spent until the crash (an
     episode ends at its crash, so that is the episode's count)."""
-    defended = "" if cell.get("defense", "none") == "none" else f"+{cell['defense']}"
-    folder = out / "cells" / (cell["model"].replace(":", "-") + defended
-                              + f"-{_attack(cell)}-eps{number_name(cell['eps'])}")
-    records = read_jsonl(folder / "episodes.jsonl", "episode record", needs=("episode",))
+    records = read_jsonl(_cell_folder(out, cell) / "episodes.jsonl", "episode record", needs=("episode",))
     crashed = [r["queries"] for r in records if r.get("crashed")]
     return float(np.median(crashed)) if crashed else None
 
@@ -396,6 +471,7 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
             row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent), path.parent / "brake")
         rows.append((row, path.parent))
     constant_margins(rows)
+    defense_margins(rows)
     return [row for row, _ in rows]
 
 
@@ -435,6 +511,7 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
         if official:
             lines += _table(official, ranked=True)
             lines += _identical(official)
+            lines += _defended(official)
         if unofficial:
             lines += [f"Unofficial rows of {scenario} (fewer episodes than the protocol's: not ranked, no margin in "
                       "bold; their CIs are wide):", ""]
@@ -480,6 +557,26 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
     return lines
 
 
+def _defended(group: list[dict[str, Any]]) -> list[str]:
+    """The defended rows of a table against their policy undefended: what the defense costs clean and what
+    it changes under the strongest attack at the largest ε, paired on the same episodes."""
+    pairs = [r for r in group if r.get("vs_undefended")]
+    if not pairs:
+        return []
+
+    def diff(m: list[float] | None) -> str:
+        return "–" if m is None else f"{m[0]:+.2f} ({m[1]:+.2f} to {m[2]:+.2f})"
+
+    eps = pairs[0]["vs_undefended"]["eps"]
+    lines = ["Defended rows against their policy undefended (defended minus undefended, paired on the same episodes, "
+             "95% CI): clean over the clean episodes, and under the strongest attack each row kept at the largest ε.",
+             "", f"| Row | Defense | Undefended row | Clean Δ | ε {eps:g} Δ |", "|---|---|---|---|---|"]
+    for r in pairs:
+        m = r["vs_undefended"]
+        lines.append(f"| {r['policy']} | {r['defense']} | {m['policy']} | {diff(m['clean'])} | {diff(m['attacked'])} |")
+    return lines + [""]
+
+
 def _identical(group: list[dict[str, Any]]) -> list[str]:
     """A sentence for rows whose clean and attacked figures are all equal: two policies that drove the same
     episodes (on intersection and merge, always-FASTER and always-IDLE do), said, not left to be noticed."""
@@ -513,17 +610,20 @@ WRITER = "zodrive leaderboard"
 does not is someone else's, and is replaced only with --force."""
 
 
-def write_leaderboard(board: Path, out: Path, plot: Path | None = None, *, force: bool = False) -> str:
+def write_leaderboard(board: Path, out: Path, plot: Path | None = None, *, frontier: Path | None = None,
+                      force: bool = False) -> str:
     rows = read_rows(board)
     if not rows:
         raise ZodriveError(f"no bench rows under {board} (expected {board}/SCENARIO/POLICY/row.json)")
-    for path in (out, plot):
+    for path in (out, plot, frontier):
         if path is not None and path.exists() and not force and not written_by_zodrive(path):
             raise ZodriveError(f"{path} exists and was not written by `{WRITER}`: pass --force to replace it")
     text = leaderboard_markdown(rows)
     write_atomic(out, text)
     if plot is not None:
         plot_leaderboard(rows, plot)
+    if frontier is not None:
+        plot_frontier(rows, frontier)
     return text
 
 
@@ -613,4 +713,42 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     fig.suptitle("zodrive leaderboard (dashed grey: constant actions; dotted: unofficial rows)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120, metadata={"Software": WRITER})
+    plt.close(fig)
+
+
+def pareto(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of the points no other point beats on both coordinates (higher is better), by the first."""
+    keep = [i for i, (x, y) in enumerate(points)
+            if not any((a >= x and b >= y) and (a, b) != (x, y) for a, b in points)]
+    return sorted(keep, key=lambda i: points[i])
+
+
+def plot_frontier(rows: list[dict[str, Any]], path: Path) -> None:
+    """Clean return against the return under the strongest attack at the largest ε, one panel per table of
+    official rows: which systems both drive well and hold up. Defended rows are squares, constant actions
+    grey; the line joins the rows no other row beats on both."""
+    from zodrive.evaluation.report import headless_pyplot
+
+    plt = headless_pyplot()
+    official = [r for r in rows if r["official"]]
+    protocols = sorted({r["protocol"] for r in official})
+    if not protocols:
+        raise ZodriveError("no official bench rows: the frontier compares rows of the protocols' episodes")
+    fig, axes = plt.subplots(1, len(protocols), figsize=(4.6 * len(protocols), 4.6), squeeze=False)
+    for ax, name in zip(axes[0], protocols):
+        table = sorted((r for r in official if r["protocol"] == name), key=lambda r: r["policy"])
+        points = [(r["clean"]["return"], r["attacked"][-1]["return"]) for r in table]
+        for r, (x, y) in zip(table, points):
+            ax.scatter([x], [y], marker="s" if r.get("defense") else "o", s=22, zorder=3,
+                       color="0.55" if _constant(r) else ("C3" if r.get("defense") else "C0"))
+            ax.annotate(r["policy"], (x, y), fontsize=5, xytext=(3, 2), textcoords="offset points")
+        front = pareto(points)
+        ax.plot([points[i][0] for i in front], [points[i][1] for i in front], color="C2", lw=1, zorder=2)
+        ax.set_title(f"{table[0]['scenario']} ({name})", fontsize=9)
+        ax.set_xlabel("clean return (protocol's clean episodes)", fontsize=8)
+        ax.set_ylabel(f"return at ε {table[0]['attacked'][-1]['eps']:g}\n(worst black-box attack)", fontsize=8)
+    fig.suptitle("zodrive frontier: clean against attacked (squares: defended; grey: constant actions; "
+                 "line: no row beats these on both)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130, metadata={"Software": WRITER})
     plt.close(fig)

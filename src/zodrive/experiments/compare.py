@@ -34,19 +34,21 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, shifted: bool = False,
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
-            trust: bool = False, on_cell: Callable[[int, int, dict[str, Any]], None] | None = None
-            ) -> list[dict[str, Any]]:
-    """Every model (x defense) x attack x eps x per-step query budget; one resumable
-    evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies
+            trust: bool = False, on_cell: Callable[[int, int, dict[str, Any]], None] | None = None,
+            attack_budgets: dict[str, list[int | None]] | None = None) -> list[dict[str, Any]]:
+    """Every model (x defense) x attack x eps x per-step query budget (`attack_budgets`: an attack's own
+    budgets instead of `query_budgets`, as a bench protocol caps its black-box attacks and not PGD); one
+    resumable evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies
     that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
     can change what they do; white-box attacks skip policies that offer no gradients."""
     from zodrive.defense import make_defense
 
     budgets = query_budgets or [None]
+    budgets_of = {attack: (attack_budgets or {}).get(attack) or budgets for attack in attacks}
     defenses = defenses or [None]
     for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
-        for budget in budgets:
+        for budget in budgets_of[attack]:
             for eps in eps_values:
                 load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget).check()
     grid: list[dict[str, Any]] = []
@@ -66,14 +68,11 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             if defense is not None:
                 make_defense(defense, model_preset)  # the preset must be one the defense understands
             for attack in ["none", *usable]:
-                points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets]
+                points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets_of[attack]]
                 for eps, budget in points:
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
-                    folder = out / "cells" / (name.replace(":", "-") + ("" if defense is None else f"+{defense}")
-                                              + f"-{attack_name(attack).replace(':', '-')}"
-                                              + ("" if eps is None else f"-eps{number_name(eps)}")
-                                              + ("" if budget is None else f"-qb{budget}"))
+                    folder = cell_folder(out, name, defense, attack_name(attack), eps, budget)
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
                                   defense=defense, trust=trust, scenario_source=source)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
@@ -101,6 +100,14 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done, envs=envs)
     return rows  # type: ignore[return-value]
+
+
+def cell_folder(out: Path, model: str, defense: str | None, attack: str, eps: float | None,
+                budget: int | None) -> Path:
+    """The folder of one cell of the comparison in `out` (the one place its name is made)."""
+    return out / "cells" / (model.replace(":", "-") + ("" if defense in (None, "none") else f"+{defense}")
+                            + f"-{attack.replace(':', '-')}" + ("" if eps is None else f"-eps{number_name(eps)}")
+                            + ("" if budget is None else f"-qb{budget}"))
 
 
 def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:

@@ -217,7 +217,7 @@ def attack_train(
 
         if keeps_state(defense):
             raise ZodriveError(f"the {defense} defense keeps state over an episode; attack-train supports "
-                               "stateless defenses (shield[@EPS], close-shield[@EPS])")
+                               "stateless defenses (shield[@EPS], close-shield[@EPS], smooth@SIGMA)")
     check_run_folder(out, resume=False, force=force, resumable=False)
     victim = load_policy(model, preset, defense)  # safe loader; the defended system if a defense is named
     context = attack_context(preset)
