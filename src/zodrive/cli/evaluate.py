@@ -13,7 +13,7 @@ from typing import Any
 
 from zodrive.cli.attack import add_attack_flags, attack_spec_from_args, option_type
 from zodrive.cli.common import (
-    episode_count,
+    episode_count, float_above,
     MODEL_HELP, check_trust, defense_name, envs_flag, envs_of, positive_int, preset_of, progress_flag, scenario_of,
     refuse_nonempty, scenario_flags, seed_number, workers_flag,
 )
@@ -74,6 +74,11 @@ def add_parsers(sub: Any) -> None:
     cert.add_argument("--attack", nargs="+", default=[], metavar="NAME",
                       help="also attack every one of those states on its own (untargeted) with these attacks: their "
                            "success beside the certified share; the gap between them is unknown")
+    cert.add_argument("--exact", action="store_true",
+                      help="also decide every state completely (a MILP per state, HiGHS): robust, attackable (a "
+                           "counterexample the float32 network confirms) or unknown; discrete ReLU MLP policies only")
+    cert.add_argument("--time-limit", type=float_above(0.0, True, "a positive number of seconds"), metavar="S",
+                      help="--exact: seconds per state before it counts as unknown (default: 10)")
     cert.add_argument("--out", type=Path, help="folder for certify.json")
     cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
 
@@ -216,6 +221,10 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.tol is not None and policy.action_kind() == "discrete":
         raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
     tol = 0.2 if args.tol is None else args.tol
+    if args.time_limit is not None and not args.exact:
+        raise ZodriveError("--time-limit bounds each state's exact check: give --exact")
+    if args.exact and policy.action_kind() != "discrete":
+        raise ZodriveError("--exact decides discrete policies (DQN, QR-DQN); a continuous actor is not supported")
     for name in args.attack:
         spec = load_attack(name)  # an unknown attack is an error before any episode runs
         if spec.attack not in ATTACKS or not ATTACKS[spec.attack].search:
@@ -223,7 +232,8 @@ def cmd_certify(args: argparse.Namespace) -> int:
                                f"{spec.attack} is no per-state search (use random-search, zo-signsgd, pgd, ...)")
     result = certify_model(policy.ref, preset, args.eps, episodes=args.episodes,
                            seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
-                           attacks=tuple(args.attack))
+                           attacks=tuple(args.attack),
+                           exact_limit=(10.0 if args.time_limit is None else args.time_limit) if args.exact else None)
     what = ("the action cannot change" if result["kind"] == "discrete"
             else f"no action dimension can move more than {tol}")
     print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
@@ -238,10 +248,22 @@ def cmd_certify(args: argparse.Namespace) -> int:
         if len(row.get("attacks", [])) > 1:
             print(f"    any of them: success {row['any_attack']['success_share']:.1%}, "
                   f"unknown {row['any_attack']['unknown_share']:.1%}")
+        if "exact" in row:
+            print("    " + _exact_line(row["exact"], row["states"]))
     if args.out is not None:
         write_json(args.out / "certify.json", {**result, "command": command_line()})
         print(f"results: {args.out}/certify.json")
     return 0
+
+
+def _exact_line(exact: dict[str, Any], states: int) -> str:
+    """One row of `certify --exact`: the verdicts' counts, their time and any contradiction."""
+    close = exact["unknown"] - exact["timed_out"]
+    timed = f" ({exact['timed_out']} timed out, {close} too close to call)" if exact["unknown"] else ""
+    return (f"exact (MILP, {exact['time_limit']:g} s/state): CROWN-certified {exact['crown_certified']}/{states}, "
+            f"robust {exact['robust']}, attackable {exact['attackable']}, unknown {exact['unknown']}{timed}; "
+            f"s/state median {exact['seconds_median']:.3f}, max {exact['seconds_max']:.2f}"
+            + (f", {exact['contradictions']} CONTRADICTIONS" if exact["contradictions"] else ""))
 
 
 COMMANDS = {"evaluate": cmd_evaluate, "render": cmd_render, "demo": cmd_demo, "certify": cmd_certify}

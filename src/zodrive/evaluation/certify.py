@@ -118,16 +118,56 @@ def _crown_lower(spec: torch.Tensor, top: int, affine: list[tuple[torch.Tensor, 
     return (a @ mid[:, :, None])[..., 0] - (a.abs() @ rad[:, :, None])[..., 0] + const
 
 
-def _crown(affine: list[tuple[torch.Tensor, torch.Tensor]], spec: torch.Tensor, lo: torch.Tensor,
-           hi: torch.Tensor) -> torch.Tensor:
-    """Lower bound (N, m) of spec @ f(x) for a ReLU MLP f over the box [lo, hi] (N, dim)."""
+def crown_pre(affine: list[tuple[torch.Tensor, torch.Tensor]], lo: torch.Tensor,
+              hi: torch.Tensor) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """CROWN bounds (lower, upper), each (N, n_k), of every hidden pre-activation of a ReLU MLP
+    over the box [lo, hi] (N, dim), layer by layer (each layer's bounds use those below it)."""
     pre: list[tuple[torch.Tensor, torch.Tensor]] = []
-    for k in range(len(affine) - 1):                       # bound each hidden pre-activation first
+    for k in range(len(affine) - 1):
         eye = torch.eye(affine[k][0].shape[0], dtype=torch.float64).expand(len(lo), -1, -1)
         lower = _crown_lower(eye, k, affine, pre, lo, hi)
         upper = -_crown_lower(-eye, k, affine, pre, lo, hi)
         pre.append((lower, upper))
+    return pre
+
+
+def _crown(affine: list[tuple[torch.Tensor, torch.Tensor]], spec: torch.Tensor, lo: torch.Tensor,
+           hi: torch.Tensor, pre: list[tuple[torch.Tensor, torch.Tensor]] | None = None) -> torch.Tensor:
+    """Lower bound (N, m) of spec @ f(x) for a ReLU MLP f over the box [lo, hi] (N, dim)."""
+    pre = crown_pre(affine, lo, hi) if pre is None else pre
     return _crown_lower(spec, len(affine) - 1, affine, pre, lo, hi)
+
+
+def score_head(layers: list[nn.Module], post: str, owner: Any) -> tuple[int, torch.Tensor, torch.Tensor]:
+    """Index of a discrete policy's last Linear layer and its (W, b) in float64, giving the scores
+    (QR-DQN: the mean over quantiles is linear, folded into W and b)."""
+    last = max(i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear))
+    if any(isinstance(layer, MONOTONE) for layer in layers[last + 1:]):
+        raise ZodriveError("a discrete policy's scores must come out of a Linear layer")
+    w, b = layers[last].weight.double(), layers[last].bias.double()
+    if post == "quantiles":
+        q = owner.n_quantiles
+        w = w.view(q, -1, w.shape[1]).mean(dim=0)
+        b = b.view(q, -1).mean(dim=0)
+    return last, w, b
+
+
+def relu_scores(net: nn.Module) -> list[tuple[torch.Tensor, torch.Tensor]] | None:
+    """(W, b) in float64 of each Linear layer of a discrete policy that is a ReLU MLP, the last one
+    giving the scores (see `score_head`); None if the network is not Linear (ReLU Linear)*."""
+    layers, post, owner = _layers(net)
+    affine = _relu_mlp(layers)
+    if affine is None:
+        return None
+    _, w, b = score_head(layers, post, owner)
+    return affine[:-1] + [(w, b)]
+
+
+def box_of(x0: np.ndarray, eps: float, mask: np.ndarray, low: float, high: float) -> tuple[torch.Tensor, ...]:
+    """The flattened states (N, dim) and their threat boxes' bounds, as float64 tensors."""
+    flat = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(len(x0), -1))
+    lo, hi = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
+    return flat, torch.as_tensor(lo), torch.as_tensor(hi)
 
 
 def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndarray, low: float, high: float,
@@ -139,32 +179,12 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
                  for i in range(0, len(x0), chunk)]
         return Certificate(np.concatenate([p.certified for p in parts]), np.concatenate([p.bound for p in parts]))
     layers, post, owner = _layers(net)
-    flat = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(len(x0), -1))
-    box = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
-    lo, hi = torch.as_tensor(box[0]), torch.as_tensor(box[1])
+    flat, lo, hi = box_of(x0, eps, mask, low, high)
     with torch.no_grad():
         clean = net(flat.float()).double()
         if kind == "discrete":
-            last = max(i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear))
-            if any(isinstance(layer, MONOTONE) for layer in layers[last + 1:]):
-                raise ZodriveError("a discrete policy's scores must come out of a Linear layer")
-            w, b = layers[last].weight.double(), layers[last].bias.double()
-            if post == "quantiles":  # the mean over quantiles is linear: fold it into the last layer
-                q = owner.n_quantiles
-                w = w.view(q, -1, w.shape[1]).mean(dim=0)
-                b = b.view(q, -1).mean(dim=0)
             action = clean.argmax(dim=1)
-            affine = _relu_mlp(layers)
-            if affine is not None:  # CROWN on the score differences, with the last layer folded as above
-                eye = torch.eye(b.shape[0], dtype=torch.float64)
-                lower = _crown(affine[:-1] + [(w, b)], eye[action][:, None, :] - eye[None], lo, hi)
-            else:
-                h_lo, h_hi = _interval(layers[:last], lo, hi)
-                diff_w = w[action][:, None, :] - w[None]          # (N, k, hidden): score(a*) - score(j)
-                diff_b = b[action][:, None] - b[None]
-                mid, rad = (h_hi + h_lo) / 2, (h_hi - h_lo) / 2
-                lower = (diff_w @ mid[:, :, None])[..., 0] - (diff_w.abs() @ rad[:, :, None])[..., 0] + diff_b
-            lower[torch.arange(len(lower)), action] = float("inf")  # a* against itself
+            lower = margins(net, action, lo, hi)
             margin = lower.min(dim=1).values
             return Certificate(certified=(margin > SLACK).numpy(), bound=margin.numpy())
         squash = isinstance(layers[-1], nn.Tanh) and _relu_mlp(layers[:-1]) is not None
@@ -184,6 +204,28 @@ def certify(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndar
                 out_lo, out_hi = torch.clamp(out_lo, low_a, high_a), torch.clamp(out_hi, low_a, high_a)
         change = torch.maximum(out_hi - clean, clean - out_lo).amax(dim=1) + SLACK
         return Certificate(certified=(change <= tol).numpy(), bound=change.numpy())
+
+
+def margins(net: nn.Module, action: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+            pre: list[tuple[torch.Tensor, torch.Tensor]] | None = None) -> torch.Tensor:
+    """Lower bounds (N, k) of score(a*) - score(j) over each box [lo, hi] (N, dim) for a discrete
+    policy, a* = `action` (N,) (+inf at j = a*): CROWN on a ReLU MLP (reusing the hidden layers'
+    bounds `pre` if given), interval bounds through the body otherwise."""
+    with torch.no_grad():
+        affine = relu_scores(net)
+        if affine is not None:  # CROWN on the score differences
+            eye = torch.eye(affine[-1][1].shape[0], dtype=torch.float64)
+            lower = _crown(affine, eye[action][:, None, :] - eye[None], lo, hi, pre)
+        else:
+            layers, post, owner = _layers(net)
+            last, w, b = score_head(layers, post, owner)
+            h_lo, h_hi = _interval(layers[:last], lo, hi)
+            diff_w = w[action][:, None, :] - w[None]          # (N, k, hidden): score(a*) - score(j)
+            diff_b = b[action][:, None] - b[None]
+            mid, rad = (h_hi + h_lo) / 2, (h_hi - h_lo) / 2
+            lower = (diff_w @ mid[:, :, None])[..., 0] - (diff_w.abs() @ rad[:, :, None])[..., 0] + diff_b
+        lower[torch.arange(len(lower)), action] = float("inf")  # a* against itself
+    return lower
 
 
 def episode_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int) -> np.ndarray:
@@ -239,16 +281,21 @@ def sandwich(states: np.ndarray, certified: np.ndarray, attack: str, eps: float,
 
 
 def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *, episodes: int, seed: int,
-                  tol: float = 0.2, attacks: tuple[str, ...] = ()) -> dict[str, Any]:
-    """The certified share of a model's clean states at each eps (see `certify`), and for each
-    of `attacks` its success on the same states (`sandwich`)."""
-    from zodrive.policies.loading import load_network, raw_network_only
-    from zodrive.policies.victims import network_victim
+                  tol: float = 0.2, attacks: tuple[str, ...] = (), exact_limit: float | None = None) -> dict[str, Any]:
+    """The certified share of a model's clean states at each eps (see `certify`), for each of
+    `attacks` its success on the same states (`sandwich`), and with `exact_limit` (seconds per
+    state) the complete verdicts of `exact.exact` on them."""
     from zodrive.attacks.spec import AttackSpec
     from zodrive.envs import scenario
+    from zodrive.policies.loading import load_network, raw_network_only
+    from zodrive.policies.victims import network_victim
 
     raw_network_only(model, "certify")
     network = load_network(model, preset)  # rebuilt from plain data; nothing unpickled
+    if exact_limit is not None:
+        from zodrive.evaluation.exact import exact_network, exact_summary
+
+        exact_network(network.net, network.kind)  # a network --exact cannot decide is refused before any episode
     env = scenario(preset)
     victim = network_victim(network.net, network.kind, network.obs_shape)  # type: ignore[arg-type]
     states = episode_states(preset, victim, seed, episodes)
@@ -257,14 +304,20 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
         threat = AttackSpec(eps=eps).threat(env.features, env.bounds)  # the default threat model's mask
         cert = certify(network.net, network.kind, states, eps, threat.mask(states.shape[1:]), *env.bounds, tol=tol)
         row: dict[str, Any] = {"eps": eps, "certified_share": float(cert.certified.mean()),
-                               "states": int(len(states)), "mean_bound": float(np.mean(cert.bound))}
+                               "states": len(states), "mean_bound": float(np.mean(cert.bound))}
         if attacks:  # from above: each attack, and the states any of them won
             sides = [sandwich(states, cert.certified, name, eps, victim, preset, seed, tol) for name in attacks]
             row["attacks"] = [side for side, _ in sides]
             anyone = np.any([won for _, won in sides], axis=0)
             row["any_attack"] = {"success_share": float(anyone.mean()),
                                  "unknown_share": 1.0 - float(anyone.mean()) - row["certified_share"]}
+        if exact_limit is not None:
+            row["exact"] = exact_summary(network.net, network.kind, states, eps, threat.mask(states.shape[1:]),
+                                         env.bounds, exact_limit, cert.certified, anyone if attacks else None)
         rows.append(row)
     return {"model": model, "preset": preset.get("name"), "kind": network.kind, "seed": seed, "episodes": episodes,
             "method": "CROWN (Zhang et al. 2018) on ReLU networks, interval bounds (Gowal et al. 2018) otherwise",
+            "exact_method": None if exact_limit is None else (
+                "MILP per state (Tjeng et al. 2019: big-M on CROWN's bounds, HiGHS) after a gradient search; "
+                "every counterexample confirmed by the float32 network"),
             "tol": tol if network.kind == "continuous" else None, "rows": rows}
