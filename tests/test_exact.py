@@ -16,7 +16,7 @@ from torch import nn
 from zodrive.attacks.spec import AttackSpec
 from zodrive.cli import main
 from zodrive.evaluation.certify import certify, threat_box
-from zodrive.evaluation.exact import exact
+from zodrive.evaluation.exact import attack_gap, exact, grid_bracket, min_eps
 from zodrive.policies.victims import network_victim
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -171,8 +171,8 @@ def test_the_time_limit_makes_counted_unknowns() -> None:
     net, (x0, mask) = _net((25, 128, 128, 5), seed=2), _states(6, seed=2)
     hard = exact(net, "discrete", x0[:1], 0.3, mask, -1.0, 1.0, time_limit=2.0, falsify=False)
     assert hard.verdict[0] == "unknown" and hard.timed_out[0] and 1.5 < hard.seconds[0] < 6
-    summary = exact_summary(net, "discrete", x0, 0.3, mask, (-1.0, 1.0), 1e-4,
-                            np.zeros(len(x0), dtype=bool), None)
+    summary, _ = exact_summary(net, "discrete", x0, 0.3, mask, (-1.0, 1.0), 1e-4,
+                               np.zeros(len(x0), dtype=bool), None)
     # the gradient search runs before the limit applies: what it finds is confirmed, the rest is unknown
     assert summary["unknown"] == summary["timed_out"] >= 1 and summary["robust"] == 0
     assert summary["unknown"] + summary["attackable"] == len(x0) and summary["seconds_max"] < 5
@@ -205,3 +205,92 @@ def test_certify_exact_on_the_command_line(tmp_path: Path, monkeypatch, capsys) 
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) <= 2 and err[-1].startswith("zodrive: error:") and "Traceback" not in "".join(err)
+
+
+def test_a_miss_is_an_attackable_state_the_attack_did_not_win() -> None:
+    """attack_gap on a toy: won and attackable is found, attackable and not won is missed, a win the
+    exact check left unknown is counted apart, a win where it says robust is a reported contradiction;
+    the counts add up both ways."""
+    verdict = np.array(["attackable", "attackable", "attackable", "robust", "unknown", "robust"], dtype=object)
+    won = np.array([True, False, False, False, True, False])
+    gap = attack_gap(verdict, won)
+    assert (gap["attackable"], gap["found"], gap["missed"], gap["success"]) == (3, 1, 2, 2)
+    assert gap["miss_rate"] == pytest.approx(2 / 3) and gap["success_share"] == pytest.approx(2 / 6)
+    assert (gap["won_robust"], gap["won_unknown"]) == (0, 1)
+    assert gap["found"] + gap["missed"] == gap["attackable"]
+    assert gap["found"] + gap["won_robust"] + gap["won_unknown"] == gap["success"]
+    everything = attack_gap(verdict, verdict == "attackable")
+    assert everything["missed"] == 0 and everything["miss_rate"] == 0.0
+    bad = attack_gap(verdict, np.array([False, False, False, True, False, False]))
+    assert bad["won_robust"] == 1 and bad["miss_rate"] == 1.0  # reported, not dropped
+    assert attack_gap(np.array(["robust"], dtype=object), np.array([False]))["miss_rate"] is None
+
+
+def _ramp() -> nn.Sequential:
+    """2 inputs, 2 actions: score(0) = 0.3, score(1) = x[0]; from x[0] = c the action changes exactly
+    beyond radius 0.3 - c (a tie keeps action 0)."""
+    net = nn.Sequential(nn.Linear(2, 2), nn.ReLU(), nn.Linear(2, 2)).eval()
+    with torch.no_grad():
+        net[0].weight.copy_(torch.tensor([[1.0, 0.0], [-1.0, 0.0]]))
+        net[0].bias.zero_()
+        net[2].weight.copy_(torch.tensor([[0.0, 0.0], [1.0, -1.0]]))
+        net[2].bias.copy_(torch.tensor([0.3, 0.0]))
+    return net
+
+
+def test_the_bisection_brackets_the_known_smallest_radius() -> None:
+    net = _ramp()
+    c = np.array([0.0, 0.1, -0.15, -0.5], dtype=np.float32)  # smallest radius 0.3, 0.2, 0.45, 0.8
+    x0 = np.stack([c, np.zeros_like(c)], axis=1)
+    mask, grid = np.ones(2, dtype=np.float32), [0.1, 0.6]
+    verdicts = [exact(net, "discrete", x0, eps, mask, -1.0, 1.0).verdict for eps in grid]
+    assert list(verdicts[0]) == ["robust"] * 4 and list(verdicts[1]) == ["attackable"] * 3 + ["robust"]
+    found = min_eps(net, "discrete", x0, grid, verdicts, mask, (-1.0, 1.0), 10.0, steps=8)
+    truth = 0.3 - c.astype(np.float64)
+    assert found.broken == 0 and not found.stopped.any() and found.checks == 3 * 8
+    assert (found.lower[:3] < truth[:3]).all() and (truth[:3] <= found.upper[:3] + 1e-6).all()
+    assert (found.upper[:3] - found.lower[:3] <= 0.5 / 256 + 1e-12).all()
+    assert found.lower[3] == 0.6 and found.upper[3] == np.inf  # robust at every radius checked
+
+
+def test_a_grid_that_breaks_nesting_is_counted() -> None:
+    lower, upper, broken = grid_bracket([0.01, 0.02], [np.array(["attackable", "unknown"], dtype=object),
+                                                        np.array(["robust", "attackable"], dtype=object)])
+    assert broken == 1 and list(upper) == [0.01, 0.02] and list(lower) == [0.02, 0.0]
+
+
+def test_certify_reports_each_attacks_misses_against_exact(tmp_path: Path, monkeypatch, capsys) -> None:
+    """certify --attack ... --exact --min-eps: per attack found + missed = exactly attackable, the
+    per-state strings give the same counts, the black-box ensemble misses no more than any of its
+    attacks, no win where exact says robust, and the bisection's bracket is nested in the grid's."""
+    import zodrive.evaluation.certify as certify_module
+
+    x0, _ = _states(12, seed=6)
+    x0[:, :, 1:] *= 0.3
+    monkeypatch.setattr(certify_module, "episode_states", lambda *args: x0)
+    out = tmp_path / "gap"
+    assert main(["certify", str(DRIVER), "--eps", "0.005", "0.02", "--attack", "random-search", "pgd", "--exact",
+                 "--min-eps", "--out", str(out)]) == 0
+    assert "miss rate" in capsys.readouterr().out
+    result = json.loads((out / "certify.json").read_text())
+    for row in result["rows"]:
+        per = row["per_state"]
+        assert per["exact"].count("a") == row["exact"]["attackable"] and len(per["exact"]) == len(x0)
+        for side in row["attacks"]:
+            gap, won = side["vs_exact"], np.array([b == "1" for b in per[side["attack"]]])
+            assert gap["found"] + gap["missed"] == gap["attackable"] == row["exact"]["attackable"]
+            assert gap["found"] + gap["won_robust"] + gap["won_unknown"] == gap["success"] == won.sum()
+            assert gap["success_share"] == pytest.approx(side["success_share"]) and gap["won_robust"] == 0
+            assert gap["missed"] == sum(v == "a" and not w for v, w in zip(per["exact"], won))
+        ensemble = row["exact"]["black_box_ensemble"]
+        assert ensemble["attacks"] == ["random-search"]  # PGD is white-box: not in the ensemble
+        assert ensemble["missed"] == row["attacks"][0]["vs_exact"]["missed"]
+    found = result["min_eps"]
+    lower, upper = (np.array([np.inf if v is None else v for v in found[k]]) for k in ("lower", "upper"))
+    assert (lower < upper).all() and found["broken"] == 0
+    first = [0.005 if a == "a" else 0.02 if b == "a" else np.inf
+             for a, b in zip(result["rows"][0]["per_state"]["exact"], result["rows"][1]["per_state"]["exact"])]
+    assert (upper <= np.array(first)).all()
+    assert found["beyond_grid"] == int(np.isinf(upper).sum())
+    assert main(["certify", str(DRIVER), "--eps", "0.01", "--min-eps"]) == 2
+    assert capsys.readouterr().err.strip().startswith("zodrive: error:")

@@ -79,6 +79,9 @@ def add_parsers(sub: Any) -> None:
                            "counterexample the float32 network confirms) or unknown; discrete ReLU MLP policies only")
     cert.add_argument("--time-limit", type=float_above(0.0, True, "a positive number of seconds"), metavar="S",
                       help="--exact: seconds per state before it counts as unknown (default: 10)")
+    cert.add_argument("--min-eps", action="store_true",
+                      help="--exact: also bisect each state's smallest radius that changes its action (8 more exact "
+                           "checks per state at most, started from the verdicts at the --eps radii, up to the largest)")
     cert.add_argument("--out", type=Path, help="folder for certify.json")
     cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
 
@@ -223,6 +226,8 @@ def cmd_certify(args: argparse.Namespace) -> int:
     tol = 0.2 if args.tol is None else args.tol
     if args.time_limit is not None and not args.exact:
         raise ZodriveError("--time-limit bounds each state's exact check: give --exact")
+    if args.min_eps and not args.exact:
+        raise ZodriveError("--min-eps bisects on the exact check: give --exact")
     if args.exact and policy.action_kind() != "discrete":
         raise ZodriveError("--exact decides discrete policies (DQN, QR-DQN); a continuous actor is not supported")
     for name in args.attack:
@@ -233,7 +238,8 @@ def cmd_certify(args: argparse.Namespace) -> int:
     result = certify_model(policy.ref, preset, args.eps, episodes=args.episodes,
                            seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, tol=tol,
                            attacks=tuple(args.attack),
-                           exact_limit=(10.0 if args.time_limit is None else args.time_limit) if args.exact else None)
+                           exact_limit=(10.0 if args.time_limit is None else args.time_limit) if args.exact else None,
+                           min_eps_steps=MIN_EPS_STEPS if args.min_eps else 0)
     what = ("the action cannot change" if result["kind"] == "discrete"
             else f"no action dimension can move more than {tol}")
     print(f"{result['rows'][0]['states']} states of {args.episodes} clean episodes (seeds {result['seed']}..): "
@@ -250,6 +256,13 @@ def cmd_certify(args: argparse.Namespace) -> int:
                   f"unknown {row['any_attack']['unknown_share']:.1%}")
         if "exact" in row:
             print("    " + _exact_line(row["exact"], row["states"]))
+            for side in row.get("attacks", []):
+                print(f"      {side['attack']}{' (white-box)' if side['white_box'] else ''}: " + _gap_line(side["vs_exact"]))
+            ensemble = row["exact"].get("black_box_ensemble")
+            if ensemble and len(ensemble["attacks"]) > 0:
+                print(f"      black-box ensemble ({', '.join(ensemble['attacks'])}): " + _gap_line(ensemble))
+    if "min_eps" in result:
+        print(_min_eps_text(result["min_eps"], list(args.attack)))
     if args.out is not None:
         write_json(args.out / "certify.json", {**result, "command": command_line()})
         print(f"results: {args.out}/certify.json")
@@ -264,6 +277,36 @@ def _exact_line(exact: dict[str, Any], states: int) -> str:
             f"robust {exact['robust']}, attackable {exact['attackable']}, unknown {exact['unknown']}{timed}; "
             f"s/state median {exact['seconds_median']:.3f}, max {exact['seconds_max']:.2f}"
             + (f", {exact['contradictions']} CONTRADICTIONS" if exact["contradictions"] else ""))
+
+
+def _gap_line(gap: dict[str, Any]) -> str:
+    """An attack against the exact verdicts: what it found of the attackable states, what it missed."""
+    rate = "n/a" if gap["miss_rate"] is None else f"{gap['miss_rate']:.1%}"
+    return (f"found {gap['found']}/{gap['attackable']} exactly attackable, missed {gap['missed']} (miss rate {rate})"
+            + (f", won {gap['won_unknown']} the exact check left unknown" if gap["won_unknown"] else "")
+            + (f", {gap['won_robust']} CONTRADICTIONS (won where exact says robust)" if gap["won_robust"] else ""))
+
+
+def _min_eps_text(found: dict[str, Any], attacks: list[str]) -> str:
+    """The smallest radius that changes each state's action: its quartiles, bracketed by the bisection."""
+    def show(v: float | None) -> str:
+        return f"> {max(found['grid']):g}" if v is None else f"{v:.4g}"
+
+    bracket = ", ".join(f"{name} [{show(a)}, {show(b)}]" for name, a, b in
+                        zip(("q25", "median", "q75"), found["quartiles_lower"], found["quartiles_upper"]))
+    lines = [f"  smallest eps that changes the action (exact, bisection: {found['steps']} halvings from the grid "
+             f"bracket; {found['checks']} checks, {found['seconds']:.0f} s): {bracket}; no counterexample up to "
+             f"{max(found['grid']):g}: {found['beyond_grid']} ({found['unknown_at_max']} of them unknown there), "
+             f"bisections stopped by an unknown: {found['stopped']}"
+             + (f", {found['broken']} CONTRADICTIONS (robust at a larger eps than attackable)" if found["broken"] else "")]
+    for name in ["exact", *attacks]:
+        q = found["on_grid"][name]
+        lines.append(f"    on the grid only, smallest eps {name} changed the action at: q25 {show(q[0])}, median "
+                     f"{show(q[1])}, q75 {show(q[2])}")
+    return "\n".join(lines)
+
+
+MIN_EPS_STEPS = 8  # bisection halvings per state for --min-eps: bracket / 256 from the grid's
 
 
 COMMANDS = {"evaluate": cmd_evaluate, "render": cmd_render, "demo": cmd_demo, "certify": cmd_certify}

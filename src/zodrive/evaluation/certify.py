@@ -46,8 +46,9 @@ class Certificate:
     bound: np.ndarray          # (N,) discrete: the certified margin lower bound; continuous: max |change|
 
 
-def threat_box(x0: np.ndarray, eps: float, mask: np.ndarray, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per-coordinate bounds (N, dim) of every point the threat model allows around x0 (N, dim)."""
+def threat_box(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-coordinate bounds (N, dim) of every point the threat model allows around x0 (N, dim); `eps` one
+    radius, or one per state (N, 1)."""
     delta = eps * mask[None]
     lo = np.maximum(x0 - delta, np.minimum(low, x0))
     hi = np.minimum(x0 + delta, np.maximum(high, x0))
@@ -163,7 +164,7 @@ def relu_scores(net: nn.Module) -> list[tuple[torch.Tensor, torch.Tensor]] | Non
     return affine[:-1] + [(w, b)]
 
 
-def box_of(x0: np.ndarray, eps: float, mask: np.ndarray, low: float, high: float) -> tuple[torch.Tensor, ...]:
+def box_of(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float, high: float) -> tuple[torch.Tensor, ...]:
     """The flattened states (N, dim) and their threat boxes' bounds, as float64 tensors."""
     flat = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(len(x0), -1))
     lo, hi = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
@@ -281,10 +282,14 @@ def sandwich(states: np.ndarray, certified: np.ndarray, attack: str, eps: float,
 
 
 def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *, episodes: int, seed: int,
-                  tol: float = 0.2, attacks: tuple[str, ...] = (), exact_limit: float | None = None) -> dict[str, Any]:
+                  tol: float = 0.2, attacks: tuple[str, ...] = (), exact_limit: float | None = None,
+                  min_eps_steps: int = 0) -> dict[str, Any]:
     """The certified share of a model's clean states at each eps (see `certify`), for each of
     `attacks` its success on the same states (`sandwich`), and with `exact_limit` (seconds per
-    state) the complete verdicts of `exact.exact` on them."""
+    state) the complete verdicts of `exact.exact` on them: then each attack's distance from optimal
+    (`exact.attack_gap`: its misses among the exactly attackable states, alone and for the union of
+    the black-box attacks), per-state verdicts and wins as strings (`per_state`), and with
+    `min_eps_steps` > 0 each state's smallest radius that changes its action (`exact.min_eps`)."""
     from zodrive.attacks.spec import AttackSpec
     from zodrive.envs import scenario
     from zodrive.policies.loading import load_network, raw_network_only
@@ -293,16 +298,16 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
     raw_network_only(model, "certify")
     network = load_network(model, preset)  # rebuilt from plain data; nothing unpickled
     if exact_limit is not None:
-        from zodrive.evaluation.exact import exact_network, exact_summary
+        from zodrive.evaluation.exact import attack_gap, exact_network, exact_summary
 
         exact_network(network.net, network.kind)  # a network --exact cannot decide is refused before any episode
     env = scenario(preset)
     victim = network_victim(network.net, network.kind, network.obs_shape)  # type: ignore[arg-type]
     states = episode_states(preset, victim, seed, episodes)
-    rows = []
+    mask = AttackSpec(eps=max(eps_values)).threat(env.features, env.bounds).mask(states.shape[1:])  # no eps in it
+    rows, verdicts, wins = [], [], {name: [] for name in attacks}
     for eps in eps_values:
-        threat = AttackSpec(eps=eps).threat(env.features, env.bounds)  # the default threat model's mask
-        cert = certify(network.net, network.kind, states, eps, threat.mask(states.shape[1:]), *env.bounds, tol=tol)
+        cert = certify(network.net, network.kind, states, eps, mask, *env.bounds, tol=tol)
         row: dict[str, Any] = {"eps": eps, "certified_share": float(cert.certified.mean()),
                                "states": len(states), "mean_bound": float(np.mean(cert.bound))}
         if attacks:  # from above: each attack, and the states any of them won
@@ -311,13 +316,39 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
             anyone = np.any([won for _, won in sides], axis=0)
             row["any_attack"] = {"success_share": float(anyone.mean()),
                                  "unknown_share": 1.0 - float(anyone.mean()) - row["certified_share"]}
+            for name, (_, won) in zip(attacks, sides):
+                wins[name].append(won)
         if exact_limit is not None:
-            row["exact"] = exact_summary(network.net, network.kind, states, eps, threat.mask(states.shape[1:]),
-                                         env.bounds, exact_limit, cert.certified, anyone if attacks else None)
+            row["exact"], result = exact_summary(network.net, network.kind, states, eps, mask, env.bounds, exact_limit,
+                                                 cert.certified, anyone if attacks else None)
+            verdicts.append(result.verdict)
+            row["per_state"] = {"crown": _bits(cert.certified),
+                                "exact": "".join(str(v)[0] for v in result.verdict)}  # r / a / u
+            if attacks:
+                black = [won for side, won in sides if not side["white_box"]]
+                for side, won in sides:
+                    side["vs_exact"] = attack_gap(result.verdict, won)
+                    row["per_state"][side["attack"]] = _bits(won)
+                row["exact"]["black_box_ensemble"] = {
+                    "attacks": [side["attack"] for side, _ in sides if not side["white_box"]],
+                    **(attack_gap(result.verdict, np.any(black, axis=0)) if black else {})}
         rows.append(row)
-    return {"model": model, "preset": preset.get("name"), "kind": network.kind, "seed": seed, "episodes": episodes,
-            "method": "CROWN (Zhang et al. 2018) on ReLU networks, interval bounds (Gowal et al. 2018) otherwise",
-            "exact_method": None if exact_limit is None else (
-                "MILP per state (Tjeng et al. 2019: big-M on CROWN's bounds, HiGHS) after a gradient search; "
-                "every counterexample confirmed by the float32 network"),
-            "tol": tol if network.kind == "continuous" else None, "rows": rows}
+    out = {"model": model, "preset": preset.get("name"), "kind": network.kind, "seed": seed, "episodes": episodes,
+           "method": "CROWN (Zhang et al. 2018) on ReLU networks, interval bounds (Gowal et al. 2018) otherwise",
+           "exact_method": None if exact_limit is None else (
+               "MILP per state (Tjeng et al. 2019: big-M on CROWN's bounds, HiGHS) after a gradient search; "
+               "every counterexample confirmed by the float32 network"),
+           "tol": tol if network.kind == "continuous" else None, "rows": rows}
+    if exact_limit is not None and min_eps_steps > 0:
+        from zodrive.evaluation.exact import min_eps, min_eps_summary
+
+        found = min_eps(network.net, network.kind, states, eps_values, verdicts, mask, env.bounds, exact_limit,
+                        steps=min_eps_steps)
+        out["min_eps"] = min_eps_summary(found, eps_values, verdicts,
+                                         {name: np.stack(won) for name, won in wins.items()}, min_eps_steps)
+    return out
+
+
+def _bits(flags: np.ndarray) -> str:
+    """A per-state bool array as a string of 0 and 1 (state i is character i)."""
+    return "".join("1" if f else "0" for f in flags)

@@ -69,15 +69,18 @@ def exact_network(net: nn.Module, kind: str) -> Affine:
     return [(w.detach(), b.detach()) for w, b in affine]
 
 
-def exact(net: nn.Module, kind: str, x0: np.ndarray, eps: float, mask: np.ndarray, low: float, high: float, *,
-          time_limit: float = 10.0, crown_first: bool = True, falsify: bool = True, chunk: int = 64) -> Exact:
-    """Exact verdicts for the clean states `x0` (N, ...) at radius `eps` (see the module docstring),
-    with at most `time_limit` seconds per state. `crown_first=False` sends CROWN-certified states
-    through the MILP too, `falsify=False` skips the gradient search that precedes it (both: checks)."""
+def exact(net: nn.Module, kind: str, x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float,
+          high: float, *, time_limit: float = 10.0, crown_first: bool = True, falsify: bool = True,
+          chunk: int = 64) -> Exact:
+    """Exact verdicts for the clean states `x0` (N, ...) at radius `eps` (one number, or one per state:
+    (N,)) (see the module docstring), with at most `time_limit` seconds per state. `crown_first=False`
+    sends CROWN-certified states through the MILP too, `falsify=False` skips the gradient search that
+    precedes it (both: checks)."""
     affine = exact_network(net, kind)
+    radii = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(x0),))
     parts = []
     for start in range(0, len(x0), chunk):
-        flat, lo, hi = box_of(x0[start:start + chunk], eps, mask, low, high)
+        flat, lo, hi = box_of(x0[start:start + chunk], radii[start:start + chunk, None], mask, low, high)
         with torch.no_grad():
             action = net(flat.float()).argmax(dim=1)
             pre = crown_pre(affine, lo, hi)
@@ -258,10 +261,10 @@ class _Program:
 
 def exact_summary(net: nn.Module, kind: str, states: np.ndarray, eps: float, mask: np.ndarray,
                   bounds: tuple[float, float], time_limit: float, certified: np.ndarray,
-                  won: np.ndarray | None) -> dict[str, Any]:
-    """`exact` on `states` as certify.json's counts; `certified` (CROWN, from `certify`) and the
-    states the attacks `won` are checked against the verdicts: each contradiction is counted
-    (a sound, complete check has none)."""
+                  won: np.ndarray | None) -> tuple[dict[str, Any], Exact]:
+    """`exact` on `states` as certify.json's counts, and the verdicts themselves; `certified` (CROWN,
+    from `certify`) and the states the attacks `won` are checked against the verdicts: each
+    contradiction is counted (a sound, complete check has none)."""
     result = exact(net, kind, states, eps, mask, *bounds, time_limit=time_limit)
     robust, attackable = result.verdict == "robust", result.verdict == "attackable"
     summary: dict[str, Any] = {
@@ -272,4 +275,100 @@ def exact_summary(net: nn.Module, kind: str, states: np.ndarray, eps: float, mas
         "contradictions": int((certified & ~robust).sum()) + (0 if won is None else int((won & robust).sum())),
     }
     summary.update({f"{key}_share": summary[key] / len(states) for key in ("robust", "attackable", "unknown")})
-    return summary
+    return summary, result
+
+
+def attack_gap(verdict: np.ndarray, won: np.ndarray) -> dict[str, Any]:
+    """How far an attack is from optimal on states the exact check decided (`verdict` (N,) as
+    `Exact.verdict`, `won` (N,) bool: the attack changed the action). `found` + `missed` =
+    `attackable`; `found` + `won_robust` + `won_unknown` = `success`. `miss_rate` = missed /
+    attackable (None without an attackable state). `won_robust` is a contradiction (a won state
+    has a point that changes the action): it must be 0, and is reported, never dropped."""
+    attackable, robust, unknown = (verdict == v for v in ("attackable", "robust", "unknown"))
+    missed = int((attackable & ~won).sum())
+    return {"states": len(verdict), "success": int(won.sum()), "success_share": float(won.mean()),
+            "attackable": int(attackable.sum()), "found": int((attackable & won).sum()), "missed": missed,
+            "miss_rate": missed / int(attackable.sum()) if attackable.any() else None,
+            "won_robust": int((won & robust).sum()), "won_unknown": int((won & unknown).sum())}
+
+
+@dataclass(frozen=True)
+class MinEps:
+    """The smallest radius at which each state's action can change lies in (lower, upper]: robust
+    (proved) at `lower`, a confirmed counterexample at `upper` (inf: none up to the largest radius
+    checked). `stopped`: the bisection met an unknown verdict and kept the bracket it had."""
+    lower: np.ndarray    # (N,)
+    upper: np.ndarray    # (N,)
+    stopped: np.ndarray  # (N,) bool
+    broken: int          # states whose grid verdicts break nesting (`grid_bracket`): a bug if not 0
+    checks: int          # exact checks run by the bisection (the grid's are reused)
+    seconds: float
+
+
+def grid_bracket(grid: list[float], verdicts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, int]:
+    """Each state's starting bracket from the verdicts at the grid radii (one array per radius): the
+    largest radius proved robust (0 if none) and the smallest found attackable (inf if none), and how
+    many states break nesting (robust at a radius larger than one where it is attackable: must be 0)."""
+    radii = np.asarray(grid, dtype=np.float64)[:, None]
+    table = np.stack(verdicts)                                  # (G, N)
+    lower = np.where(table == "robust", radii, 0.0).max(axis=0)
+    upper = np.where(table == "attackable", radii, np.inf).min(axis=0)
+    return lower, upper, int((lower >= upper).sum())
+
+
+def min_eps(net: nn.Module, kind: str, states: np.ndarray, grid: list[float], verdicts: list[np.ndarray],
+            mask: np.ndarray, bounds: tuple[float, float], time_limit: float, steps: int = 8) -> MinEps:
+    """Bisection on `exact` for each state's smallest radius that changes its action, started from
+    its bracket on the grid (`grid_bracket`) and halved `steps` times where the bracket is finite:
+    robust at the midpoint raises `lower`, attackable lowers `upper`, unknown stops that state. States
+    robust at every grid radius keep (largest radius, inf); a broken bracket is counted, not bisected."""
+    start = time.perf_counter()
+    lower, upper, broken = grid_bracket(grid, verdicts)
+    stopped = lower >= upper  # a broken bracket (counted in `broken`) is not bisected
+    checks = 0
+    for _ in range(steps):
+        rows = np.flatnonzero(np.isfinite(upper) & ~stopped)
+        if not len(rows):
+            break
+        mid = (lower[rows] + upper[rows]) / 2
+        verdict = exact(net, kind, states[rows], mid, mask, *bounds, time_limit=time_limit).verdict
+        checks += len(rows)
+        lower[rows] = np.where(verdict == "robust", mid, lower[rows])
+        upper[rows] = np.where(verdict == "attackable", mid, upper[rows])
+        stopped[rows] = verdict == "unknown"
+    return MinEps(lower=lower, upper=upper, stopped=stopped, broken=broken, checks=checks,
+                  seconds=time.perf_counter() - start)
+
+
+QUARTILES = (0.25, 0.5, 0.75)
+
+
+def quartiles(values: np.ndarray) -> list[float]:
+    """The 25th, 50th and 75th percentiles as order statistics (no interpolation: inf stays inf, and
+    quartiles of lower and upper bounds bound the true quartiles)."""
+    return [float(np.quantile(values, q, method="inverted_cdf")) for q in QUARTILES]
+
+
+def min_eps_summary(found: MinEps, grid: list[float], verdicts: list[np.ndarray], wins: dict[str, np.ndarray],
+                    steps: int) -> dict[str, Any]:
+    """certify.json's `min_eps`: per state the bracket (None for inf), quartiles of both ends, and on the
+    grid alone the quartiles of the smallest radius at which the exact check (`verdicts`, one array per
+    grid radius) and each attack (`wins`: name -> (G, N) bool) changed the action (inf where never:
+    null in JSON)."""
+    radii = np.asarray(grid, dtype=np.float64)[:, None]
+
+    def first(hit: np.ndarray) -> np.ndarray:
+        return np.where(hit, radii, np.inf).min(axis=0)
+
+    def listed(values: list[float] | np.ndarray) -> list[float | None]:
+        return [None if not np.isfinite(v) else float(v) for v in values]
+
+    on_grid = {"exact": listed(quartiles(first(np.stack(verdicts) == "attackable")))}
+    return {
+        "steps": steps, "grid": list(grid), "checks": found.checks, "seconds": found.seconds, "broken": found.broken,
+        "lower": listed(found.lower), "upper": listed(found.upper),
+        "quartiles_lower": listed(quartiles(found.lower)), "quartiles_upper": listed(quartiles(found.upper)),
+        "beyond_grid": int((~np.isfinite(found.upper)).sum()), "stopped": int(found.stopped.sum()),
+        "unknown_at_max": int((~np.isfinite(found.upper) & (found.lower < max(grid))).sum()),
+        "on_grid": on_grid | {name: listed(quartiles(first(won))) for name, won in wins.items()},
+    }
