@@ -16,7 +16,8 @@ get it wrong:
         x = project(step(candidates, objective values))
 
 An attack only says how to start (`init`), what to query around the base point
-(`propose`) and where to go next (`step`). The objective is the paper's Eq. 8:
+(`propose`) and where to go next (`step`); a decision-based one (`attacks.boundary`) also reads
+which candidates met the goal (`observe`) and ranks successful points itself (`merit`). The objective is the paper's Eq. 8:
 L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
 False`) get the exact gradient of L1 at the base point instead of probes. Two attacks are no
 search and bring their own `perturb` (`search = False`): the learned adversary
@@ -98,6 +99,10 @@ class Attack(abc.ABC):
     no_search: ClassVar[str] = ""  # an attack that is no search (`search = False`): why the search options do nothing
     reads: ClassVar[frozenset[str]] = frozenset(TUNABLE)  # the tunable options it reads; another one given is an error
     reference: ClassVar[str] = ""
+    on_decisions: ClassVar[bool] = False
+    """Meaningful when each query returns only the decision (`access: decision`, one-hot outputs): it needs
+    no score margin (it samples, or reads only whether the goal is met). Others are refused there
+    (`spec.decision_refusal` says why)."""
 
     def __init__(
         self,
@@ -237,6 +242,15 @@ class Attack(abc.ABC):
         """Only the proposals of rows `keep` (A,) bool go on to `step` (a row whose budget
         cannot pay for its points stops): drop what `propose` kept for the others."""
 
+    def observe(self, rows: np.ndarray, ok: np.ndarray) -> None:
+        """Which queried candidates (A, 1 + P) of `rows` met the goal, told before `step` (a
+        decision-based attack steps on this indicator alone); nothing by default."""
+
+    def merit(self, f: np.ndarray, cand: np.ndarray, x0: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """What ranks points (A, M, dim) of rows with clean points x0 (A, dim) for the best point
+        (`Best`; successful points first, then lower merit): the objective f (A, M) by default."""
+        return f
+
     @abc.abstractmethod
     def step(self, k: int, cand: np.ndarray, f: np.ndarray, rows: np.ndarray, grad: np.ndarray | None) -> np.ndarray:
         """The next base points (A, dim) from the queried candidates (A, 1 + P, dim) (base
@@ -348,7 +362,9 @@ class Search:
                 out[moved], grad[moved] = self.oracle.gradient(
                     start[moved].reshape(-1, *self.shape), self.white_box_loss(moved), moved)
         _, _, f0, ok0 = self.values(start[:, None], out[:, None], self.everyone)
-        self.best = Best(start, out, f0[:, 0], self.already if self.box is None else ok0[:, 0])
+        ok0 = self.already[:, None] if self.box is None else ok0
+        f0 = self.attack.merit(f0, start[:, None], self.flat0, ok0)
+        self.best = Best(start, out, f0[:, 0], ok0[:, 0])
         self.known_x, self.known_out = start.copy(), out.copy()
         self.known_grad = None if grad is None else grad.reshape(self.n, self.dim).astype(np.float32)
 
@@ -417,11 +433,13 @@ class Search:
         the rows that succeeded (early stop) or stopped improving (patience); return f (A, 1 + P)."""
         attack, best = self.attack, self.best
         l1, l2, f, ok = self.values(cand, out, rows)
+        attack.observe(rows, ok)
+        rank = attack.merit(f, cand, self.flat0[rows], ok)
         has_ok = ok.any(axis=1)
-        pick = np.where(has_ok, np.where(ok, f, np.inf).argmin(axis=1), f.argmin(axis=1))
+        pick = np.where(has_ok, np.where(ok, rank, np.inf).argmin(axis=1), rank.argmin(axis=1))
         ar = np.arange(len(rows))
         before_f, before_ok = best.f[rows].copy(), best.ok[rows].copy()
-        best.offer(rows, cand[ar, pick], out[ar, pick], f[ar, pick], ok[ar, pick])
+        best.offer(rows, cand[ar, pick], out[ar, pick], rank[ar, pick], ok[ar, pick])
         if attack.patience is not None:  # give up on a step that has stopped improving
             improved = (best.f[rows] < before_f) | (best.ok[rows] & ~before_ok)
             self.stalled[rows] = np.where(improved, 0, self.stalled[rows] + 1)

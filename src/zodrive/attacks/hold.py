@@ -52,6 +52,7 @@ class VertexHold(Attack):
     reads = frozenset({"seed", "target", "tol"})  # (`tol`: a continuous target's tolerance)
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
+    on_decisions = True  # it reads only whether the victim took the target
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         """`adversary`: a picker's folder (`vertex-hold:DIR`), else vertices are drawn blind."""

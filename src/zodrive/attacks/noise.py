@@ -18,6 +18,7 @@ from zodrive.attacks.base import Attack, reads_all_but
 class UniformNoise(Attack):
     name = "uniform-noise"
     reference = "baseline (no paper): uniform noise in the threat model"
+    on_decisions = True  # what it feeds reads no output; its success is read from the decision
 
     reads = reads_all_but("steps", "n_directions", "mu", "step_size", "patience")
 

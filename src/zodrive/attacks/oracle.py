@@ -1,14 +1,34 @@
-"""The one place where queries to the victim are made, counted and budgeted."""
+"""The one place where queries to the victim are made, counted and budgeted, and what they return
+(`access`: the victim's outputs, or its decision alone)."""
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Literal
 
 import numpy as np
 import torch
 
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
+
+Access = Literal["score", "decision"]
+ACCESS = ("score", "decision")
+
+
+def decision_view(victim: Victim) -> Victim:
+    """A discrete `victim` as a decision-only attacker sees it: each query returns the one-hot vector of
+    the action taken (the argmax, ties to the first as `Victim.actions`), never the scores; no gradient
+    (`differentiable`) and no calibration copy (`calibrate`), the two other ways to its network."""
+    if victim.kind != "discrete":
+        raise ZodriveError("decision access applies to a discrete victim: a continuous victim's output is its action "
+                           "(the decision) already")
+    query = victim.query
+
+    def decide(batch: np.ndarray) -> np.ndarray:
+        out = np.asarray(query(batch))
+        return np.eye(out.shape[-1], dtype=np.float32)[out.argmax(axis=-1)]
+
+    return Victim(query=decide, kind="discrete", obs_shape=victim.obs_shape, reads=victim.reads, decisions_only=True)
 
 
 class QueryBudgetExhausted(Exception):
@@ -34,12 +54,22 @@ class QueryOracle:
     attack, sent to zodrive's own copy of the network, `Victim.calibrate`, never to a user's
     callable; counted apart, in `calibration_queries`); a row whose share of a call is smaller is sent on its own, as a one-row run
     would send it. That is what makes N episodes in lockstep equal N one-episode runs.
+
+    `access="decision"` (a discrete victim only): every query returns the one-hot vector of the action
+    taken, and the victim the oracle holds (`victim`) is that decision-only view (`decision_view`), so
+    neither a query, nor `gradient`, nor the victim attribute gives an attack the scores. The network's
+    calibration copy stays private to the oracle (batch sizes are measured on the scores, a stricter test
+    than on the decisions), and its outputs reach no attack.
     """
 
-    def __init__(self, victim: Victim, query_budget: int | None = None) -> None:
+    def __init__(self, victim: Victim, query_budget: int | None = None, access: Access = "score") -> None:
         if query_budget is not None and query_budget < 1:
             raise ZodriveError(f"query_budget must be >= 1, not {query_budget}")
-        self.victim = victim
+        if access not in ACCESS:
+            raise ZodriveError(f"access must be score or decision, not {access!r}")
+        self.access = access
+        self._calibrate = victim.calibrate
+        self.victim = decision_view(victim) if access == "decision" else victim
         self.query_budget = query_budget
         self.row_queries = np.zeros(1, dtype=np.int64)
         self.row_episode_queries = np.zeros(1, dtype=np.int64)
@@ -130,6 +160,8 @@ class QueryOracle:
         Counted as one query per row like any other. Only the labelled white-box baselines
         (FGSM, PGD) may call this; black-box attacks never do.
         """
+        if self.access == "decision":
+            raise ZodriveError("decision access gives no gradients (the attacker sees only the action taken)")
         if self.victim.differentiable is None:
             raise ZodriveError("this victim offers no gradients; white-box attacks need a torch network (an SB3 model or a torch module)")
         owners = self._owners(len(batch), owners)
@@ -155,10 +187,10 @@ class QueryOracle:
         go on their own and the rest together."""
         if len(owners) == 0 or owners.min() == owners.max():
             return [np.arange(len(owners))]
-        if self.stable_batch is None and self.victim.calibrate is None:
+        if self.stable_batch is None and self._calibrate is None:
             self.stable_batch = NEVER_MIX  # not our network: no calls of our own, each row alone
         if self.stable_batch is None:
-            self.stable_batch, self.calibration_queries = stable_batch(self.victim.calibrate, self.victim.obs_shape)
+            self.stable_batch, self.calibration_queries = stable_batch(self._calibrate, self.victim.obs_shape)
         share = np.bincount(owners)[owners]
         alone = share < self.stable_batch
         if not alone.any():

@@ -24,6 +24,9 @@ class RandomSearch(Attack):
     reads = reads_all_but("mu", "step_size")  # it moves between vertices: no finite differences, no step
     reference = "Andriushchenko et al., Square Attack, ECCV 2020"
     p_init: float = 0.3  # initial fraction of coordinates re-drawn per proposal
+    # on one-hot outputs its objective is a function of the decision alone (0 at the goal, 1 + kappa elsewhere;
+    # a fallback target adds a level) and it moves only to a point that lowers it: a decision-based search
+    on_decisions = True
 
     def queries_per_run(self, steps: int | None = None) -> int:
         return 2 + (steps or self.steps) * self.n_directions

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from zodrive.attacks.base import Attack
+from zodrive.attacks.boundary import HopSkipJump
 from zodrive.attacks.coordinate import CoordinateFD
 from zodrive.attacks.hold import VertexCheck, VertexHold
 from zodrive.attacks.nes import NES
@@ -20,14 +21,14 @@ from zodrive.errors import ZodriveError
 ATTACKS: dict[str, type[Attack]] = {
     cls.name: cls
     for cls in (ZOSignSGD, ZOSGD, NES, SPSA, RandomSearch, CoordinateFD, UniformNoise, FGSM, PGD, VertexHold,
-                VertexCheck)
+                VertexCheck, HopSkipJump)
 }
 
 
 PICKER_ATTACKS = ("vertex-hold", "vertex-check")  # the attacks that read a picker (`NAME:DIR`)
 KNOWN = (*(name for name in ATTACKS if name != VertexCheck.name), "learned:DIR",
          *(f"{name}:DIR" for name in PICKER_ATTACKS))
-"""Every attack name: the attacks above (nine searches and vertex hold; vertex check runs only with a
+"""Every attack name: the attacks above (ten searches, one of them decision-based (hsja), and vertex hold; vertex check runs only with a
 picker), the learned adversary (`learned`, read from a folder `zodrive attack-train` wrote;
 `zodrive.attacks.learned`), which has no place in the registry of attacks that run from nothing but their
 options, and vertex hold and vertex check with a picker (`vertex-hold:DIR`, `vertex-check:DIR`, fitted by

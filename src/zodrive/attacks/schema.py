@@ -81,6 +81,9 @@ class AttackOptions(Strict):
     max_change: Optional[float] = option(
         None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0, le=MAX_NUMBER,
         metavar="D")
+    access: Literal["score", "decision"] = option(
+        "score", "what each query returns to the attacker: score (the victim's outputs: Q-values, or a continuous "
+        "action) or decision (a discrete victim's action alone, one-hot; only decision-based attacks run on it)")
     query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1, le=MAX_QUERIES,
                                                 metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
@@ -133,12 +136,12 @@ class AttackOptions(Strict):
 REMOVED: dict[str, tuple[Any, str]] = {
     "on_failure": ("best", "results/on-failure/"),  # clean: 321.77 against best's 70.21 (DQN driver, eps 0.05)
     "timing": (None, "none committed"),  # the strategically timed attack (Lin et al., IJCAI 2017)
-    "access": ("score", "none committed"),  # decision: the attacker saw only the action taken (one-hot)
     "episode_query_budget": (None, "none committed"),  # a cap on an episode's queries
     "restarts": (0, "results/ceiling/ (per state only)"),  # further runs from random points of the budget set
 }
 """Options zodrive no longer has (issue 45: no committed result put them on the front of queries per step
-against damage): each one's value that is the behaviour left, and where its measurement lives. A record
+against damage): each one's value that is the behaviour left, and where its measurement lives (`access`,
+removed in c645e5d, is an option again since issue 65: decision-only access and a decision-based attack). A record
 written while the option existed (an `eval_key.json`, a config) that holds it at that value is the same
 attack today; one that holds another value describes an attack zodrive can no longer run."""
 

@@ -123,6 +123,8 @@ class AttackSpec(AttackOptions):
         if cls is None:
             return  # an unknown attack: building it says so
         refuse_unread(cls, self.model_dump())
+        if self.access == "decision" and not cls.on_decisions:
+            raise ZodriveError(decision_refusal(cls))
         if not cls.queries_clean and target_reads_clean(self.target):
             raise ZodriveError(needs_fixed_target(cls.name))
         if "loss" not in cls.reads and target_has_fallback(self.target):
@@ -162,6 +164,9 @@ class AttackSpec(AttackOptions):
         if self.mode == "budgeted" and self.norm == "linf" and self.eps >= width:
             log.warning("eps=%g covers the whole observation box (its narrowest side is %g wide): the budget "
                         "constrains nothing, only the box clips the perturbation", self.eps, width)
+        if self.access == "decision" and victim.kind != "discrete":
+            raise ZodriveError("access decision changes nothing for a continuous victim (its output is its action, the "
+                               "decision, already): drop --access decision")
         attack = self._make(threat, load_network)
         if victim.decisions_only and isinstance(attack, GradientEstimateAttack):
             log.warning("the policy answers with its decision alone (one-hot), so %s, which follows differences of "
@@ -174,7 +179,27 @@ class AttackSpec(AttackOptions):
         attack.check_objective(objective)
         if not attack.black_box and victim.differentiable is None:
             raise ZodriveError(f"{self.attack} is a white-box baseline: it needs a victim with gradients (an SB3 model or a torch module, in memory or from FILE.py:NAME), not one that only answers queries")
-        return attack, objective, QueryOracle(victim, self.query_budget)
+        return attack, objective, QueryOracle(victim, self.query_budget, self.access)
+
+
+def decision_attacks() -> list[str]:
+    """The registered attacks that run on decisions (`Attack.on_decisions`)."""
+    return [name for name, cls in ATTACKS.items() if cls.on_decisions]
+
+
+def decision_refusal(cls: type[Attack]) -> str:
+    """Why attack `cls` does not run with `access: decision` (queries return only the action taken), in one line."""
+    if cls.name == LEARNED:
+        why = "the learned adversary makes no query at attack time, so access changes nothing"
+    elif not cls.black_box:
+        why = "it reads the network's gradient, which a decision-only attacker never sees"
+    elif issubclass(cls, GradientEstimateAttack):
+        why = ("it follows finite differences of a loss over the outputs, which over one-hot decisions are zero except "
+               "where a probe crosses a decision boundary")
+    else:
+        why = "it reads the victim's scores"
+    return (f"attack {cls.name} does not run with access decision ({why}); decision-based attacks: "
+            f"{', '.join(decision_attacks())}")
 
 
 def _known(spec: AttackOptions) -> None:
