@@ -1,3 +1,5 @@
+"""`python -m zodrive`: the `zodrive` command line (`zodrive.cli.main`), with its exit status."""
+
 import sys
 
 from zodrive.cli import main

@@ -214,6 +214,7 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
     if obs.shape[1:] != where.obs_shape:
         raise ZodriveError(f"observations of shape {obs.shape[1:]} per row; {where.name} gives {where.obs_shape}")
     spec = _spec(attack, where, {"seed": seed, **options})
+    assert spec is not None  # an attack is named
     attacker, objective, oracle = build_attacker(spec, resolved.victim(preset), preset)
     attacker.reseed([seed * 1_000_003 + row for row in range(len(obs))])
     result, _ = attack_observations(obs, attacker, objective, oracle)
@@ -237,4 +238,5 @@ class AttackWrapper(_AttackWrapper):
             raise ZodriveError(f"AttackWrapper wraps a gymnasium environment, not a {type(env).__name__}")
         where = scenario_of_env(env)
         spec = _spec(attack, where, options)
+        assert spec is not None  # an attack is named
         super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where))

@@ -8,7 +8,7 @@ both use it; inside SB3's vectorized envs each copy attacks its own environment.
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import gymnasium as gym
 import numpy as np
@@ -18,7 +18,7 @@ from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.spec import AttackSpec
 from zodrive.attacks.victim import Victim
-from zodrive.defense import keeps_state, make_defense
+from zodrive.defense import EpisodeFilter, keeps_state, make_defense
 from zodrive.defense.wrappers import FilterWrapper, defended_victim
 from zodrive.drivers import baselines as bl
 from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape
@@ -73,7 +73,8 @@ class Attacker:
         if any(seed is None for seed in env_seeds):
             self.attack.begin_episode()
         else:
-            self.attack.reseed([episode_seed(self.attack.seed, int(seed)) for seed in env_seeds])
+            seeds = cast("Sequence[int]", env_seeds)  # none is None here
+            self.attack.reseed([episode_seed(self.attack.seed, int(seed)) for seed in seeds])
         self.oracle.begin_step(rows=len(env_seeds))
         self.oracle.begin_episode()
 
@@ -118,7 +119,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self._episode_applicable += int(not result.already[0])
         return result.x_adv[0]
 
-    def reset(self, **kwargs: Any):  # type: ignore[override]
+    def reset(self, **kwargs: Any):
         """Reset; a seeded reset also restarts the attack's random stream from that seed, so an
         episode's perturbations depend only on (attack seed, episode seed)."""
         self.attacker.start([kwargs.get("seed")])
@@ -126,7 +127,7 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         obs, info = super().reset(**kwargs)
         return obs, self._info(info)
 
-    def step(self, action: Any):  # type: ignore[override]
+    def step(self, action: Any):
         """Step; the observation an episode ends on is passed on clean and not attacked: no one
         acts on it, so querying the victim about it would spend queries no step is charged."""
         obs, reward, terminated, truncated, info = self.env.step(action)
@@ -187,7 +188,7 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
         victim = load_policy(policy, preset, defense, trust=trust)
         return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
     victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
-    filt = make_defense(defense, preset)
+    filt = cast(EpisodeFilter, make_defense(defense, preset))  # it keeps state: an EpisodeFilter
     env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
     return victim, FilterWrapper(env, filt)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import difflib
 import reprlib
-from typing import Any
+from typing import Any, Mapping
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -34,7 +34,8 @@ def one_line(error: ValidationError, context: str, fields: set[str], prefix: str
     text = first["msg"].removeprefix("Value error, ")
     for words, sign in (("Input should be greater than or equal to", "must be >="),
                         ("Input should be greater than", "must be >"),
-                        ("Input should be less than or equal to", "must be <="), ("Input should be less than", "must be <")):
+                        ("Input should be less than or equal to", "must be <="),
+                        ("Input should be less than", "must be <")):
         text = text.replace(words, sign)
     if first["type"] == "finite_number":
         return f"{context}: {where} must be a finite number, not {value!r}"
@@ -60,7 +61,7 @@ _REPR = reprlib.Repr()
 _REPR.maxstring, _REPR.maxother, _REPR.maxlevel = 80, 80, 3
 
 
-def _expected(error: dict[str, Any]) -> str:
+def _expected(error: Mapping[str, Any]) -> str:
     kind = error["type"]
     if kind == "bool_type":
         return "true or false"

@@ -17,8 +17,8 @@ get it wrong:
 
 An attack only says how to start (`init`), what to query around the base point
 (`propose`) and where to go next (`step`); a decision-based one (`attacks.boundary`) also reads
-which candidates met the goal (`observe`) and ranks successful points itself (`merit`). The objective is the paper's Eq. 8:
-L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
+which candidates met the goal (`observe`) and ranks successful points itself (`merit`). The
+objective is the paper's Eq. 8: L1 (from `objectives`) + l2_weight * ||x - x0||^2. White-box baselines (`black_box =
 False`) get the exact gradient of L1 at the base point instead of probes. Two attacks are no
 search and bring their own `perturb` (`search = False`): the learned adversary
 (`attacks.learned`) and vertex hold (`attacks.hold`).
@@ -296,8 +296,8 @@ class Search:
         self.flat0 = np.asarray(x0, dtype=np.float32).reshape(self.n, self.dim)
         self.integer = np.issubdtype(np.asarray(x0).dtype, np.integer)
         if self.integer and attack.max_change is not None:
-            raise ZodriveError("max_change on integer observations (pixels) is not supported: rounding a point toward the "
-                               "clean one may leave the max_change box")
+            raise ZodriveError("max_change on integer observations (pixels) is not supported: rounding a point "
+                               "toward the clean one may leave the max_change box")
         oracle.begin_step(rows=self.n)
         self.box = attack.smooth_box(self.flat0.reshape(self.n, *self.shape))
         self.around = attack.threat.around(self.flat0, self.shape, integer=self.integer)
@@ -322,7 +322,8 @@ class Search:
             inside = np.where(snap, cand, inside)
         return inside
 
-    def values(self, cand: np.ndarray, out: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    def values(self, cand: np.ndarray, out: np.ndarray,
+               rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
         """L1, L2 (None when not needed), f = L1 + l2_weight * L2 and success of points (A, M, dim)."""
         out_t, clean_t = torch.from_numpy(out), torch.from_numpy(self.clean[rows])
         l1 = self.objective.loss(out_t, clean_t).numpy().astype(np.float64)
@@ -358,6 +359,7 @@ class Search:
             if moved.size and self.attack.black_box:
                 out[moved] = self.oracle(start[moved].reshape(-1, *self.shape), moved)
             elif moved.size:
+                assert self.grad0 is not None  # white-box: `query_clean` took the gradient
                 grad = self.grad0.copy()
                 out[moved], grad[moved] = self.oracle.gradient(
                     start[moved].reshape(-1, *self.shape), self.white_box_loss(moved), moved)
@@ -417,6 +419,7 @@ class Search:
             if self.attack.black_box and owners.size:
                 out[need] = self.oracle(cand[need].reshape(-1, *self.shape), owners)
             elif not self.attack.black_box:
+                assert self.known_grad is not None  # white-box: `fallback` kept the gradient
                 grad = self.known_grad[rows].copy()
                 ask = need[:, 0]
                 if ask.any():
@@ -445,6 +448,7 @@ class Search:
             self.stalled[rows] = np.where(improved, 0, self.stalled[rows] + 1)
             self.active[rows[self.stalled[rows] >= attack.patience]] = False
         if self.trace:
+            assert l2 is not None  # `values` computes L2 for a trace
             rec = {"l1": np.full(self.n, np.nan), "l2": np.full(self.n, np.nan)}
             rec["l1"][rows], rec["l2"][rows] = l1[:, 0], l2[:, 0]
             self.records.append(rec)

@@ -80,14 +80,17 @@ class VertexHold(Attack):
         """Pick fresh vertices with `picker`, fitted for `goal` (`objective_target`); also used while one is fitted."""
         self.picker, self.picker_goal, self._checked = picker, goal, None
 
-    def check_objective(self, objective: Objective) -> None:
+    # an instance method over the base's classmethod: the base's check needs only the class, this
+    # one also reads the picker an instance holds (every caller has the instance)
+    def check_objective(self, objective: Objective) -> None:  # type: ignore[override]
         """Also, with a picker: the goal and the frozen features it was fitted for (`AttackSpec.build`
         calls this with the victim's objective and the real threat model; `AttackSpec.check` knows neither)."""
         super().check_objective(objective)
         if self.picker is None or objective is self._checked:  # `perturb` checks every step: once is enough
             return
         if self.picker_frozen is not None and self.picker_frozen != sorted(self.threat.frozen):
-            raise ZodriveError(f"the picker was fitted with {self.picker_frozen} frozen, not {sorted(self.threat.frozen)}")
+            raise ZodriveError(f"the picker was fitted with {self.picker_frozen} frozen, "
+                               f"not {sorted(self.threat.frozen)}")
         if objective_target(objective) != self.picker_goal:
             raise ZodriveError(f"the picker ranks vertices for {self.picker_goal}, not "
                                f"{objective_target(objective)}: fit one for this target")
@@ -125,6 +128,7 @@ class VertexHold(Attack):
         stale = np.isnan(held).any(axis=1)
         rating = np.full(n, -np.inf)  # the picker's rating of each held vertex at this step
         if self._rates_held():
+            assert self.picker is not None  # only a picker rates
             for r in np.flatnonzero(~stale):  # one call per row: lockstep = one-row runs
                 rating[r] = self.picker.scores(self._project(x0[r:r + 1], delta[r:r + 1]))[0]
             stale |= rating < self.picker.switch  # a held vertex rated below `switch` here may be replaced
@@ -161,10 +165,12 @@ class VertexHold(Attack):
 
     def _query(self, fed: np.ndarray, rows: np.ndarray, oracle: QueryOracle, objective: Objective
                ) -> tuple[np.ndarray, np.ndarray]:
-        """The victim's outputs on `fed`, one counted query charged to each of `rows`, and whether it took the target."""
+        """The victim's outputs on `fed`, one counted query charged to each of `rows`, and whether it took
+        the target."""
         answered = np.asarray(oracle(fed, rows), dtype=np.float32)
         out_t = torch.from_numpy(answered)
-        return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()  # targeted: the clean output is not read
+        # targeted: the clean output is not read
+        return answered, objective.success(out_t[:, None], out_t)[:, 0].numpy()
 
     def _result(self, x0: np.ndarray, fed: np.ndarray, success: np.ndarray, out: np.ndarray,
                 oracle: QueryOracle) -> AttackResult:
@@ -189,6 +195,7 @@ class VertexHold(Attack):
     def _rated(self, flat0: np.ndarray, rows: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """`candidates` random vertices (rows, k, dim) for each of `rows` and the picker's ratings (rows, k)
         of them at the row's observation (one picker call per row)."""
+        assert self.picker is not None  # called with a picker only (`fresh`)
         eps = np.float32(self.threat.eps)
         mask = self.threat.mask(shape).reshape(-1)
         signs = np.array([-eps, eps], dtype=np.float32)
@@ -236,6 +243,7 @@ class VertexCheck(VertexHold):
         self._bank: np.ndarray | None = None  # per row: queries earned (one per step) and not yet spent
 
     def queries_per_run(self, steps: int | None = None) -> int:
+        assert self.picker is not None  # vertex check always has one (`__init__`)
         return 1 if self.check_below is None else 1 + self.picker.candidates
 
     def _rates_held(self) -> bool:

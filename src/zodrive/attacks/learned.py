@@ -13,15 +13,15 @@ At attack time the adversary's deterministic action (its Gaussian mean, clipped 
 rebuilt by the safe loader: nothing in the folder is unpickled) is computed row by row, so N
 episodes in lockstep get bit for bit what N one-episode runs get. It keeps no state.
 
-Queries per environment step: 0. It has no per-step goal (it maximizes the victim's loss over the episode), so no per-step
-success is reported: judge it by the return.
+Queries per environment step: 0. It has no per-step goal (it maximizes the victim's loss over the
+episode), so no per-step success is reported: judge it by the return.
 """
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 import torch
@@ -86,7 +86,8 @@ def read_meta(folder: str | Path) -> dict[str, Any]:
     return meta
 
 
-def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str, preset: dict[str, Any]) -> None:
+def check_fitted_against(meta: dict[str, Any], what: str, verb: str, *, model_file: str,
+                         preset: dict[str, Any]) -> None:
     """Refuse a trained folder (its description `meta`) made against another model file (by SHA-256) or
     preset: one line, "`what` against ..., not ...: `verb` one against this model"."""
     from zodrive.runinfo import sha256
@@ -122,7 +123,7 @@ class LearnedAdversary(Attack):
     name = NAME
     search = False
     no_search = "the adversary was trained to lower the victim's return; it has no per-step objective or search"
-    reads: frozenset[str] = frozenset()
+    reads: ClassVar[frozenset[str]] = frozenset()
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None,

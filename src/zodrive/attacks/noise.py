@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from zodrive.attacks.base import Attack, reads_all_but
+from zodrive.attacks.threat import ThreatModel
 
 
 class UniformNoise(Attack):
@@ -22,7 +23,7 @@ class UniformNoise(Attack):
 
     reads = reads_all_but("steps", "n_directions", "mu", "step_size", "patience")
 
-    def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, threat: ThreatModel, **kwargs: Any) -> None:
         super().__init__(threat, **kwargs)
         self.steps = 1  # one draw, queried once
 

@@ -283,9 +283,9 @@ def make_objective(
                 raise ZodriveError(f"target {given!r}: a discrete victim's target is an action, not:ACTION, or "
                                    "ACTION,not:ACTION (the action, else at least not the other; e.g. "
                                    "FASTER,not:SLOWER)")
-            avoid = _action_index(fallback[len(AVOID):], names, n_actions, given)
-        elif isinstance(target, str) and target.lower().startswith(AVOID):
-            return DiscreteAvoid(weight=weight, avoid=_action_index(target[len(AVOID):], names, n_actions, given),
+            avoid = _action_index(fallback[len(AVOID):], names, n_actions, str(given))  # given: the str split above
+        elif isinstance(target, str) and target.lower().startswith(AVOID):  # unsplit: `target` is `given`
+            return DiscreteAvoid(weight=weight, avoid=_action_index(target[len(AVOID):], names, n_actions, target),
                                  kappa=kappa)
         index = _action_index(target, names, n_actions)  # type: ignore[arg-type]
         if avoid == index:

@@ -52,8 +52,8 @@ class QueryOracle:
     measures, once, from which batch size the victim's outputs stop depending on it
     (`stable_batch`, on random inputs that are not observations and whose outputs reach no
     attack, sent to zodrive's own copy of the network, `Victim.calibrate`, never to a user's
-    callable; counted apart, in `calibration_queries`); a row whose share of a call is smaller is sent on its own, as a one-row run
-    would send it. That is what makes N episodes in lockstep equal N one-episode runs.
+    callable; counted apart, in `calibration_queries`); a row whose share of a call is smaller is
+    sent on its own, as a one-row run would send it. That is what makes N episodes in lockstep equal N one-episode runs.
 
     `access="decision"` (a discrete victim only): every query returns the one-hot vector of the action
     taken, and the victim the oracle holds (`victim`) is that decision-only view (`decision_view`), so
@@ -163,7 +163,8 @@ class QueryOracle:
         if self.access == "decision":
             raise ZodriveError("decision access gives no gradients (the attacker sees only the action taken)")
         if self.victim.differentiable is None:
-            raise ZodriveError("this victim offers no gradients; white-box attacks need a torch network (an SB3 model or a torch module)")
+            raise ZodriveError("this victim offers no gradients; white-box attacks need a torch network "
+                               "(an SB3 model or a torch module)")
         owners = self._owners(len(batch), owners)
         self._charge(owners)
         x = torch.tensor(np.asarray(batch, dtype=np.float32), requires_grad=True)
@@ -175,6 +176,7 @@ class QueryOracle:
             out = torch.cat([self.victim.differentiable(x[torch.from_numpy(part)]) for part in calls])[order]
         loss(out).sum().backward()
         self._count(len(batch))
+        assert x.grad is not None  # the outputs are computed from x
         return out.detach().numpy(), x.grad.numpy()
 
     def _count(self, n: int) -> None:
@@ -190,6 +192,7 @@ class QueryOracle:
         if self.stable_batch is None and self._calibrate is None:
             self.stable_batch = NEVER_MIX  # not our network: no calls of our own, each row alone
         if self.stable_batch is None:
+            assert self._calibrate is not None  # without it, NEVER_MIX was set just above
             self.stable_batch, self.calibration_queries = stable_batch(self._calibrate, self.victim.obs_shape)
         share = np.bincount(owners)[owners]
         alone = share < self.stable_batch

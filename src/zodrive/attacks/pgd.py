@@ -22,6 +22,7 @@ import numpy as np
 from zodrive.attacks.base import Attack, AttackResult, reads_all_but
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
+from zodrive.attacks.threat import ThreatModel
 
 
 class PGD(Attack):
@@ -64,7 +65,7 @@ class FGSM(PGD):
     reads = reads_all_but("steps", "n_directions", "mu", "step_size", "patience")
     reference = "Goodfellow et al., ICLR 2015 (white-box)"
 
-    def __init__(self, threat, **kwargs: Any) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, threat: ThreatModel, **kwargs: Any) -> None:
         super().__init__(threat, **kwargs)
         self.steps = 2  # gradient at x0, then evaluate x0 - eps * sign(grad)
 

@@ -42,7 +42,7 @@ def network(inputs: int, width: int) -> torch.nn.Sequential:
 class Picker:
     """Ranks fed observations by the fitted probability that the victim takes the target."""
 
-    def __init__(self, net: torch.nn.Module, candidates: int, switch: float) -> None:
+    def __init__(self, net: torch.nn.Sequential, candidates: int, switch: float) -> None:
         self.net, self.candidates, self.switch = net.eval(), int(candidates), float(switch)
 
     def scores(self, fed: np.ndarray) -> np.ndarray:
@@ -63,12 +63,14 @@ class Picker:
         try:
             state = torch.load(Path(folder) / WEIGHTS_FILE, map_location="cpu", weights_only=True)
         except Exception as exc:  # a truncated or foreign file; weights_only refuses anything but tensors
-            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} is not a picker's weights ({type(exc).__name__})") from None
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} is not a picker's weights "
+                               f"({type(exc).__name__})") from None
         net = network(int(np.prod(meta["obs_shape"])), int(meta["width"]))
         try:
             net.load_state_dict(state)
         except (RuntimeError, TypeError, AttributeError):
-            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} does not fit the network {META_FILE} describes") from None
+            raise ZodriveError(f"{Path(folder) / WEIGHTS_FILE} does not fit the network "
+                               f"{META_FILE} describes") from None
         return cls(net, meta["candidates"], meta["switch"]), meta
 
 
@@ -94,7 +96,8 @@ def _number(value: Any) -> bool:
 def _well_typed(meta: dict[str, Any]) -> bool:
     """Every field a picker's description gives has the type and range zodrive writes."""
     target = meta["target"]
-    return (isinstance(meta["victim"], str) and isinstance(meta["victim_sha256"], str) and isinstance(meta["preset"], dict)
+    return (isinstance(meta["victim"], str) and isinstance(meta["victim_sha256"], str)
+            and isinstance(meta["preset"], dict)
             and _number(meta["eps"]) and meta["eps"] > 0 and meta["norm"] == "linf"
             and isinstance(meta["frozen"], list) and all(isinstance(f, str) for f in meta["frozen"])
             and (_count(target, 10_000) or target == 0 or (isinstance(target, list) and all(_number(v) for v in target))

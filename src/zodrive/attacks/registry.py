@@ -28,11 +28,11 @@ ATTACKS: dict[str, type[Attack]] = {
 PICKER_ATTACKS = ("vertex-hold", "vertex-check")  # the attacks that read a picker (`NAME:DIR`)
 KNOWN = (*(name for name in ATTACKS if name != VertexCheck.name), "learned:DIR",
          *(f"{name}:DIR" for name in PICKER_ATTACKS))
-"""Every attack name: the attacks above (ten searches, one of them decision-based (hsja), and vertex hold; vertex check runs only with a
-picker), the learned adversary (`learned`, read from a folder `zodrive attack-train` wrote;
-`zodrive.attacks.learned`), which has no place in the registry of attacks that run from nothing but their
-options, and vertex hold and vertex check with a picker (`vertex-hold:DIR`, `vertex-check:DIR`, fitted by
-`zodrive picker-train`; `zodrive.attacks.picker`)."""
+"""Every attack name: the attacks above (ten searches, one of them decision-based (hsja), and vertex
+hold; vertex check runs only with a picker), the learned adversary (`learned`, read from a folder
+`zodrive attack-train` wrote; `zodrive.attacks.learned`), which has no place in the registry of
+attacks that run from nothing but their options, and vertex hold and vertex check with a picker
+(`vertex-hold:DIR`, `vertex-check:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:

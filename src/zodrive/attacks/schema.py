@@ -37,8 +37,10 @@ def option(default: Any, description: str, *, flag: str | None = None, off: str 
     command line shows it: `flag` when it is not `--NAME` (`--attack` sets `attack` and, as
     `NAME:DIR`, `adversary`); `off` the help of a boolean's `--no-NAME`; `clear` the help of a
     `--no-NAME` that sets an optional option back to none; `metavar` the value's name in --help."""
-    cli = {k: v for k, v in (("flag", flag), ("off", off), ("clear", clear), ("metavar", metavar)) if v is not None}
-    return Field(default, description=description, json_schema_extra=cli or None, **bounds)
+    cli: dict[str, Any] = {k: v for k, v in (("flag", flag), ("off", off), ("clear", clear), ("metavar", metavar))
+                           if v is not None}
+    limits: dict[str, Any] = bounds
+    return Field(default, description=description, json_schema_extra=cli or None, **limits)
 
 
 class AttackOptions(Strict):
@@ -79,13 +81,13 @@ class AttackOptions(Strict):
     warm_start: StrictBool = option(False, "start each step's search from the previous step's perturbation",
                                     off="start each step's search at the clean observation")
     max_change: Optional[float] = option(
-        None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps", gt=0, le=MAX_NUMBER,
-        metavar="D")
+        None, "defense-aware attacker: the perturbation changes by at most this (L-inf) between steps",
+        gt=0, le=MAX_NUMBER, metavar="D")
     access: Literal["score", "decision"] = option(
         "score", "what each query returns to the attacker: score (the victim's outputs: Q-values, or a continuous "
         "action) or decision (a discrete victim's action alone, one-hot; only decision-based attacks run on it)")
-    query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap", ge=1, le=MAX_QUERIES,
-                                                metavar="N")
+    query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap",
+                                                ge=1, le=MAX_QUERIES, metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
     adversary: Optional[str] = option(
         None, "the trained folder of learned / vertex-hold / vertex-check (on the command line: --attack NAME:DIR)",

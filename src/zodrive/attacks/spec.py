@@ -101,7 +101,7 @@ class AttackSpec(AttackOptions):
         if frozen == DEFAULT_FROZEN and "presence" not in features:
             frozen = ()
         low, high = (float(b) if np.ndim(b) == 0 else tuple(map(float, np.ravel(b))) for b in bounds)
-        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,  # type: ignore[arg-type]
+        return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,
                            features=features, low=low, high=high, feature_axis=feature_axis)
 
     def _make(self, threat: ThreatModel, load_network: Any = None) -> Attack:
@@ -112,7 +112,7 @@ class AttackSpec(AttackOptions):
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
         self._check_unread()
-        self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=())))  # type: ignore[arg-type]
+        self._check_budgets(self._make(ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=())))
 
     def _check_unread(self) -> None:
         """An option the attack never reads is an error (`Attack.reads`), and so is a goal defined by the
@@ -178,7 +178,9 @@ class AttackSpec(AttackOptions):
         objective = self.objective(victim.kind, n_actions, action_names, action_bounds)
         attack.check_objective(objective)
         if not attack.black_box and victim.differentiable is None:
-            raise ZodriveError(f"{self.attack} is a white-box baseline: it needs a victim with gradients (an SB3 model or a torch module, in memory or from FILE.py:NAME), not one that only answers queries")
+            raise ZodriveError(f"{self.attack} is a white-box baseline: it needs a victim with gradients "
+                               "(an SB3 model or a torch module, in memory or from FILE.py:NAME), "
+                               "not one that only answers queries")
         return attack, objective, QueryOracle(victim, self.query_budget, self.access)
 
 
@@ -231,7 +233,7 @@ def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
             data = deep_merge(data, parse_override(text))
         return AttackSpec.from_mapping(data, f"attack {name!r}")
     if name in ATTACKS and name not in available("attacks"):
-        data: dict[str, Any] = {"attack": name}
+        data = {"attack": name}
         for text in overrides or []:
             from zodrive.config import deep_merge, parse_override
 

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Literal, Sequence
 
 import numpy as np
 
 from zodrive.errors import ZodriveError
+
+if TYPE_CHECKING:
+    import torch
 
 Norm = Literal["linf", "l2"]
 Mode = Literal["budgeted", "paper"]
@@ -23,9 +26,9 @@ class ThreatModel:
     observation box [low, high] (the values a real sensor can produce: the preset's
     normalization range, the observation space's box per dimension, or unbounded; `low` and
     `high` are numbers or, per dimension, the flattened box), the features are named along
-    `feature_axis` (the last for Kinematics, the first for OccupancyGrid), masked features (by default `presence`) are never
-    changed, and a clean coordinate is never moved by the box: a clean value outside it
-    stays reachable. Where a guarantee cannot hold (a frozen feature the observation does
+    `feature_axis` (the last for Kinematics, the first for OccupancyGrid), masked features (by
+    default `presence`) are never changed, and a clean coordinate is never moved by the box: a
+    clean value outside it stays reachable. Where a guarantee cannot hold (a frozen feature the observation does
     not have), `mask` raises instead of skipping it.
     """
 
@@ -72,7 +75,7 @@ class ThreatModel:
                     f"{len(self.features)} features {', '.join(self.features)} along axis {axis}"
                 )
             for name in self.frozen:
-                index = [slice(None)] * len(key)
+                index: list[Any] = [slice(None)] * len(key)
                 index[axis] = self.features.index(name)
                 mask[tuple(index)] = 0.0
             self._mask_cache[key] = mask
@@ -144,7 +147,8 @@ def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.abs(flat).max(axis=1), np.linalg.norm(flat, axis=1)
 
 
-def worst_in_ball(objective, x0, eps: float, steps: int, mask, low: float, high: float):  # type: ignore[no-untyped-def]
+def worst_in_ball(objective: Callable[[torch.Tensor], torch.Tensor], x0: torch.Tensor, eps: float, steps: int,
+                  mask: torch.Tensor | float, low: float, high: float) -> torch.Tensor:
     """WHITE-BOX, for robust training: the point of the L-inf eps-ball around the torch batch
     `x0` where `objective(x)` (per row, summed) is highest, by PGD (Madry et al., ICLR 2018):
     a random start, then `steps` signed-gradient steps of 2.5 eps / steps. The same threat

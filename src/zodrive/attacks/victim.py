@@ -12,6 +12,9 @@ from typing import Any, Callable, Literal
 
 import numpy as np
 
+ActionKind = Literal["discrete", "continuous"]
+"""A policy's actions: scores per discrete action (the argmax is taken), or the continuous action."""
+
 QueryFn = Callable[[np.ndarray], np.ndarray]
 """Observation batch (B, *obs_shape) -> outputs (B, k): Q-values or actions."""
 
@@ -25,7 +28,7 @@ class Victim:
     """
 
     query: QueryFn
-    kind: Literal["discrete", "continuous"]
+    kind: ActionKind
     obs_shape: tuple[int, ...]
     differentiable: Callable[[Any], Any] | None = None
     """White-box access (torch forward with gradients); only the FGSM/PGD baselines use it."""

@@ -162,6 +162,7 @@ def add_attack_flags(parser: argparse.ArgumentParser) -> None:
         if _is_bool(kind):
             on = not f.flag.startswith("--no-")
             text = info.description if on else extra["off"]
+            assert text is not None  # every option has a description (`option`)
             group.add_argument(f.flag, dest=f.dest, action="store_true" if on else "store_false", default=None,
                                help=text + (" (default)" if default == on else ""))
         elif f.clears:
@@ -171,11 +172,13 @@ def add_attack_flags(parser: argparse.ArgumentParser) -> None:
             group.add_argument(f.flag, dest=f.dest, choices=typing.get_args(kind), default=None,
                                help=f"{info.description} {_default_text(f.field, default)}")
         elif typing.get_origin(kind) is tuple and typing.get_args(kind) == (str, Ellipsis):
-            group.add_argument(f.flag, dest=f.dest, type=_names, default=None, metavar=f"{extra.get('metavar', 'NAME')},...",
+            group.add_argument(f.flag, dest=f.dest, type=_names, default=None,
+                               metavar=f"{extra.get('metavar', 'NAME')},...",
                                help=f"{info.description} {_default_text(f.field, default)}")
         else:
             group.add_argument(f.flag, dest=f.dest, type=option_type(f.field), default=None,
-                               metavar=extra.get("metavar"), help=f"{info.description} {_default_text(f.field, default)}")
+                               metavar=extra.get("metavar"),
+                               help=f"{info.description} {_default_text(f.field, default)}")
 
 
 def attack_spec_from_args(args: argparse.Namespace) -> Any:

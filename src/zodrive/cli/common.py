@@ -12,7 +12,7 @@ import argparse
 import math
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NoReturn
 
 from zodrive.defense import parse_defense
 from zodrive.errors import ZodriveError
@@ -40,7 +40,7 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", Help)
         super().__init__(*args, **kwargs)
 
-    def error(self, message: str) -> None:  # one line, exit 2, like every other error
+    def error(self, message: str) -> NoReturn:  # one line, exit 2, like every other error
         command = self.prog.partition(" ")[2]  # "zodrive evaluate" -> "evaluate"; main adds "zodrive: error:"
         raise ZodriveError(f"{command}: {message}" if command else message)
 

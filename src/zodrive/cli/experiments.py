@@ -27,7 +27,8 @@ def add_parsers(sub: Any) -> None:
     rep.add_argument("--episodes", type=episode_count, help="episodes per cell (default: 100)")
     workers_flag(rep, default=2)
     envs_flag(rep)
-    rep.add_argument("--quick", action="store_true", help="5 episodes per cell (a smoke run, minutes); not with --episodes")
+    rep.add_argument("--quick", action="store_true",
+                     help="5 episodes per cell (a smoke run, minutes); not with --episodes")
     rep.add_argument("--retrain", action="store_true", help="train all four models anew instead of the shipped ones")
     rep.add_argument("--robustness-episodes", type=nonnegative_int, default=10,
                      help="episodes per cell of the robustness section (0: leave it out)")
@@ -37,7 +38,8 @@ def add_parsers(sub: Any) -> None:
     cmp_ = sub.add_parser("compare", help="table of attacks x eps x models (each cell an evaluation)")
     cmp_.add_argument("models", nargs="+", help="SB3 zips, model folders or baseline:NAME")
     cmp_.add_argument("--attacks", nargs="+", default=None,
-                      help="default: every registered attack that takes the --attack-set options (the others are named)")
+                      help="default: every registered attack that takes the --attack-set options "
+                           "(the others are named)")
     cmp_.add_argument("--eps", nargs="+", type=option_type("eps"), default=[0.2], help="budget radii, one cell each")
     cmp_.add_argument("--query-budgets", nargs="+", type=option_type("query_budget"), default=None,
                       help="per-step query budgets, one cell each (default: no cap)")

@@ -74,8 +74,9 @@ def add_parsers(sub: Any) -> None:
                      help="L-inf radius the agent is trained to withstand (not with distill --kappa 0: plain cloning)")
     rob.add_argument("--steps", type=positive_int, required=True, help="training timesteps to add")
     rob.add_argument("--out", type=Path, required=True, help="run folder")
-    rob.add_argument("--kappa", type=nonnegative_float, help="sa, distill: weight of the robustness term "
-                                                             "(SA regularizer; distill: the adversarial CE) (default: 0.5)")
+    rob.add_argument("--kappa", type=nonnegative_float,
+                     help="sa, distill: weight of the robustness term "
+                          "(SA regularizer; distill: the adversarial CE) (default: 0.5)")
     rob.add_argument("--pgd-steps", type=positive_int, help="sa, distill: PGD steps for the inner max (default: 5)")
     rob.add_argument("--seed", type=seed_number, default=1, help="training seed")
     rob.add_argument("--warmup", type=nonnegative_int, help="sa, at: steps acting before updates start (default: 1000)")
@@ -85,14 +86,14 @@ def add_parsers(sub: Any) -> None:
     trust_flag(rob)
     rob.add_argument("--epochs", type=positive_int, help="distill: passes over the collected states (default: 20)")
     rob.add_argument("--teacher", metavar="baseline:NAME",
-                     help="distill: an observation-reading baseline that drives and labels (default: the model itself); "
-                          "with --dagger also the simulator-reading baseline:idm-mobil (a DDPG/TD3 actor's teacher) or "
-                          "baseline:planner (a DQN's)")
+                     help="distill: an observation-reading baseline that drives and labels "
+                          "(default: the model itself); with --dagger also the simulator-reading "
+                          "baseline:idm-mobil (a DDPG/TD3 actor's teacher) or baseline:planner (a DQN's)")
     rob.add_argument("--dagger", type=nonnegative_int, metavar="ROUNDS",
-                     help="distill: behaviour cloning with DAgger (Ross et al. 2011): after the teacher's --steps states, "
-                          "ROUNDS rounds of --steps states the student drives into (a DDPG/TD3 student: with the "
-                          "teacher's action with probability 0.5 ** round), labelled by the teacher; "
-                          "--epochs per refit")
+                     help="distill: behaviour cloning with DAgger (Ross et al. 2011): "
+                          "after the teacher's --steps states, ROUNDS rounds of --steps states the student "
+                          "drives into (a DDPG/TD3 student: with the teacher's action with probability "
+                          "0.5 ** round), labelled by the teacher; --epochs per refit")
     progress_flag(rob)
 
     atk = sub.add_parser("attack-train", help="train a learned optimal adversary (SA-RL, Zhang et al. ICLR 2021) "
@@ -153,7 +154,8 @@ def add_parsers(sub: Any) -> None:
     scenario_flags(pick, trust=False)
     pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
-    sel = sub.add_parser("select", help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
+    sel = sub.add_parser("select",
+                         help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
     sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
     sel.add_argument("--episodes", type=episode_count, default=20, help="tuning episodes per checkpoint")
     sel.add_argument("--from-step", type=nonnegative_int, default=0, help="ignore checkpoints before this step")

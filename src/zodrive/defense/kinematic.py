@@ -108,7 +108,7 @@ class KinematicFilter:
         batch = np.asarray(batch, dtype=np.float32)
         if self.state is None:
             return batch.copy()
-        pred = self._pred
+        pred: np.ndarray = self._pred  # type: ignore[assignment]  # set with the state: not None here
         match = tracks.match(batch, pred, self.tol.gate)
         out = batch.copy()
         # the ego row always matches the ego track

@@ -97,11 +97,15 @@ class Smoothing:
 
         where = scenario(preset)
         if where.kind != "discrete":
-            raise ZodriveError("randomized smoothing votes on an action: it defends discrete policies, not continuous ones")
+            raise ZodriveError("randomized smoothing votes on an action: it defends discrete policies, "
+                               "not continuous ones")
         self.sigma, self.votes = float(sigma), int(votes)
         low, high = where.bounds
-        self.low = np.asarray(low, dtype=np.float32).reshape(-1) if not np.isscalar(low) else np.float32(low)
-        self.high = np.asarray(high, dtype=np.float32).reshape(-1) if not np.isscalar(high) else np.float32(high)
+        # numpy's isscalar guard also admits str and bytes; the bounds are numbers
+        self.low = (np.asarray(low, dtype=np.float32).reshape(-1) if not np.isscalar(low)
+                    else np.float32(low))  # type: ignore[arg-type]
+        self.high = (np.asarray(high, dtype=np.float32).reshape(-1) if not np.isscalar(high)
+                     else np.float32(high))  # type: ignore[arg-type]
         mask = np.ones(where.obs_shape, dtype=np.float32)
         if "presence" in where.features:
             index: list[Any] = [slice(None)] * len(where.obs_shape)
@@ -161,7 +165,8 @@ class Smoothing:
                 flat = x.reshape(-1, *self.obs_shape)
                 cloud = self.noise(flat.detach().cpu().numpy())
                 offset = x.new_tensor(cloud) - flat.detach()[:, None]  # the copies, as offsets from x
-                mean = net((flat[:, None] + offset).reshape(-1, *self.obs_shape)).reshape(len(flat), self.votes, -1).mean(1)
+                mean = (net((flat[:, None] + offset).reshape(-1, *self.obs_shape))
+                        .reshape(len(flat), self.votes, -1).mean(1))
                 value = mean.new_tensor(query(flat.detach().cpu().numpy()))
                 return (mean + (value - mean).detach()).reshape(*x.shape[: x.ndim - len(self.obs_shape)], -1)
 

@@ -39,7 +39,7 @@ class FilterWrapper(gym.ObservationWrapper):
         self.filt = filt
         self._fresh = True
 
-    def reset(self, **kwargs: Any):  # type: ignore[override]
+    def reset(self, **kwargs: Any):
         self._fresh = True
         self.filt.state = None  # an attack on the first observation must not see the last episode
         return super().reset(**kwargs)

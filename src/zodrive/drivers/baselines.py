@@ -25,7 +25,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 import torch
 
-from zodrive.attacks.victim import Victim
+from zodrive.attacks.victim import ActionKind, Victim
 from zodrive.envs.presets import ACTION_NAMES, CONTINUOUS_NAMES, scenario
 from zodrive.errors import ZodriveError
 
@@ -149,6 +149,7 @@ def check_baseline_fits(baseline: Baseline, preset: dict[str, Any]) -> None:
 def constant_victim(baseline: Baseline, obs_shape: tuple[int, ...], n_actions: int,
                     action_names: tuple[str, ...] = ACTION_NAMES) -> Victim:
     """A victim that outputs the same thing for every observation (one-hot scores or the action)."""
+    kind: ActionKind
     if isinstance(baseline.action, str):
         index = action_names.index(baseline.action)
         out, kind = np.eye(n_actions, dtype=np.float32)[index], "discrete"
@@ -185,7 +186,7 @@ class IdmMobilDriver:
     is the same with or without it.
     """
 
-    def __init__(self, env, kind: str, target_speed: float = IDM_TARGET_SPEED, *, replan: bool = False):
+    def __init__(self, env, kind: ActionKind, target_speed: float = IDM_TARGET_SPEED, *, replan: bool = False):
         self.env, self.kind, self.target_speed, self.replan = env, kind, target_speed, replan
         self._ego = None
         self._target_lane = self._origin_lane = None
@@ -274,7 +275,7 @@ def mobil_gain(vehicle, lane_index) -> float:
         new_rear_pred_a - new_rear_a + old_rear_pred_a - old_rear_a))
 
 
-def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind: str, *,
+def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind: ActionKind, *,
                      replan: bool = False) -> Callable[[], Any]:
     """The simulator-reading `baseline` bound to `env` (called for the action at its current state)."""
     if baseline.name == "planner":
@@ -285,7 +286,7 @@ def simulator_driver(baseline: Baseline, env: Any, preset: dict[str, Any], kind:
     return IdmMobilDriver(env, kind, replan=replan)
 
 
-def driver_victim(driver: Callable[[], Any], kind: str, obs_shape: tuple[int, ...], n_actions: int) -> Victim:
+def driver_victim(driver: Callable[[], Any], kind: ActionKind, obs_shape: tuple[int, ...], n_actions: int) -> Victim:
     """A simulator-reading driver as a `Victim` (its outputs do not depend on the observation)."""
 
     def query(obs: np.ndarray) -> np.ndarray:

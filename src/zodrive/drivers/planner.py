@@ -45,7 +45,8 @@ class LookAheadPlanner:
     for the action at the environment's current state. Deterministic: highway-env's vehicles
     behave deterministically once placed, so a rollout is the future under that action."""
 
-    def __init__(self, env: Any, preset: dict[str, Any], horizon_s: float = HORIZON_S, *, straight: bool = True) -> None:
+    def __init__(self, env: Any, preset: dict[str, Any], horizon_s: float = HORIZON_S, *,
+                 straight: bool = True) -> None:
         """`straight`: the paper's straight highway, where the rules follow each first action and the
         copies are pruned; otherwise IDLE follows on the whole road."""
         self.env = env

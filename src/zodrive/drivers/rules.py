@@ -288,7 +288,7 @@ class ContinuousRules:
             follow = A_MAX * (1 - (v / FREE_SPEED) ** 4 - (desired / gap) ** 2)
             acc = np.where(has, np.minimum(acc, follow), acc)
 
-        def normalized(value: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
+        def normalized(value: np.ndarray, bounds: tuple[float, ...]) -> np.ndarray:  # (low, high)
             low, high = bounds
             return np.clip(2 * (value - low) / (high - low) - 1, -1, 1)
 

@@ -48,6 +48,8 @@ def _feature(vehicle: Vehicle, name: str, observe_intentions: bool) -> float:
 class FastKinematicObservation(KinematicObservation):
     """Drop-in replacement for highway-env's `Kinematics` observation type."""
 
+    features_range: dict[str, list[float]] | None  # set by the base class; filled in by `_normalize`
+
     def _rows(self, vehicles: list, origin: Vehicle | None, intentions: bool) -> np.ndarray:
         rows = np.array(
             [[_feature(v, f, intentions) for f in self.features] for v in vehicles],

@@ -28,7 +28,7 @@ class FastObservationMixin:
     """Build spaces as highway-env does, then swap a `FastKinematics` observer in."""
 
     def define_spaces(self) -> None:
-        env: AbstractEnv = self  # type: ignore[assignment]
+        env: AbstractEnv = self
         obs_config = env.config["observation"]
         if obs_config.get("type") != FAST_TYPE:
             super().define_spaces()  # type: ignore[misc]

@@ -15,7 +15,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +23,9 @@ import numpy as np
 from zodrive.config import available, check_keys, config_root, load_config, read_text
 from zodrive.envs.traffic import KeepTraffic, restore_defaults
 from zodrive.errors import ZodriveError, cause
+
+ActionKind = Literal["discrete", "continuous"]
+"""The same type as `zodrive.attacks.victim.ActionKind` (a room on this floor: not imported)."""
 
 ENV_ID = "zodrive/highway-v0"
 ACTION_NAMES = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-v0's DiscreteMetaAction
@@ -39,7 +42,7 @@ class Scenario:
     """What a preset's environment is, as attacks, victims and reports see it."""
 
     name: str
-    kind: str                          # discrete | continuous
+    kind: ActionKind                   # discrete | continuous
     obs_shape: tuple[int, ...]
     features: tuple[str, ...]          # names along `feature_axis` of the observation (() if unnamed)
     bounds: tuple[Any, Any]            # range of a clean observation value: two numbers, or per dimension
@@ -96,10 +99,11 @@ def register() -> None:
             gym.register(id=env_id, entry_point=f"zodrive.envs.highway:{cls}")
 
 
-def _env_class(env_id: str) -> type | None:
+def _env_class(env_id: str) -> type[Any] | None:
     register()
     try:
-        creator = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)
+        # a callable entry point fails here as an unknown id does: no class to read defaults from
+        creator = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)  # type: ignore[arg-type]
     except Exception:  # noqa: BLE001 - an id gymnasium does not know is reported by make_env
         return None
     return creator if isinstance(creator, type) else None
@@ -132,7 +136,8 @@ def gym_preset(env_id: str, overrides: list[str] | None = None, obs_bounds: tupl
         import difflib
 
         close = difflib.get_close_matches(env_id, list(gym.registry), n=1)
-        raise ZodriveError(f"unknown gymnasium environment {env_id!r}" + (f"; did you mean {close[0]!r}?" if close else ""))
+        raise ZodriveError(f"unknown gymnasium environment {env_id!r}"
+                           + (f"; did you mean {close[0]!r}?" if close else ""))
     config: dict[str, Any] = {"env_id": env_id, "max_episode_steps": gym.spec(env_id).max_episode_steps}
     config["highway" if is_highway(env_id) else "env_kwargs"] = {}
     if obs_bounds is not None:
@@ -246,7 +251,8 @@ def validate_preset(config: dict[str, Any], name: str) -> None:
         raise ZodriveError(f"preset {name!r}: env_id must be a gymnasium id")
     steps = config.get("max_episode_steps")
     if steps is not None and (not isinstance(steps, int) or isinstance(steps, bool) or steps < 1):
-        raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer (or null: the env's own end)")
+        raise ZodriveError(f"preset {name!r}: max_episode_steps must be a positive integer "
+                           "(or null: the env's own end)")
     bounds = config.get("obs_bounds")
     if bounds is not None and not (isinstance(bounds, list) and len(bounds) == 2
                                    and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)
@@ -300,12 +306,12 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
     space, actions = env.observation_space, env.action_space
     if not isinstance(space, gym.spaces.Box):
         raise ZodriveError(f"{name}: zodrive attacks Box observations, not {type(space).__name__}")
-    core = env.unwrapped
+    core: Any = env.unwrapped  # highway-env's AbstractEnv where `road` (untyped)
     road = hasattr(core, "road") and hasattr(core, "observation_type")
     features: tuple[str, ...] = ()
     bounds: tuple[Any, Any] = (float("-inf"), float("inf"))
     axis = -1
-    observer = getattr(core, "observation_type", None)
+    observer: Any = getattr(core, "observation_type", None)
     kinematic = road and hasattr(observer, "features") and hasattr(observer, "normalize")
     if kinematic:
         env.reset(seed=0)  # highway-env fills in its default feature ranges at the first observation
@@ -322,6 +328,7 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
             bounds = (tuple(map(float, space.low.ravel())), tuple(map(float, space.high.ravel())))
     if config.get("obs_bounds") is not None:
         bounds = _within_declared(name, (float(config["obs_bounds"][0]), float(config["obs_bounds"][1])), space)
+    kind: ActionKind
     if isinstance(actions, gym.spaces.Discrete):
         kind, n = "discrete", int(actions.n)
         names = tuple(core.action_type.actions[i] for i in range(n)) if road and hasattr(
@@ -330,7 +337,7 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
         high_a: tuple[float, ...] = ()
     elif isinstance(actions, gym.spaces.Box) and len(actions.shape) == 1:
         kind, n = "continuous", int(actions.shape[0])
-        action_type = getattr(core, "action_type", None)
+        action_type: Any = getattr(core, "action_type", None)
         if road and hasattr(action_type, "longitudinal"):
             names = tuple(d for d, on in zip(CONTINUOUS_NAMES, (action_type.longitudinal, action_type.lateral)) if on)
         else:
@@ -340,7 +347,8 @@ def _read_scenario(config: dict[str, Any], env: gym.Env) -> Scenario:
         raise ZodriveError(f"{name}: zodrive attacks policies with Discrete or 1-D Box actions, not {actions}")
     observed: dict[str, Any] = {}
     if kinematic:
-        observed = {"feature_ranges": {k: (float(v[0]), float(v[1])) for k, v in (observer.features_range or {}).items()},
+        observed = {"feature_ranges": {k: (float(v[0]), float(v[1]))
+                                       for k, v in (observer.features_range or {}).items()},
                     "relative": not observer.absolute, "normalized": bool(observer.normalize),
                     "lanes": core.config.get("lanes_count") or _lanes_at_start(core),
                     "policy_frequency": float(core.config["policy_frequency"])}
@@ -371,7 +379,7 @@ def _max_return(config: dict[str, Any], core: Any) -> float | None:
     return float(min(steps, config["max_episode_steps"]) if config.get("max_episode_steps") else steps)
 
 
-def action_kind(config: dict[str, Any]) -> str:
+def action_kind(config: dict[str, Any]) -> ActionKind:
     """`discrete` or `continuous`, from the preset's environment."""
     hw = config.get("highway")
     if isinstance(hw, dict) and hw.get("action", {}).get("type"):  # no environment needed

@@ -25,7 +25,8 @@ RANGES: dict[str, dict[str, float]] = {  # keys highway-env accepts nonsense for
 }
 OBSERVATION_FIELDS: dict[str, Any] = {
     "type": (Optional[str], None), "vehicles_count": (StrictInt, Field(None, ge=1)),
-    "features": (list[str], Field(None, min_length=1)), "features_range": (Optional[dict[str, list[Finite]]], None), "absolute": (StrictBool, None),
+    "features": (list[str], Field(None, min_length=1)), "features_range": (Optional[dict[str, list[Finite]]], None),
+    "absolute": (StrictBool, None),
     "normalize": (StrictBool, None), "clip": (StrictBool, None), "see_behind": (StrictBool, None),
     "observe_intentions": (StrictBool, None), "order": (Literal["sorted", "shuffled"], None),
     "flatten": (StrictBool, None), "include_obstacles": (StrictBool, None),
@@ -58,7 +59,7 @@ def _highway_model(defaults: dict[str, Any]) -> type[BaseModel]:
     fields: dict[str, Any] = {}
     for key, default in defaults.items():
         kind = _field_type(key, default)
-        rules = RANGES.get(key, {})
+        rules: dict[str, Any] = RANGES.get(key, {})
         fields[key] = (Optional[kind] if default is None or kind is Any else kind, Field(None, **rules))
     fields["observation"] = (dict, None)
     return create_model("HighwayConfig", __config__=ConfigDict(extra="forbid", strict=True), **fields)
@@ -130,9 +131,9 @@ def _check_observer_keys(observation: dict[str, Any], default: dict[str, Any], c
     same = kind == default.get("type", "Kinematics") or {kind, default.get("type", "Kinematics")} <= kinematics
     ignored = sorted(k for k in observation if k != "type" and k not in reads and not (same and k in default))
     if ignored:
-        raise ZodriveError(f"{context}: highway.observation.{ignored[0]} is not an option of {kind}, which would ignore "
-                           f"it (it reads {', '.join(sorted(reads))}); to change the observation type, give the whole "
-                           "mapping in a preset file")
+        raise ZodriveError(f"{context}: highway.observation.{ignored[0]} is not an option of {kind}, "
+                           f"which would ignore it (it reads {', '.join(sorted(reads))}); to change the "
+                           "observation type, give the whole mapping in a preset file")
 
 
 def _check_range(value: Any, where: str, context: str, strict: bool) -> None:

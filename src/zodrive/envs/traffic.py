@@ -26,7 +26,7 @@ SHARED = ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN")
 _MISSING = object()
 
 
-def _family(cls: type) -> list[type]:
+def _family(cls: type[Any]) -> list[type[Any]]:
     return [cls, *(sub for child in cls.__subclasses__() for sub in _family(child))]
 
 

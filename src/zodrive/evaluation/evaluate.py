@@ -238,13 +238,16 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int, envs: int = 1,
                     break
                 except queue.Empty:
                     for future in futures:
-                        if future.done() and future.exception() is not None:
-                            raise future.exception()
+                        if future.done():
+                            error = future.exception()
+                            if error is not None:
+                                raise error
 
 
-def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any], defense: str | None) -> None:
-    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s or `vertex-check:DIR`'s picker) fitted against
-    another model file, preset or defense: one line saying which."""
+def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any],
+                         defense: str | None) -> None:
+    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s or `vertex-check:DIR`'s
+    picker) fitted against another model file, preset or defense: one line saying which."""
     if attack is not None and attack.get("attack") == "learned":
         from zodrive.attacks.learned import check_adversary
 
@@ -324,9 +327,9 @@ def _claim(job: EvalJob, episodes: int, out: Path, force: bool) -> dict[int, dic
             held = max(held, summary["episodes"] if isinstance(summary["episodes"], int) else 0)
         if held > episodes:
             if not force:
-                raise ZodriveError(f"{out} already holds {plural(held, 'episode')} of this evaluation and zodrive never "
-                                   f"drops recorded episodes: ask for at least {held}, choose another --out, or use "
-                                   "--force to replace them")
+                raise ZodriveError(f"{out} already holds {plural(held, 'episode')} of this evaluation and "
+                                   f"zodrive never drops recorded episodes: ask for at least {held}, choose another "
+                                   "--out, or use --force to replace them")
             return _fresh(job, out)
         _rewrite_consistent(out, done)
         return done
@@ -351,7 +354,7 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     todo = [i for i in range(episodes) if i not in done]
     if done:
         log.info("resuming: %d of %d episodes already on disk", len(done), episodes)
-    bar = None  # drawn with the first step or episode: a refusal while building comes first, alone
+    bar: Any = None  # drawn with the first step or episode: a refusal while building comes first, alone
     started = time.time()
     stepped = [0, 0.0]  # environment steps so far, when the bar last showed them
 
@@ -366,8 +369,9 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     def tick(n: int) -> None:  # a long episode moves the bar's step count, not only its end
         stepped[0] += n
         if open_bar() is not None and time.time() - stepped[1] >= 0.5:
-            bar.set_postfix_str(f"steps={stepped[0]}" + (f", mean_return={np.mean([r['return'] for r in done.values()]):.1f}"
-                                                          if done else ""))
+            bar.set_postfix_str(f"steps={stepped[0]}"
+                                + (f", mean_return={np.mean([r['return'] for r in done.values()]):.1f}"
+                                   if done else ""))
             stepped[1] = time.time()
 
     for record, steps in run_episodes(job, todo, workers, envs, tick=tick if progress else None):
@@ -415,8 +419,9 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     if on_disk == wanted:
         return
     if isinstance(on_disk.get("attack"), dict) and removed_settings(on_disk["attack"]):
-        raise ZodriveError(f"{out} holds an evaluation made with {removed_message(removed_settings(on_disk['attack']))}; "
-                           "use --force to replace it, or choose another --out")
+        raise ZodriveError(f"{out} holds an evaluation made with "
+                           f"{removed_message(removed_settings(on_disk['attack']))}; use --force to replace it, "
+                           "or choose another --out")
     differs = [k for k in sorted(set(on_disk) | set(wanted)) if on_disk.get(k) != wanted.get(k)]
     what = {"model": "the model (its file's SHA-256 or baseline)", "preset": "the preset",
             "attack": "the attack settings or the attack engine's version", "seed": "the first seed",
@@ -424,7 +429,8 @@ def check_same_evaluation(on_disk: dict[str, Any], wanted: dict[str, Any], out: 
     names = [what.get(k, k) for k in differs]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
     raise ZodriveError(f"{out} holds a different evaluation ({listed} "
-                       f"{'differs' if len(names) == 1 else 'differ'}); use --force to replace it, or choose another --out")
+                       f"{'differs' if len(names) == 1 else 'differ'}); use --force to replace it, "
+                       "or choose another --out")
 
 
 def _rewrite_consistent(out: Path, done: dict[int, dict[str, Any]]) -> None:
@@ -512,7 +518,8 @@ def summarize(
                                                                    [r["applicable"] for r in records])),
             # an attack that never asks about the clean observation knows no base rate: its success is
             # the share of all attacked steps on which the victim took the target
-            target_base_rate=None if learned or blind else 1.0 - applicable / steps_total if steps_total else float("nan"),
+            target_base_rate=(None if learned or blind
+                              else 1.0 - applicable / steps_total if steps_total else float("nan")),
             queries_per_step=sum(r["queries"] for r in records) / max(steps_total, 1),
             # every row the victim received: the attack's queries and the policy's own decisions
             # (one a step); the harness sends it none (it calibrates on its own copy of a network)

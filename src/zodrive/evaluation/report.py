@@ -10,8 +10,9 @@ def format_summary(summary: dict[str, Any]) -> str:
     """A few lines a person reads: return with CI, collisions, and the attack's numbers."""
     low, high = summary["ci95"]
     lines = [
-        f"episodes: {summary['episodes']} " + (f"(seed {summary['seed']})" if summary['episodes'] == 1 else
-                                               f"(seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})"),
+        f"episodes: {summary['episodes']} "
+        + (f"(seed {summary['seed']})" if summary['episodes'] == 1
+           else f"(seeds {summary['seed']}..{summary['seed'] + summary['episodes'] - 1})"),
         f"mean return: {summary['mean_return']:.2f}  "
         + (f"95% CI [{low:.2f}, {high:.2f}]  " if summary["episodes"] > 1 else "(no CI from one episode)  ")
         + (f"({summary['pct_of_max']:.2f}% of max)" if summary.get("pct_of_max") is not None else ""),
@@ -20,7 +21,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(
             f"collision rate: {summary['collision_rate']:.2%}  ended off-road: {summary.get('offroad_rate', 0):.2%}  "
             f"on road: {or_dash(summary.get('on_road_share'), '{:.1%}')} of steps  "
-            f"mean length: {summary['mean_length']:.1f}  mean speed: {summary['mean_speed']:.1f} m/s  lane changes/episode: "
+            f"mean length: {summary['mean_length']:.1f}  mean speed: {summary['mean_speed']:.1f} m/s  "
+            "lane changes/episode: "
             f"{or_dash(summary.get('lane_changes_per_episode'), '{:.2f}')}  path: "
             f"{or_dash(summary.get('mean_path_length'), '{:.0f}')} m  right lane: {summary['right_lane_share']:.1%}")
     else:  # not a highway-env road: no driving metrics
@@ -35,7 +37,8 @@ def format_summary(summary: dict[str, Any]) -> str:
                                                               else "") + ", budgeted" if summary.get("eps") is not None
                else "unconstrained: paper mode, no budget")
             + (f", adversary {(summary.get('attack_config') or {}).get('adversary')})" if summary["attack"] == "learned"
-               else f", target={summary['target']}" + _picker(summary) + ")") + _options(summary.get("attack_config") or {})
+               else f", target={summary['target']}" + _picker(summary) + ")")
+            + _options(summary.get("attack_config") or {})
         )
         if summary["attack_success_rate"] is None:  # a learned adversary: no per-step goal
             lines.append(f"attack success: n/a (the adversary lowers the return over the episode, no per-step "

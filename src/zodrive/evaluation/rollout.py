@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -87,7 +87,9 @@ class Episode:
     def __init__(self, env: gym.Env, policy: Victim, *, episode: int, seed: int, max_return: float | None) -> None:
         self.env, self.episode, self.seed, self.max_return = env, episode, seed, max_return
         self.road = hasattr(env.unwrapped, "vehicle") and hasattr(env.unwrapped, "road")
-        ego = env.unwrapped.vehicle if self.road else None  # read for the driving metrics only; the policy sees `obs`
+        core: Any = env.unwrapped  # on a road: a highway-env AbstractEnv (untyped)
+        ego: Any = core.vehicle if self.road else None  # read for the driving metrics only; the policy sees `obs`
+        self.lane: int | None
         self.start_x, self.lane = (float(ego.position[0]), ego.lane_index[2]) if self.road else (0.0, None)
         self.position = np.array(ego.position, dtype=float) if self.road else None
         self.path, self.on_road = 0.0, 0
@@ -111,7 +113,7 @@ class Episode:
             self.applicable += not attack["already"]
             self.max_linf = max(self.max_linf, attack["linf"])
 
-    def stepped(self, reward: float, terminated: bool, info: dict[str, Any]) -> None:
+    def stepped(self, reward: SupportsFloat, terminated: bool, info: dict[str, Any]) -> None:
         self.total += float(reward)
         self.length += 1
         self.speeds.append(float(info.get("speed", np.nan)))
@@ -119,7 +121,8 @@ class Episode:
         self.crashed = bool(info.get("crashed", False))
         self.terminated = terminated
         if self.road:
-            ego = self.env.unwrapped.vehicle
+            core: Any = self.env.unwrapped
+            ego = core.vehicle
             self.lane_changes += ego.lane_index[2] != self.lane
             self.lane = ego.lane_index[2]
             position = np.array(ego.position, dtype=float)
@@ -129,13 +132,14 @@ class Episode:
 
     def record(self, attacked: bool) -> EpisodeRecord:
         road, env = self.road, self.env
+        core: Any = env.unwrapped
         return EpisodeRecord(
             episode=self.episode, seed=self.seed, return_=self.total,
             pct_of_max=100.0 * self.total / self.max_return if self.max_return else float("nan"),
             length=self.length, crashed=self.crashed, offroad=left_road(env, self.terminated, self.crashed),
             mean_speed=float(np.nanmean(self.speeds)) if road and self.speeds else float("nan"),
             right_lane_share=self.right / max(self.length, 1), lane_changes=int(self.lane_changes),
-            distance=float(env.unwrapped.vehicle.position[0]) - self.start_x if road else 0.0, queries=self.queries,
+            distance=float(core.vehicle.position[0]) - self.start_x if road else 0.0, queries=self.queries,
             path_length=self.path if road else None,
             on_road_share=self.on_road / max(self.length, 1) if road else None,
             attacked_steps=self.length if attacked else 0, successes=int(self.successes),
@@ -173,6 +177,7 @@ def run_episode(
         action = act(policy, obs, space)
         tracker.acted(action, pending)
         if pending is not None and on_step is not None:
+            assert wrapper is not None  # `pending` is the attack wrapper's
             on_step({"episode": episode, "step": tracker.length, "action": _plain(action), **pending,
                      "wall_time": wrapper.last_wall_time})
         obs, reward, terminated, truncated, info = env.step(action)

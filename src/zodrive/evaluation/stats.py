@@ -9,7 +9,7 @@ import numpy as np
 from scipy import stats
 
 
-def mean_ci(values: Sequence[float], *, confidence: float = 0.95, seed: int = 0) -> tuple[float, float]:
+def mean_ci(values: Sequence[float] | np.ndarray, *, confidence: float = 0.95, seed: int = 0) -> tuple[float, float]:
     """Bootstrap (BCa, 10,000 resamples, fixed seed) CI of the mean; degenerate -> [m, m]."""
     data = np.asarray(values, dtype=np.float64)
     if data.size == 0:
@@ -69,7 +69,8 @@ def paired_difference_ci(a: Sequence[float], b: Sequence[float], *, seed: int = 
     return float(diff.mean()), low, high
 
 
-def iqm_over_seeds(returns: Sequence[Sequence[float]], *, reps: int = 10_000, seed: int = 0) -> tuple[float, float, float] | None:
+def iqm_over_seeds(returns: Sequence[Sequence[float]], *, reps: int = 10_000,
+                   seed: int = 0) -> tuple[float, float, float] | None:
     """Interquartile mean over training seeds x evaluation episodes with a stratified
     bootstrap 95 % CI (rliable: Agarwal et al., "Deep RL at the Edge of the Statistical
     Precipice", NeurIPS 2021): runs are the seeds, tasks the evaluation episodes (every

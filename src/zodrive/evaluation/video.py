@@ -146,7 +146,7 @@ def panel_extent(frame: Frame) -> tuple[tuple[float, float], float]:
     return (min(-30.0, min(xs) - 5.0), max(90.0, max(xs) + 5.0)), max(14.0, max(ys) + 3.0)
 
 
-def _car(x: float, y: float, **style):
+def _car(x: float, y: float, /, **style: Any) -> Any:
     from matplotlib.patches import Rectangle
 
     return Rectangle((x - 2.5, y - 1.0), 5.0, 2.0, **style)  # a 5 m x 2 m car

@@ -161,7 +161,8 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         raise ZodriveError(f"{resolved.ref} does not read the observation: a defense between its sensor and it "
                            "changes nothing (bench it without --defense)")
     attacks = [*black_box_of(proto, defense), proto.white_box]
-    capped = {attack: [proto.query_budget] for attack in black_box_of(proto, defense)} if proto.query_budget else None
+    capped: dict[str, list[int | None]] | None = (
+        {attack: [proto.query_budget] for attack in black_box_of(proto, defense)} if proto.query_budget else None)
     defenses = [defense]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
@@ -279,7 +280,8 @@ def _attacked(out: Path, eps: float, worst: dict[str, Any], pgd: dict[str, Any] 
             "pgd_collision_rate": pgd["collision_rate"] if pgd else None}
 
 
-def _inside(attacked: list[dict[str, Any]], clean: dict[str, Any], grid: tuple[float, ...]) -> dict[float, dict[str, Any]]:
+def _inside(attacked: list[dict[str, Any]], clean: dict[str, Any],
+            grid: tuple[float, ...]) -> dict[float, dict[str, Any]]:
     """ε of `grid` -> the cell with the lowest mean return inside the ε-ball, from `attacked` and
     clean (compare's `strongest`, for the one policy of a bench folder)."""
     (curve,) = strongest([clean, *attacked]).values()
@@ -529,7 +531,8 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
     if split:
         lines += [(f"Clean columns and Δ: {n_clean} episodes; \"Clean, first {n}\", the attacked columns, area and ε "
                    f"past brake: the first {n} (`clean_on_attacked_episodes`)."), ""]
-    lines += ["| " + ("# | " if ranked else "") + "Policy | Defense | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
+    lines += ["| " + ("# | " if ranked else "")
+              + "Policy | Defense | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
               "Collisions | Speed (m/s) | " + (f"Clean, first {n} | " if split else "")
               + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
               + f" | PGD ε {eps[-1]:g} | Area | ε past brake | Queries to crash (median) |",

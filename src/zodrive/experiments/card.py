@@ -35,9 +35,11 @@ def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
 def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
-            f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, mean speed {summary['mean_speed']:.1f} m/s, "
+            f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, "
+            f"mean speed {summary['mean_speed']:.1f} m/s, "
             + (f"{summary['lane_changes_per_episode']:.1f} lane changes per episode, "
-               f"{summary['mean_distance']:.0f} m travelled, " if summary.get("lane_changes_per_episode") is not None else "")
+               f"{summary['mean_distance']:.0f} m travelled, "
+               if summary.get("lane_changes_per_episode") is not None else "")
             + f"right lane {summary['right_lane_share']:.0%}, {summary['episodes']} episodes, seeds "
             f"{summary['seed']}..{summary['seed'] + summary['episodes'] - 1}")
 
@@ -48,7 +50,8 @@ def seed_table(folders: list[Path]) -> list[str]:
 
     rows = []
     for folder in folders:
-        train, summary = _load(folder / "train.json", ("seed",)), _load(folder / "eval" / "summary.json", ("mean_return",))
+        train, summary = (_load(folder / "train.json", ("seed",)),
+                          _load(folder / "eval" / "summary.json", ("mean_return",)))
         rows.append((train["seed"], folder, summary))
     lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
              "|---|---|---|---|---|---|---|"]
@@ -174,7 +177,8 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     if summary.get("action_share"):
         from zodrive.envs import ACTION_NAMES
 
-        lines.append("Action shares: " + ", ".join(f"{n} {s:.1%}" for n, s in zip(ACTION_NAMES, summary["action_share"])) + ".")
+        lines.append("Action shares: "
+                     + ", ".join(f"{n} {s:.1%}" for n, s in zip(ACTION_NAMES, summary["action_share"])) + ".")
     if attacked:
         lines += ["", "Under attack (the same evaluation seeds, from the first; each line gives its episodes):", ""] \
             + _attacked_lines(attacked)

@@ -45,6 +45,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     from zodrive.defense import make_defense
 
     budgets = query_budgets or [None]
+    eps: float | None  # the cells' radii; None: the clean cell
     budgets_of = {attack: (attack_budgets or {}).get(attack) or budgets for attack in attacks}
     defenses = defenses or [None]
     for attack in attacks:  # every attack is checked (and every budget against it) before any cell runs
@@ -68,7 +69,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             if defense is not None:
                 make_defense(defense, model_preset)  # the preset must be one the defense understands
             for attack in ["none", *usable]:
-                points = [(None, None)] if attack == "none" else [(e, b) for e in eps_values for b in budgets_of[attack]]
+                points: list[tuple[float | None, int | None]] = ([(None, None)] if attack == "none"
+                          else [(e, b) for e in eps_values for b in budgets_of[attack]])
                 for eps, budget in points:
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
@@ -76,7 +78,8 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
                                   defense=defense, trust=trust, scenario_source=source)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
-                                 "attack": _label(attack, spec and spec.attack), "eps": eps, "query_budget": budget})
+                                 "attack": _label(attack, spec.attack if spec else None), "eps": eps,
+                                 "query_budget": budget})
                     cells.append(Cell(job, episodes, folder, force=force))
     if claim:  # `zodrive compare` owns its folder; `reproduce` composes several grids in one
         _claim(out, grid, force)
@@ -170,14 +173,16 @@ def _label(attack: str, runs: str | None = None) -> str:
 
 def markdown(rows: list[dict[str, Any]]) -> str:
     budgets = any(r.get("query_budget") is not None for r in rows)
-    lines = ["| Model | Attack | ε (L∞) | " + ("Budget/step | " if budgets else "") + "Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
+    lines = ["| Model | Attack | ε (L∞) | " + ("Budget/step | " if budgets else "")
+             + "Return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep "
              "| Success (base rate) | Queries/step | max L∞ |",
              "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if budgets else "")]
     for r in rows:
         success = "–" if r["attack_success_rate"] is None else \
             f"{r['attack_success_rate']:.1%} ({or_dash(r['target_base_rate'], '{:.1%}')})"
         budget = f"{or_dash(r.get('query_budget'), '{:d}')} | " if budgets else ""
-        lines.append(f"| {_system(r)} | {r['attack']} | {'–' if r['eps'] is None else number_name(r['eps'])} | {budget}{r['mean_return']:.1f} "
+        lines.append(f"| {_system(r)} | {r['attack']} | {'–' if r['eps'] is None else number_name(r['eps'])} | "
+                     f"{budget}{r['mean_return']:.1f} "
                      f"({r['ci95_low']:.1f}–{r['ci95_high']:.1f}) | {r['collision_rate']:.0%} | "
                      f"{or_dash(r.get('offroad_rate'), '{:.0%}')} | {or_dash(r.get('mean_speed'), '{:.1f}')} | "
                      f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
@@ -249,7 +254,8 @@ def robustness_markdown(rows: list[dict[str, Any]]) -> str:
         values = [f"{clean['mean_return']:.1f} (ignores its input)" if _ignores_input(clean)
                   else f"{cells[e]['mean_return']:.1f} ({_source(cells[e], e)}, {cells[e]['mean_speed']:.1f} m/s)"
                   if e in cells else "–" for e in eps_values]
-        lines.append(f"| {system} | {clean['mean_return']:.1f} ({clean['mean_speed']:.1f} m/s) | " + " | ".join(values) + " |")
+        lines.append(f"| {system} | {clean['mean_return']:.1f} ({clean['mean_speed']:.1f} m/s) | "
+                     + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 
 

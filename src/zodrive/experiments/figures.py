@@ -70,5 +70,6 @@ def plot_training_rewards(monitor_csv: Path, path: Path, title: str) -> dict[str
     ax.set_title(title)
     ax.legend()
     save_figure(fig, path)
-    return {"episodes": int(len(rewards)), "first_half": float(rewards[: len(rewards) // 2].mean()) if len(rewards) > 1 else float("nan"),
+    return {"episodes": int(len(rewards)),
+            "first_half": float(rewards[: len(rewards) // 2].mean()) if len(rewards) > 1 else float("nan"),
             "second_half": float(rewards[len(rewards) // 2 :].mean()) if len(rewards) > 1 else float("nan")}

@@ -51,7 +51,8 @@ def build_table(summaries: dict[str, dict[str, dict[str, Any]]], out: Path) -> d
             records.append(rec)
     write_json(out / "table1.json", records)
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(records[0].keys()) + ["change_vs_initial", "change_ci95_low", "change_ci95_high"],
+    writer = csv.DictWriter(buf, fieldnames=list(records[0].keys())
+                            + ["change_vs_initial", "change_ci95_low", "change_ci95_high"],
                             extrasaction="ignore")
     writer.writeheader()
     writer.writerows(records)
@@ -85,16 +86,20 @@ def table_markdown(records: list[dict[str, Any]]) -> str:
         lines.append(
             f"| {r['algo']} | {r['row']} | {r['mean_return']:.2f} ({r['ci95_low']:.2f}–{r['ci95_high']:.2f}) | "
             f"{r['pct_of_max']:.2f}% | {or_dash(r['paper_return'], '{:.2f}')} | {or_dash(r['paper_pct'], '{:.2f}%')} | "
-            f"{r['collision_rate']:.0%} | {or_dash(r.get('offroad_rate'), '{:.0%}')} | {or_dash(r.get('mean_speed'), '{:.1f}')} | "
-            f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | {or_dash(r['queries_per_step'], '{:.0f}')} | "
+            f"{r['collision_rate']:.0%} | {or_dash(r.get('offroad_rate'), '{:.0%}')} | "
+            f"{or_dash(r.get('mean_speed'), '{:.1f}')} | "
+            f"{or_dash(r.get('lane_changes_per_episode'), '{:.1f}')} | {success} | "
+            f"{or_dash(r['queries_per_step'], '{:.0f}')} | "
             f"{or_dash(r['max_linf'], '{:.3f}')} |"
         )
     return "\n".join(lines) + "\n"
 
 
 FIGURES = [
-    ("fig2_loss.png", "Fig. 2 — Loss1 (attack) and Loss2 (distortion) over ZO-SignSGD iterations on a step the attack won (early stopping off, L2 weight 0.1)."),
-    ("fig3_attacked_episode.png", "Fig. 3 — The attacked DQN at its collision: simulator (left), what it perceived (red outlines) over what was there (green), right."),
+    ("fig2_loss.png", "Fig. 2 — Loss1 (attack) and Loss2 (distortion) over ZO-SignSGD iterations on a step "
+                      "the attack won (early stopping off, L2 weight 0.1)."),
+    ("fig3_attacked_episode.png", "Fig. 3 — The attacked DQN at its collision: simulator (left), what it "
+                                  "perceived (red outlines) over what was there (green), right."),
     ("fig3_attacked_episode.gif", "Fig. 3 (animated) — the last decisions before the collision."),
     ("fig4_ddpg_adversarial_training.png", "Fig. 4 — DDPG reward per episode during adversarial training."),
     ("fig5_dqn_adversarial_training.png", "Fig. 5 — DQN reward per episode during adversarial training."),
@@ -106,14 +111,15 @@ def robustness_section(out: Path, episodes: int) -> tuple[str, str, Path | None]
     folder = out / "robustness"
     if not episodes or not (folder / "robustness.md").is_file():
         return "", "", None
-    intro = (f"Return under the strongest attack inside each ε-ball, at that ε or a smaller one, so that it never rises "
-             f"with ε ({_episodes(episodes)}): black-box random search, its defense-aware form that "
-             "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box PGD "
-             "for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most (and its ε "
-             "where smaller), and the speed. dqn-robust and ddpg-robust are the defended agents, dqn-sa (SA-DQN) and dqn-at (Algorithm 2) the "
-             "other training defenses (their cards say how each was made); "
-             "baseline:robust-rules@0.02 is the observation rules made pessimistic for ε 0.02; the constant SLOWER "
-             "and the constant brake ignore their input and are the floor a defense must beat. Cells: robustness/table.md.")
+    intro = (f"Return under the strongest attack inside each ε-ball, at that ε or a smaller one, so that it never "
+             f"rises with ε ({_episodes(episodes)}): black-box random search, its defense-aware form that "
+             "carries the perturbation and moves it by at most 0.01 per step (random-search-smooth), and white-box "
+             "PGD for the networks (through the kinematic filter by BPDA). In brackets: the attack that hurt most "
+             "(and its ε where smaller), and the speed. dqn-robust and ddpg-robust are the defended agents, "
+             "dqn-sa (SA-DQN) and dqn-at (Algorithm 2) the other training defenses (their cards say how each was "
+             "made); baseline:robust-rules@0.02 is the observation rules made pessimistic for ε 0.02; the constant "
+             "SLOWER and the constant brake ignore their input and are the floor a defense must beat. "
+             "Cells: robustness/table.md.")
     figure = folder / "robustness.png"
     return intro, (folder / "robustness.md").read_text(), figure if figure.is_file() else None
 
@@ -124,11 +130,13 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
     md_table = table_markdown(table["rows"])
     rob_intro, rob_table, rob_figure = robustness_section(out, robustness_episodes)
     intro = (
-        f"Reproduction of Table 1 with {_episodes(episodes)}, {'models retrained by this run' if retrain else 'the shipped models in models/'}"
+        f"Reproduction of Table 1 with {_episodes(episodes)}, "
+        f"{'models retrained by this run' if retrain else 'the shipped models in models/'}"
         f"{' (quick mode: not the full study)' if quick else ''}. Attack: ZO-SignSGD, L∞ ε = 0.2, budgeted, "
-        "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in table1.json. "
-        "The baseline rows are policies that ignore their observation (one constant action; no observation attack can "
-        "change them) or read the simulator (IDM + MOBIL): a number that one of them also reaches is not a result."
+        "T = 100, q = 20, target FASTER (DQN) / [1, 0.5] (DDPG). Paired changes vs. Initial Training are in "
+        "table1.json. The baseline rows are policies that ignore their observation (one constant action; "
+        "no observation attack can change them) or read the simulator (IDM + MOBIL): a number that one of them "
+        "also reaches is not a result."
     )
     timing_lines = TIMINGS + "\n\n" + "\n".join(f"- {k}: {v:.0f} s" for k, v in timings.items())
     md = ["# zodrive reproduction of Table 1", "", intro, "", md_table]
@@ -145,10 +153,11 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
 
     parts = [f"<h1>zodrive reproduction of Table 1</h1><p>{html.escape(intro)}</p>", _html_table(table["rows"])]
     if rob_table:
-        parts += ["<h2>Robustness: return against ε under the strongest attack</h2>", f"<p>{html.escape(rob_intro)}</p>",
-                  _html_from_markdown_table(rob_table)]
+        parts += ["<h2>Robustness: return against ε under the strongest attack</h2>",
+                  f"<p>{html.escape(rob_intro)}</p>", _html_from_markdown_table(rob_table)]
         if rob_figure is not None:
-            parts.append(f'<figure><img src="data:image/png;base64,{base64.b64encode(rob_figure.read_bytes()).decode()}" '
+            parts.append('<figure><img src="data:image/png;base64,'
+                         f'{base64.b64encode(rob_figure.read_bytes()).decode()}" '
                          'style="max-width:100%"></figure>')
     parts.append("<h2>Figures</h2>")
     for name, caption in FIGURES:
@@ -158,7 +167,8 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
             data = base64.b64encode(path.read_bytes()).decode()
             parts.append(f'<figure><img src="data:{mime};base64,{data}" style="max-width:100%">'
                          f"<figcaption>{html.escape(caption)}</figcaption></figure>")
-    parts.append(f"<h2>Timings</h2><p>{html.escape(TIMINGS)}</p><ul>" + "".join(f"<li>{html.escape(k)}: {v:.0f} s</li>" for k, v in timings.items()) + "</ul>")
+    parts.append(f"<h2>Timings</h2><p>{html.escape(TIMINGS)}</p><ul>"
+                 + "".join(f"<li>{html.escape(k)}: {v:.0f} s</li>" for k, v in timings.items()) + "</ul>")
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>zodrive: Table 1</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
             "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}"
@@ -167,9 +177,10 @@ def write_report(out: Path, table: dict[str, Any], figures: dict[str, Any], timi
     write_atomic(out / "report.html", page)
 
 
-TIMINGS = ("Seconds, as each invocation recorded them (an older invocation's cells may count from its grid's start). "
-           "A cell's time runs from the previous cell's end to its own (cells run one after another, so "
-           "it is the cell's own time; on Ray, where cells overlap, it is not); an invocation's total is its wall time.")
+TIMINGS = ("Seconds, as each invocation recorded them (an older invocation's cells may count from its grid's "
+           "start). A cell's time runs from the previous cell's end to its own (cells run one after another, so "
+           "it is the cell's own time; on Ray, where cells overlap, it is not); an invocation's total is its "
+           "wall time.")
 
 
 def _episodes(n: int) -> str:
@@ -193,9 +204,8 @@ def _html_from_markdown_table(text: str) -> str:
 
 
 def _html_table(records: list[dict[str, Any]]) -> str:
-    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road", "Speed (m/s)",
-            "Lane changes/ep", "Attack success",
-            "Queries/step", "max L∞"]
+    head = ["Policy", "Scenario", "zodrive return", "95% CI", "% of 450", "Paper", "Collisions", "Off-road",
+            "Speed (m/s)", "Lane changes/ep", "Attack success", "Queries/step", "max L∞"]
     rows = []
     for r in records:
         cells = [r["algo"], r["row"], f"{r['mean_return']:.2f}", f"{r['ci95_low']:.2f}–{r['ci95_high']:.2f}",

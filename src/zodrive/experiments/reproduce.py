@@ -47,7 +47,8 @@ BASELINE_ROWS = {
 # gradients), the same seeds in every cell. Shipped models are named by their folder in models/
 # (`--retrain` retrains Table 1's paper-budget models only; this section always uses the shipped
 # driver and defended models).
-ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], ...] = (  # (policy, defenses, extra attacks)
+# (policy, defenses, extra attacks)
+ROBUSTNESS_SYSTEMS: tuple[tuple[str, tuple[str | None, ...], tuple[str, ...]], ...] = (
     ("dqn-driver", (None, "kinematic"), ()),
     ("dqn-robust", (None,), ()),
     ("dqn-sa", (None, "kinematic"), ()),   # SA-DQN, eps 0.05, kappa 0.5: comes out as always-SLOWER
@@ -67,14 +68,14 @@ ROBUSTNESS_EPS = (0.02, 0.05, 0.1, 0.2)
 def prepare_models(out: Path, *, retrain: bool, quick: bool, progress: bool) -> dict[str, Path]:
     """Paths of the four models: shipped, or retrained into out/models (resumable)."""
     if not retrain:
-        paths = {name: models_dir() / name for name in ("dqn", "dqn-adv", "ddpg", "ddpg-adv")}
+        paths: dict[str, Path] = {name: models_dir() / name for name in ("dqn", "dqn-adv", "ddpg", "ddpg-adv")}
         for name, path in paths.items():
             model_file(path)  # a clear error if a shipped model is missing
         return paths
     from zodrive.training.recipes import load_recipe, train
     from zodrive.training.adversarial import adversarial_train
 
-    paths: dict[str, Path] = {}
+    paths = {}
     for algo in ("dqn", "ddpg"):
         base, adv = out / "models" / algo, out / "models" / f"{algo}-adv"
         overrides = ["total_timesteps=2000"] if quick else []

@@ -47,7 +47,8 @@ def select_checkpoint(run: Path, episodes: int, *, from_step: int = 0, workers: 
                      "collision_rate": s["collision_rate"], "offroad_rate": s.get("offroad_rate", 0.0),
                      "mean_speed": s["mean_speed"], "lane_changes_per_episode": s["lane_changes_per_episode"]})
     best = max(rows, key=lambda r: r["mean_return"])
-    choice = {"command": command_line(), "selected": best, "criterion": f"highest mean return on {episodes} tuning episodes "
+    choice = {"command": command_line(), "selected": best,
+              "criterion": f"highest mean return on {episodes} tuning episodes "
               f"(seeds {TUNING_SEED}..{TUNING_SEED + episodes - 1})", "candidates": rows}
     write_json(run / "selected.json", choice)
     return choice

@@ -135,6 +135,7 @@ def trained_in_memory(model: Any) -> TrainedWith | None:
     if len(ids) != 1 or None in ids:
         return None
     env_id = ids.pop()
+    assert env_id is not None  # refused above
     said = ("the environment the model holds in memory",)
     if configs is None:
         return TrainedWith(env_id=env_id, env_kwargs=dict(specs[0].kwargs or {}), said_by=said)

@@ -18,12 +18,13 @@ from typing import Any
 import numpy as np
 from stable_baselines3 import DDPG, DQN, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
 from zodrive.policies.safe_load import PolicyNetwork, describe, network_from, read_plain, sha256, shipped_sums
 from zodrive.errors import ZodriveError, cause
 from zodrive.policies.folders import model_zip
 
-ALGOS = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
+ALGOS: dict[str, type[OffPolicyAlgorithm]] = {"dqn": DQN, "ddpg": DDPG, "td3": TD3}
 """The algorithms zodrive trains, by recipe name (`algo:`); other SB3 classes load by their class name."""
 
 
@@ -180,7 +181,8 @@ def sb3_class(name: str) -> type[BaseAlgorithm]:
     try:
         import sb3_contrib
     except ImportError:
-        raise ZodriveError(f"loading a {name} with stable-baselines3 needs sb3-contrib: pip install sb3-contrib") from None
+        raise ZodriveError(f"loading a {name} with stable-baselines3 needs sb3-contrib: "
+                           "pip install sb3-contrib") from None
     return getattr(sb3_contrib, name)
 
 

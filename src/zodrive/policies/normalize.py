@@ -126,7 +126,7 @@ def read_normalization(path: Path) -> ObsNormalization | None:
         return None
     if state.get("norm_obs_keys"):
         raise ZodriveError(f"{path} normalizes a dict observation; zodrive attacks Box observations")
-    rms = getattr(state["obs_rms"], "state", None)
+    rms: Any = getattr(state["obs_rms"], "state", None)  # None or a foreign object: the except below
     try:
         mean = np.asarray(rms["mean"], dtype=np.float64)
         var = np.asarray(rms["var"], dtype=np.float64)
@@ -163,4 +163,5 @@ def normalized_victim(victim: Victim, norm: ObsNormalization) -> Victim:
     return Victim(query=lambda obs: victim.query(norm(np.asarray(obs, dtype=np.float64))), kind=victim.kind,
                   obs_shape=victim.obs_shape,
                   differentiable=None if differentiable is None else (lambda obs: differentiable(norm.torch(obs))),
-                  calibrate=None if calibrate is None else (lambda obs: calibrate(norm(np.asarray(obs, dtype=np.float64)))))
+                  calibrate=None if calibrate is None
+                  else (lambda obs: calibrate(norm(np.asarray(obs, dtype=np.float64)))))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -151,7 +151,7 @@ def resolve(policy: Any, *, label: str | None = None) -> Policy:
             return Policy("onnx", text.policy_ref(ref), text.policy_label(ref), gradients=False)
         return Policy("model", text.policy_ref(ref), text.policy_label(ref), gradients=True)
     if callable(policy):
-        name = label or getattr(policy, "__name__", type(policy).__name__)
+        name = label or cast(str, getattr(policy, "__name__", type(policy).__name__))
         return Policy("callable", f"memory:{name}", name, gradients=False, obj=policy)
     raise ZodriveError(f"cannot read a policy from a {type(policy).__name__}: pass a model path, FILE.py:NAME, "
                        "baseline:NAME, an SB3 model, a torch module or a numpy callable")

@@ -74,8 +74,8 @@ def resolve_preset(model: str, preset: str | None, env_set: list[str] | None = N
     return resolve_scenario(model, preset, env_set, env_id, obs_bounds, shifted=shifted)[0]
 
 
-def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: list[str] | None = None, env_id: str | None = None,
-                     obs_bounds: tuple[float, float] | None = None, *, shifted: bool = False,
+def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: list[str] | None = None,
+                     env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, *, shifted: bool = False,
                      said: TrainedWith | None = None) -> tuple[dict[str, Any], str | None]:
     """Where `model` drives: `preset`, `env_id` (any gymnasium id), or where the model's files say
     it was trained (`said`, else its run folder, rl-zoo3 / Hugging Face files, `<env id>.zip`); a
@@ -94,9 +94,14 @@ def resolve_scenario(model: str, preset: str | dict[str, Any] | None, env_set: l
             raise ZodriveError("--preset and --env-id both say where the policy drives: give one")
         if obs_bounds is not None and env_id is None:
             raise ZodriveError("--obs-bounds applies to --env-id (a preset states its own observation range)")
-        config = (gym_preset(env_id, env_set, obs_bounds) if env_id is not None
-                  else named_preset(preset) if isinstance(preset, dict) else load_preset(preset, env_set))
-        why = _not_as_trained(config, said) if states else []
+        if env_id is not None:
+            config = gym_preset(env_id, env_set, obs_bounds)
+        elif isinstance(preset, dict):
+            config = named_preset(preset)
+        else:
+            assert preset is not None  # one of the two is given
+            config = load_preset(preset, env_set)
+        why = _not_as_trained(config, said) if states and said is not None else []  # (states: said is not None)
         if not why:  # nothing shifted (a caller refuses a --shifted that shifted no model: it was ignored)
             return config, None
         assert said is not None

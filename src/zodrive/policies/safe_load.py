@@ -29,7 +29,7 @@ import re
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -37,6 +37,9 @@ from torch import nn
 
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import sha256  # noqa: F401  (re-exported: safe_load.sha256)
+
+if TYPE_CHECKING:
+    from zodrive.attacks.victim import ActionKind
 
 MAX_MEMBER_BYTES = 512 * 2**20  # refuse zip members that would inflate beyond this
 
@@ -61,12 +64,15 @@ class PolicyNetwork:
     net: nn.Module               # flat observation -> scores (discrete) or the action taken (continuous)
     obs_shape: tuple[int, ...]
     n_outputs: int
-    kind: str = "discrete"       # discrete | continuous
+    kind: ActionKind = "discrete"
 
 
 class ActingNetwork(nn.Module):
     """An MLP body and what SB3 does to its output before acting, as torch operations in
     SB3's float32 order (so the safe and the full loader agree bit for bit)."""
+
+    low: torch.Tensor  # buffers (register_buffer)
+    high: torch.Tensor
 
     def __init__(self, body: nn.Sequential, post: str = "none", *, n_quantiles: int = 0,
                  low: np.ndarray | None = None, high: np.ndarray | None = None) -> None:
@@ -180,7 +186,7 @@ def _array(text: Any, size: int, what: str, path: Path) -> np.ndarray:
 
 def describe(data: dict[str, Any], weights: dict[str, torch.Tensor], path: Path) -> dict[str, Any]:
     """Family, kind, space shapes and action bounds of a zip's plain contents (see `read_plain`)."""
-    action = data.get("action_space") if isinstance(data.get("action_space"), dict) else {}
+    action: dict[str, Any] = data["action_space"] if isinstance(data.get("action_space"), dict) else {}
     family = _family(weights, path)
     space = _space_type(action)
     if space == "Discrete" or "n" in action:
@@ -300,7 +306,8 @@ def network_from(data: dict[str, Any], weights: dict[str, torch.Tensor], path: P
     """The acting network rebuilt from a zip's plain contents (see the module docstring)."""
     info = describe(data, weights, path)
     family = info["algo"]
-    broken = [k for k, v in weights.items() if torch.is_tensor(v) and v.is_floating_point() and not torch.isfinite(v).all()]
+    broken = [k for k, v in weights.items()
+              if torch.is_tensor(v) and v.is_floating_point() and not torch.isfinite(v).all()]
     if broken:
         raise ZodriveError(f"{path}: {broken[0]} holds NaN or infinite weights ({len(broken)} tensors): its outputs "
                            "decide nothing (an argmax of NaN is action 0)")

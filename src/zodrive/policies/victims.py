@@ -7,14 +7,14 @@ networks and plain callables are wrapped here. The outputs are what the policy a
 
 from __future__ import annotations
 
-from typing import Any, Callable, Literal
+from typing import Any, Callable, Literal, cast
 
 import numpy as np
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from zodrive.policies.safe_load import unscale
-from zodrive.attacks.victim import Victim
+from zodrive.attacks.victim import ActionKind, Victim
 from zodrive.envs import Scenario, scenario
 from zodrive.errors import ZodriveError, cause
 
@@ -36,7 +36,8 @@ def network_victim(net: torch.nn.Module, kind: Literal["discrete", "continuous"]
     return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape), differentiable=forward, calibrate=query)
 
 
-def module_victim(module: torch.nn.Module, kind: Literal["discrete", "continuous"], obs_shape: tuple[int, ...]) -> Victim:
+def module_victim(module: torch.nn.Module, kind: Literal["discrete", "continuous"],
+                  obs_shape: tuple[int, ...]) -> Victim:
     """A user's torch module over observation batches (B, *obs_shape) as a victim (white-box
     attacks may differentiate it)."""
     module.eval()
@@ -63,13 +64,13 @@ def callable_victim(fn: Callable[[np.ndarray], Any], kind: Literal["discrete", "
     return Victim(query=query, kind=kind, obs_shape=tuple(obs_shape))
 
 
-def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torch.Tensor], str]:
+def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torch.Tensor], ActionKind]:
     """What the loaded SB3 policy acts on, as a torch function of an observation batch."""
     from stable_baselines3 import DQN, TD3, SAC
     from stable_baselines3.common.policies import ActorCriticPolicy
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
-    policy = model.policy
+    policy: Any = model.policy  # its class (and attributes) depend on the algorithm, told apart below
     space = model.action_space
     if isinstance(model, DQN):  # the MLP after the flatten extractor: same arithmetic, less Python per query
         net = policy.q_net
@@ -94,7 +95,8 @@ def _acting_forward(model: BaseAlgorithm) -> tuple[Callable[[torch.Tensor], torc
         return (lambda x: squashed(policy.actor(x, deterministic=True))), "continuous"
     if isinstance(policy, ActorCriticPolicy):
         def forward(x: torch.Tensor) -> torch.Tensor:
-            features = policy.extract_features(x, policy.pi_features_extractor)
+            # one extractor named: one tensor
+            features = cast(torch.Tensor, policy.extract_features(x, policy.pi_features_extractor))
             out = policy.action_net(policy.mlp_extractor.forward_actor(features))
             if not hasattr(space, "n"):
                 out = squashed(torch.tanh(out)) if policy.squash_output else torch.clamp(out, low, high)
@@ -132,6 +134,7 @@ def sb3_victim(model: BaseAlgorithm) -> Victim:
     """Wrap a loaded SB3 / sb3-contrib model as a black-box victim: a live view of its
     networks (training them changes the victim)."""
     check_sb3_model(model)
+    assert model.observation_space.shape is not None  # a Box (`check_sb3_model`)
     obs_shape = tuple(model.observation_space.shape)
     model.policy.set_training_mode(False)
     forward_fn, kind = _acting_forward(model)
@@ -161,9 +164,9 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
     harness sends the user's code no rows of its own."""
     env = where if isinstance(where, Scenario) else scenario(where)
     if isinstance(policy, torch.nn.Module):
-        inner = module_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+        inner = module_victim(policy, env.kind, env.obs_shape)
     elif callable(policy):
-        inner = callable_victim(policy, env.kind, env.obs_shape)  # type: ignore[arg-type]
+        inner = callable_victim(policy, env.kind, env.obs_shape)
     else:
         raise ZodriveError(f"{label} is a {type(policy).__name__}, not a torch module or a callable")
 
@@ -182,8 +185,8 @@ def object_victim(policy: Any, where: dict[str, Any] | Scenario, label: str) -> 
                                f"{env.name!r} needs {env.n_actions} "
                                f"({'scores' if env.kind == 'discrete' else 'action dims'})")
         if not np.all(np.isfinite(out)):  # an argmax of NaN scores is action 0: a decision nobody made
-            raise ZodriveError(f"{label} returned NaN or infinite outputs on {int((~np.isfinite(out)).any(axis=1).sum())} "
-                               f"of {len(obs)} observations")
+            raise ZodriveError(f"{label} returned NaN or infinite outputs on "
+                               f"{int((~np.isfinite(out)).any(axis=1).sum())} of {len(obs)} observations")
         return out
 
     return Victim(query=query, kind=inner.kind, obs_shape=inner.obs_shape, differentiable=inner.differentiable)

@@ -12,11 +12,11 @@ preset (`rules`, TD3+BC with an online teacher). The Q term is normalized as in 
 With `error` "absolute" the guide's term is mean_dims |pi(s) - a_G(s)| instead, the loss the
 continuous clone was fitted with. The guide's term keeps the driver where the critic does not show
 it something better, the way DQfD's margin loss was meant to for the DQN (removed, issue 45:
-results/finetune/README.md); from a clone of the rules, the clone is the guide that works (the rules' high-gain steering, which the
-clone smooths, undid its lane keeping: results/finetune-continuous/README.md). With `train_actor`
-False, `train` updates the critics only (target actions from the frozen actor): policy evaluation
-of the initial driver before RL starts; a recipe with `init` therefore trains a GuidedTD3 even
-without a guide.
+results/finetune/README.md); from a clone of the rules, the clone is the guide that works (the
+rules' high-gain steering, which the clone smooths, undid its lane keeping:
+results/finetune-continuous/README.md). With `train_actor` False, `train` updates the critics only
+(target actions from the frozen actor): policy evaluation of the initial driver before RL starts;
+a recipe with `init` therefore trains a GuidedTD3 even without a guide.
 Critic updates, target smoothing, delayed actor updates and Polyak averaging are SB3's TD3 unchanged;
 `GuidedDDPG` is the same on SB3's DDPG (one critic, no smoothing, no delay). The saved zip is an
 ordinary SB3 TD3 / DDPG zip; the guide is not part of the policy.
@@ -73,7 +73,8 @@ class GuidedTD3(TD3):
                 noise = data.actions.clone().normal_(0, self.target_policy_noise).clamp(
                     -self.target_noise_clip, self.target_noise_clip)
                 next_actions = (self.actor_target(data.next_observations) + noise).clamp(-1, 1)
-                next_q = th.cat(self.critic_target(data.next_observations, next_actions), dim=1).min(dim=1, keepdim=True)[0]
+                next_q = th.cat(self.critic_target(data.next_observations, next_actions),
+                                dim=1).min(dim=1, keepdim=True)[0]
                 target = data.rewards + (1 - data.dones) * discounts * next_q
             critic_loss = sum(F.mse_loss(q, target) for q in self.critic(data.observations, data.actions))
             assert isinstance(critic_loss, th.Tensor)

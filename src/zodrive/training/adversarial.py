@@ -11,9 +11,11 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
+from stable_baselines3 import DQN
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -61,6 +63,7 @@ def adversarial_train(
     source = model_file(model_path)
     algo = model_algo(source)
     model = load_model(source, preset, trust=trust, cls=algo_class)  # an SB3 object to train further
+    assert isinstance(model, OffPolicyAlgorithm)  # DQN, DDPG or TD3 (`ALGOS`)
     victim = sb3_victim(model)  # live view of the networks being trained
     if spec is not None:  # the whole attack is checked before the run folder exists
 
@@ -89,9 +92,11 @@ def adversarial_train(
     # observations, without updates, and then `steps` steps of training follow.
     model.learning_starts = 0
     if algo == "dqn":  # keep exploring at the final rate instead of restarting the schedule at 1.0
+        assert isinstance(model, DQN)
         eps = model.exploration_final_eps
         model.exploration_schedule = LinearSchedule(eps, eps, 1.0)
     else:
+        assert venv.action_space.shape is not None  # DDPG/TD3 act in a Box
         model.action_noise = action_noise(noise or {"type": "normal", "sigma": 0.1}, venv.action_space.shape[0])
     model.set_logger(configure(str(out), ["csv"]))
     start = time.perf_counter()
@@ -106,7 +111,7 @@ def adversarial_train(
     wall = time.perf_counter() - start
     path = out / "model.zip"
     model.save(path)
-    oracle = getattr(venv.envs[0].env, "oracle", None)
+    oracle = getattr(cast(Monitor, venv.envs[0]).env, "oracle", None)  # `build`'s Monitor
     write_json(out / "train.json", {
         "algo": algo, "kind": "adversarial" if spec is not None else (method or {}).get("name", "control (no attack)"),
         "method": method, "source_model": str(source),

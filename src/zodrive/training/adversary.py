@@ -29,7 +29,7 @@ from zodrive.evaluation.rollout import to_action
 
 log = logging.getLogger(__name__)
 
-PPO_DEFAULTS = {"n_steps": 1024, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
+PPO_DEFAULTS: dict[str, Any] = {"n_steps": 1024, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
                 "gae_lambda": 0.95, "ent_coef": 0.0, "use_sde": True, "sde_sample_freq": 128}
 """SB3's PPO defaults but a shorter rollout (episodes are up to 450 decisions) and gSDE exploration
 (Raffin et al., CoRL 2021) redrawn every 128 steps: a perturbation held for many steps is tried as a whole."""
@@ -64,6 +64,7 @@ class AdversaryEnv(gym.Env):
         self.episode_return = 0.0
         self.victim_returns: list[float] = []  # the victim's return of every finished episode
         self.oracle = QueryOracle(victim)  # no budget: counts every victim call of training
+        assert env.observation_space.shape is not None  # a Box (presets refuse others)
         shape = tuple(env.observation_space.shape)
         self.obs_shape = shape
         self.free = free_coordinates(threat, shape)
@@ -77,14 +78,14 @@ class AdversaryEnv(gym.Env):
         self._obs = np.asarray(obs, dtype=np.float32)
         return self._obs.reshape(-1)
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):  # type: ignore[override]
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         obs, info = self.env.reset(seed=seed, options=options)
         self.oracle.begin_episode()
         self.t, self.episode_return = 0, 0.0
         return self._observe(obs), info
 
-    def step(self, action: np.ndarray):  # type: ignore[override]
+    def step(self, action: np.ndarray):
         if self._obs is None:
             raise ZodriveError("AdversaryEnv.step before reset")
         fed = apply_action(self.threat, self._obs[None], np.asarray(action, dtype=np.float32)[None], self.free)
@@ -147,13 +148,13 @@ def _pretrain_lines(fitted: dict[str, Any] | None) -> list[str]:
     by = "" if fitted["margin"] is None else f" by a margin of {fitted['margin']:.3g}"
     settings = fitted.get("settings") or {}
     lines = [f"- start fitted before PPO (`--pretrain-rounds`): a surrogate distilled from {fitted['queries']} counted "
-             f"victim queries ({settings.get('probes', 4)} random points per visited state, uniform in the ball), the mean "
-             f"action fitted to make it take the target action{by} (target: {fitted.get('target', 'auto')}); "
-             f"{fitted['wall_time_s']} s. Per round (driving "
+             f"victim queries ({settings.get('probes', 4)} random points per visited state, uniform in the "
+             f"ball), the mean action fitted to make it take the target action{by} "
+             f"(target: {fitted.get('target', 'auto')}); {fitted['wall_time_s']} s. Per round (driving "
              "with the previous round's fit):"]
     for r in fitted["rounds"]:
-        lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, target action "
-                     f"taken on {r['target_share']:.1%} of steps; {surrogate_fit(r)}")
+        lines.append(f"  - round {r['round']}: {r['steps']} steps, victim return {r['victim_return']:.2f}, "
+                     f"target action taken on {r['target_share']:.1%} of steps; {surrogate_fit(r)}")
     return lines
 
 
@@ -198,7 +199,8 @@ def attack_train(
     if not (isinstance(steps, int) and steps >= (0 if pretrain else 1)):
         raise ZodriveError(f"steps must be an integer >= 1 (>= 0 with a pretrained start), not {steps}")
     if explore_std is not None and not (isinstance(explore_std, float) and 0 < explore_std <= 2):
-        raise ZodriveError(f"explore_std must be a float in (0, 2] (units of eps per action dimension), not {explore_std}")
+        raise ZodriveError("explore_std must be a float in (0, 2] (units of eps per action dimension), "
+                           f"not {explore_std}")
     if explore_std is not None and not steps:
         raise ZodriveError("--explore-std sets PPO's exploration; with --steps 0 no PPO step is taken")
     if not (isinstance(critic_warmup, int) and 0 <= critic_warmup < max(steps, 1)):
@@ -247,9 +249,11 @@ def attack_train(
                                f"known; {preset.get('name')!r} is not one: use --reward minus")
         horizon = int(max_return)
     inner = AdversaryEnv(make_env(preset), victim, threat, reward=reward, horizon=horizon)
+    assert inner.action_space.shape is not None  # a Box (`AdversaryEnv`)
     meta = {"format": FORMAT, "attack": "learned", "victim": str(model), "victim_sha256": sha256(file),
             "preset": preset, "defense": defense, "defense_version": defense and defense_version(defense),
-            "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "kind": victim.kind, "obs_shape": list(victim.obs_shape),
+            "eps": float(eps), "norm": threat.norm, "frozen": list(threat.frozen), "kind": victim.kind,
+            "obs_shape": list(victim.obs_shape),
             "action_dim": int(inner.action_space.shape[0]), "reward": reward, "horizon": horizon}
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("model.zip", META_FILE, "train.json", "CARD.md", "monitor.monitor.csv"):
@@ -267,6 +271,7 @@ def attack_train(
     if pretrain is not None:
         start = time.perf_counter()
         with_env = make_env(preset)
+        assert objective is not None  # set above with `pretrain`
         fitted = fit_start(agent.policy, with_env, victim, threat, objective, inner.free, pretrain, seed)
         with_env.close()
         fitted["wall_time_s"] = round(time.perf_counter() - start, 1)

@@ -97,6 +97,7 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
     discrete = victim.kind == "discrete"
     rng = np.random.default_rng(seed)
     gen = torch.Generator().manual_seed(seed)
+    assert env.observation_space.shape is not None  # a Box (presets refuse others)
     shape = tuple(env.observation_space.shape)
     dim = int(np.prod(shape))
     oracle = QueryOracle(victim)
@@ -158,8 +159,10 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
         surrogate.requires_grad_(False)  # fitting the adversary through it: no gradient for its weights
         # discrete: win by the victim's typical gap, so that the attack survives the surrogate's error
         kappa = None if width is None else (1.0 if settings.margin is None else settings.margin) * width
-        margin = objective if kappa is None else replace(objective, kappa=kappa)
-        actor = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]  # only these are fitted
+        # (a width only for a discrete victim, whose objectives all have a kappa)
+        margin = objective if kappa is None else replace(objective, kappa=kappa)  # type: ignore[call-arg]
+        # only these are fitted
+        actor = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
         low = torch.minimum(torch.tensor(threat.low), S)
         high = torch.maximum(torch.tensor(threat.high), S)
         free_t = torch.from_numpy(free)
@@ -172,14 +175,15 @@ def pretrain(policy: Any, env: gym.Env, victim: Victim, threat: ThreatModel, obj
 
         def adversary_loss(i: torch.Tensor) -> torch.Tensor:
             mean = _mean(policy, S[i])
-            out = fed_to_surrogate(i, mean - (mean - mean.clamp(-1.0, 1.0)).detach())  # the attack's clip; gradients pass
+            # the attack's clip; gradients pass
+            out = fed_to_surrogate(i, mean - (mean - mean.clamp(-1.0, 1.0)).detach())
             outside = torch.relu(mean.abs() - 1.0)  # ... and a penalty keeps the mean near [-1, 1]
             return margin.loss(out[:, None], out.detach())[:, 0].mean() + (outside ** 2).sum(1).mean()
 
         fit = adam_epochs(actor, adversary_loss, len(S), settings.epochs, gen)
         with torch.no_grad():  # on the surrogate, the share of visited states the fitted adversary wins
-            out = fed_to_surrogate(slice(None), _mean(policy, S).clamp(-1.0, 1.0))
-            won = float(objective.success(out[:, None], out)[:, 0].float().mean())
+            fed_out = fed_to_surrogate(slice(None), _mean(policy, S).clamp(-1.0, 1.0))
+            won = float(objective.success(fed_out[:, None], fed_out)[:, 0].float().mean())
         surrogate.requires_grad_(True)
         rounds.append({"round": r, "episodes": settings.episodes, "steps": steps,
                        "victim_return": float(np.mean(returns)), "target_share": hits / max(steps, 1),

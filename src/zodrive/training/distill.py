@@ -32,14 +32,14 @@ import io
 import time
 import zipfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, cast
 
 import numpy as np
 import torch
 from torch.nn import functional as F
 
 from zodrive.attacks.threat import ThreatModel, worst_in_ball
-from zodrive.attacks.victim import Victim
+from zodrive.attacks.victim import ActionKind, Victim
 from zodrive.compute import one_torch_thread
 from zodrive.drivers.baselines import check_baseline_fits, driver_victim, get_baseline, simulator_driver
 from zodrive.envs import action_names, attack_context, make_env, n_actions, observation_shape
@@ -79,9 +79,9 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
                            "(e.g. --teacher baseline:idm-mobil --dagger 4 --kappa 0)")
     readers = ("observation", "simulator") if dagger is not None else ("observation",)
     if teacher is not None and not (resolve(teacher).kind == "baseline" and get_baseline(teacher).reads in readers):
-        raise ZodriveError(f"--teacher must be an observation-reading baseline (baseline:rules, baseline:robust-rules@EPS)"
-                           f"{' or, with --dagger, baseline:idm-mobil or baseline:planner' if dagger is not None else ''}, "
-                           f"not {teacher!r}")
+        also = " or, with --dagger, baseline:idm-mobil or baseline:planner" if dagger is not None else ""
+        raise ZodriveError("--teacher must be an observation-reading baseline (baseline:rules, "
+                           f"baseline:robust-rules@EPS){also}, not {teacher!r}")
     if teacher is not None:
         check_baseline_fits(get_baseline(teacher), preset)
     if dagger is not None:
@@ -95,6 +95,7 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
     mask, low, high = _mask_and_box(eps, preset, states.shape[1:])
     x_all = torch.as_tensor(states, dtype=torch.float32)
     y_all = torch.as_tensor(guide.query(states).argmax(axis=1), dtype=torch.long)
+    assert isinstance(source.net, torch.nn.Sequential)  # a DQN's network is its MLP alone (`network_from`)
     student = copy.deepcopy(source.net).train()
     opt = torch.optim.Adam(student.parameters(), lr=3e-4)
     gen = torch.Generator().manual_seed(seed)
@@ -187,6 +188,9 @@ class Standardize(torch.nn.Module):
     """Fixed input layer x -> (x - mean) / std (a constant feature keeps std 1). Affine, so
     `folded` merges it into the first Linear layer and the saved network is the plain MLP."""
 
+    mean: torch.Tensor  # buffers (register_buffer)
+    std: torch.Tensor
+
     def __init__(self, mean: torch.Tensor, std: torch.Tensor) -> None:
         super().__init__()
         self.register_buffer("mean", mean.float())
@@ -213,11 +217,11 @@ def standardized(net: torch.nn.Sequential, x: torch.Tensor | None = None) -> tor
 def restandardize(net: torch.nn.Sequential, x: torch.Tensor, floor: float = 0.0) -> None:
     """In place: `net[0]` (a `Standardize`) takes the statistics of `x` (each std at least
     `floor`) and the first Linear layer is rescaled so that `net` still computes the same function."""
-    scale = net[0]
+    scale = cast(Standardize, net[0])
     new = Standardize(x.mean(dim=0), x.std(dim=0).clamp(min=floor))
     first = next(m for m in net if isinstance(m, torch.nn.Linear))
     with torch.no_grad():
-        first.bias += first.weight @ ((new.mean - scale.mean) / scale.std)
+        first.bias.add_(first.weight @ ((new.mean - scale.mean) / scale.std))
         first.weight *= new.std / scale.std
         scale.mean.copy_(new.mean)
         scale.std.copy_(new.std)
@@ -226,13 +230,14 @@ def restandardize(net: torch.nn.Sequential, x: torch.Tensor, floor: float = 0.0)
 def folded(net: torch.nn.Sequential) -> torch.nn.Sequential:
     """`net` without its leading `Standardize`, merged into the first Linear layer (the same
     function, as the plain MLP an SB3 zip holds)."""
-    if not isinstance(net[0], Standardize):
+    scale = net[0]
+    if not isinstance(scale, Standardize):
         return net
-    scale, body = net[0], copy.deepcopy(torch.nn.Sequential(*list(net)[1:]))
+    body = copy.deepcopy(torch.nn.Sequential(*list(net)[1:]))
     first = next(m for m in body if isinstance(m, torch.nn.Linear))
     with torch.no_grad():
         first.weight /= scale.std
-        first.bias -= first.weight @ scale.mean
+        first.bias.sub_(first.weight @ scale.mean)
     return body
 
 
@@ -344,7 +349,8 @@ def action_error(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, names: 
     mean absolute error and the labels' standard deviation (what a constant would score)."""
     with torch.no_grad():
         err = net(x) - y
-    per = {name: {"rmse": round(float(err[:, i].pow(2).mean().sqrt()), 4), "mae": round(float(err[:, i].abs().mean()), 4),
+    per = {name: {"rmse": round(float(err[:, i].pow(2).mean().sqrt()), 4),
+                  "mae": round(float(err[:, i].abs().mean()), 4),
                   "label_std": round(float(y[:, i].std()), 4)} for i, name in enumerate(names)}
     return {"count": len(y), "per_dim": per}
 
@@ -380,11 +386,11 @@ def targets(outputs: np.ndarray, kind: str) -> torch.Tensor:
     return torch.as_tensor(outputs, dtype=torch.float32)
 
 
-def dagger_rounds(env: gym.Env, teacher: Victim, student: torch.nn.Module, obs_shape: tuple[int, ...], *,
+def dagger_rounds(env: gym.Env, teacher: Victim, student: torch.nn.Sequential, obs_shape: tuple[int, ...], *,
                   rounds: int, steps: int, seed: int,
-                  refit: Callable[[torch.nn.Module, torch.Tensor, torch.Tensor], list[float]],
-                  evaluate: Callable[[torch.nn.Module, torch.Tensor, torch.Tensor], dict[str, Any]],
-                  kind: str = "discrete", beta: float = 0.0,
+                  refit: Callable[[torch.nn.Sequential, torch.Tensor, torch.Tensor], list[float]],
+                  evaluate: Callable[[torch.nn.Sequential, torch.Tensor, torch.Tensor], dict[str, Any]],
+                  kind: ActionKind = "discrete", beta: float = 0.0,
                   ) -> tuple[torch.Tensor, torch.Tensor, list[dict[str, Any]]]:
     """DAgger (Ross et al., AISTATS 2011): round r collects `steps` states of the mixture that
     takes the teacher's action with probability beta ** r (round 0: the teacher drives; beta 0:
@@ -442,7 +448,8 @@ DAGGER_EGO_JITTER = 0.2  # continuous: the ego row's share of the `jitter` noise
                          # none, which on the tuning seeds changed lanes like the teacher but collided in 10-15 %)
 DAGGER_BETA = 0.5         # continuous: round r rolls out the teacher's action with probability 0.5 ** r
 DAGGER_STD_FLOOR = 0.05   # continuous: the input scale's smallest std (normalized units; a lane is 0.04): the
-                          # ego's speed feature is nearly constant (clipped at 20 m/s); no effect measured (ablation.txt)
+                          # ego's speed feature is nearly constant (clipped at 20 m/s); no effect measured
+                          # (ablation.txt)
 
 
 @one_torch_thread
@@ -454,8 +461,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
     aggregate after each of `rounds` + 1 rounds of `steps` states (`dagger_rounds`).
     Discrete (DQN): cross-entropy, pure student rollouts after round 0, every batch with a
     `jitter` copy labelled by the (observation-reading) teacher, and the adversarial term when
-    `kappa` > 0. Continuous (DDPG/TD3 actor, re-initialized: `reinitialized`): `scaled_mse` on the tanh-squashed action, scaled
-    per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`); for an
+    `kappa` > 0. Continuous (DDPG/TD3 actor, re-initialized: `reinitialized`): `scaled_mse` on the
+    tanh-squashed action, scaled per dimension by round 0's label spread, mixture rollouts (`DAGGER_BETA`); for an
     observation-reading teacher (the continuous `baseline:rules`) the `jitter` copy and
     `scaled_l1` instead (a simulator-reading one, IDM + MOBIL, labels only the states it is
     driven through). Agreement (or the
@@ -507,7 +514,8 @@ def dagger_distill(model: str, preset: dict[str, Any], eps: float | None, steps:
             setup["augment"] = jitter(label, std, DAGGER_JITTER, low, high, gen) if jittered else None
             loss = scaled_l1 if reads_observation else scaled_mse  # the median of a teacher's decisions
             setup["criterion"] = loss(y.std(dim=0)) if kind == "continuous" else None
-        weight = class_weights(y, len(names), DAGGER_WEIGHT_POWER) if DAGGER_WEIGHT_POWER and kind == "discrete" else None
+        weight = (class_weights(y, len(names), DAGGER_WEIGHT_POWER)
+                  if DAGGER_WEIGHT_POWER and kind == "discrete" else None)
         return fit(net, x, y, epochs=epochs, lr=DAGGER_LR, batch=DAGGER_BATCH, weight=weight, gen=gen,
                    robust=robust if kind == "discrete" else None, augment=setup["augment"],
                    criterion=setup["criterion"])

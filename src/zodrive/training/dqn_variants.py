@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
 from stable_baselines3 import DQN
 from torch.nn import functional as F
 
@@ -85,6 +86,7 @@ class SADQN(SAMixin, LossHookDQN):
         mask = self.ball_mask(x0)
         with th.no_grad():
             best = self.q_net(x0).argmax(dim=1, keepdim=True)
+        assert isinstance(self.action_space, spaces.Discrete)  # DQN acts on Discrete actions only
         others = th.ones(x0.shape[0], self.action_space.n, dtype=th.bool).scatter_(1, best, False)
 
         def margin(x: th.Tensor) -> th.Tensor:  # > 0: some other action beats a* at x

@@ -102,6 +102,7 @@ def picker_train(model: str, preset: dict[str, Any], eps: float, out: Path, fit:
                                            context.get("action_names"), context.get("action_bounds"))
     threat = attack.threat
     env = make_env(preset)
+    assert env.observation_space.shape is not None  # a Box (presets refuse others)
     shape = tuple(env.observation_space.shape)
     mask = threat.mask(shape)
     torch.manual_seed(seed)
@@ -188,9 +189,9 @@ def _card(out: Path, meta: dict[str, Any], train: dict[str, Any]) -> str:
         f"{fit['candidates']} random vertices where it needs a new one, and it replaces a held vertex rated below "
         f"{fit['switch']:g}. That is still one victim query per step.", "",
         f"- victim: `{meta['victim']}` (SHA-256 {meta['victim_sha256'][:16]}..), preset {meta['preset'].get('name')}",
-        f"- fit: seed {train['seed']}, {fit['rounds']} rounds of {fit['episodes']} training episodes, {fit['probes']} random "
-        f"vertices queried per state, MLP {fit['width']}x{fit['width']}, {fit['epochs']} epochs per round; "
-        f"{train['victim_queries']} victim queries, {train['wall_time_s']} s",
+        f"- fit: seed {train['seed']}, {fit['rounds']} rounds of {fit['episodes']} training episodes, "
+        f"{fit['probes']} random vertices queried per state, MLP {fit['width']}x{fit['width']}, "
+        f"{fit['epochs']} epochs per round; {train['victim_queries']} victim queries, {train['wall_time_s']} s",
         *[f"  - {round_line(r)}" for r in train["rounds"]], "",
         f"Use: `zodrive evaluate {meta['victim']} --attack vertex-hold:{out} --eps {meta['eps']:g}` on the preset "
         "it was fitted on (config.yaml: a picker is refused elsewhere)", "",

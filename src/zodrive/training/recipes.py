@@ -106,7 +106,8 @@ def check_init(recipe: dict[str, Any], context: str) -> dict[str, float] | None:
     init, spec = recipe.get("init"), recipe.get("calibrate")
     if init is None:
         if spec is not None:
-            raise ZodriveError(f"{context}: calibrate needs init: MODEL (it calibrates the values of an initial network)")
+            raise ZodriveError(f"{context}: calibrate needs init: MODEL "
+                               "(it calibrates the values of an initial network)")
         return None
     if recipe.get("double_q"):
         raise ZodriveError(f"{context}: init applies to recipes without double_q only")
@@ -369,6 +370,7 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
     if checkpoint is None:
         kwargs = dict(recipe.get("hyperparameters") or {})
         if algo in ACTOR_CRITIC:
+            assert env.action_space.shape is not None  # continuous actions: a Box
             kwargs["action_noise"] = action_noise(recipe.get("action_noise"), env.action_space.shape[0])
         model = algorithm_class(recipe)(
             "MlpPolicy",
@@ -385,7 +387,8 @@ def _train(recipe: dict[str, Any], out: Path, seed: int, preset: dict[str, Any],
         buffer = path.with_name(f"{algo}_replay_buffer_{done}_steps.pkl")
         check_signed([path, *([buffer] if buffer.is_file() else [])], trust)
         with warnings.catch_warnings():  # SB3 says n_steps is ignored, wrongly on a load: `check_n_step_buffer`
-            warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
+            warnings.filterwarnings("ignore",
+                                    message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
             model = algorithm_class(recipe).load(path, env=env, device="cpu")  # signed by this machine, or trusted
         check_n_step_buffer(model, recipe)
         if buffer.is_file():

@@ -47,7 +47,9 @@ def robust_train(model: str, preset: dict[str, Any], method: str, eps: float | N
         raise ZodriveError("--dagger applies to --method distill")
     if teacher is not None:
         raise ZodriveError("--teacher applies to --method distill")
-    common = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust, "force": force}
+    assert eps is not None  # only distill clones without one (returned above)
+    common: dict[str, Any] = {"seed": seed, "warmup": warmup, "progress_bar": progress_bar, "trust": trust,
+                              "force": force}
     if method == "at":
         return adversarial_train(model, preset, load_attack("zo-signsgd").with_overrides(eps=eps), steps, out, **common)
     algo = model_algo(model_file(model))
