@@ -162,7 +162,8 @@ def cmd_render(args: argparse.Namespace) -> int:
             break
     if float(np.asarray(frames[0].image).max()) == 0:
         raise ZodriveError("rendered frames are black: unset SDL_VIDEODRIVER or set it to 'offscreen'")
-    title = (f"{spec.attack} eps={spec.eps} | " if spec else "clean | ") + (f"+{args.defense} | " if args.defense else "")
+    title = ((f"{spec.attack} eps={spec.eps} | " if spec else "clean | ")
+             + (f"+{args.defense} | " if args.defense else ""))
     if not args.no_progress:
         print(f"drawing {len(frames)} frames (PNG, GIF, MP4)", file=sys.stderr, flush=True)
     save_png(frames, args.out / "episode.png", title=title)
@@ -171,7 +172,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     write_json(args.out / "episode.json", {**info, "attack": spec.to_dict() if spec else None, "defense": args.defense})
     print(f"seed {info['seed']}: return {info['return']:.2f}, {info['length']} steps, "
           f"{'crashed' if info['crashed'] else 'left the road' if info['offroad'] else 'no collision'}"
-          f" -> {args.out}/episode.png, episode.gif" + (", episode.mp4" if mp4 else " (MP4: pip install 'zodrive[video]')"))
+          f" -> {args.out}/episode.png, episode.gif"
+          + (", episode.mp4" if mp4 else " (MP4: pip install 'zodrive[video]')"))
     return 0
 
 
@@ -222,7 +224,8 @@ def cmd_certify(args: argparse.Namespace) -> int:
         refuse_nonempty(args.out / "certify.json", args.force, "certificates")
     preset = preset_of(args)
     if args.tol is not None and policy.action_kind() == "discrete":
-        raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action cannot change")
+        raise ZodriveError("--tol applies to continuous policies; a discrete one is certified when its action "
+                           "cannot change")
     tol = 0.2 if args.tol is None else args.tol
     if args.time_limit is not None and not args.exact:
         raise ZodriveError("--time-limit bounds each state's exact check: give --exact")
@@ -257,7 +260,8 @@ def cmd_certify(args: argparse.Namespace) -> int:
         if "exact" in row:
             print("    " + _exact_line(row["exact"], row["states"]))
             for side in row.get("attacks", []):
-                print(f"      {side['attack']}{' (white-box)' if side['white_box'] else ''}: " + _gap_line(side["vs_exact"]))
+                print(f"      {side['attack']}{' (white-box)' if side['white_box'] else ''}: "
+                      + _gap_line(side["vs_exact"]))
             ensemble = row["exact"].get("black_box_ensemble")
             if ensemble and len(ensemble["attacks"]) > 0:
                 print(f"      black-box ensemble ({', '.join(ensemble['attacks'])}): " + _gap_line(ensemble))
@@ -298,7 +302,8 @@ def _min_eps_text(found: dict[str, Any], attacks: list[str]) -> str:
              f"bracket; {found['checks']} checks, {found['seconds']:.0f} s): {bracket}; no counterexample up to "
              f"{max(found['grid']):g}: {found['beyond_grid']} ({found['unknown_at_max']} of them unknown there), "
              f"bisections stopped by an unknown: {found['stopped']}"
-             + (f", {found['broken']} CONTRADICTIONS (robust at a larger eps than attackable)" if found["broken"] else "")]
+             + (f", {found['broken']} CONTRADICTIONS (robust at a larger eps than attackable)"
+                if found["broken"] else "")]
     for name in ["exact", *attacks]:
         q = found["on_grid"][name]
         lines.append(f"    on the grid only, smallest eps {name} changed the action at: q25 {show(q[0])}, median "

@@ -27,7 +27,7 @@ is what neither knows. No queries: this reads the weights (a white-box tool, lab
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -46,7 +46,8 @@ class Certificate:
     bound: np.ndarray          # (N,) discrete: the certified margin lower bound; continuous: max |change|
 
 
-def threat_box(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+def threat_box(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float,
+               high: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-coordinate bounds (N, dim) of every point the threat model allows around x0 (N, dim); `eps` one
     radius, or one per state (N, 1)."""
     delta = eps * mask[None]
@@ -93,7 +94,7 @@ def _relu_mlp(layers: list[nn.Module]) -> list[tuple[torch.Tensor, torch.Tensor]
     if not all(isinstance(layer, nn.Linear) for layer in linears) or not all(
             isinstance(layer, nn.ReLU) for layer in body[1::2]) or len(body) != 2 * len(linears) - 1:
         return None
-    return [(layer.weight.double(), layer.bias.double()) for layer in linears]
+    return [(layer.weight.double(), layer.bias.double()) for layer in cast(list[nn.Linear], linears)]
 
 
 def _crown_lower(spec: torch.Tensor, top: int, affine: list[tuple[torch.Tensor, torch.Tensor]],
@@ -104,11 +105,11 @@ def _crown_lower(spec: torch.Tensor, top: int, affine: list[tuple[torch.Tensor, 
     a = spec @ w                                           # (N, m, n_{top-1})
     const = spec @ b
     for j in range(top - 1, -1, -1):                       # through ReLU j and Linear j
-        l, u = pre[j]
-        unstable = (l < 0) & (u > 0)
-        up_slope = torch.where(u <= 0, 0.0, torch.where(l >= 0, 1.0, u / (u - l).clamp(min=1e-12)))
-        up_shift = torch.where(unstable, -up_slope * l, 0.0)
-        low_slope = torch.where(u <= 0, 0.0, torch.where(l >= 0, 1.0, (u > -l).double()))
+        lj, uj = pre[j]
+        unstable = (lj < 0) & (uj > 0)
+        up_slope = torch.where(uj <= 0, 0.0, torch.where(lj >= 0, 1.0, uj / (uj - lj).clamp(min=1e-12)))
+        up_shift = torch.where(unstable, -up_slope * lj, 0.0)
+        low_slope = torch.where(uj <= 0, 0.0, torch.where(lj >= 0, 1.0, (uj > -lj).double()))
         pos, neg = a.clamp(min=0), a.clamp(max=0)
         a = pos * low_slope[:, None] + neg * up_slope[:, None]
         const = const + (neg * up_shift[:, None]).sum(-1)
@@ -145,7 +146,8 @@ def score_head(layers: list[nn.Module], post: str, owner: Any) -> tuple[int, tor
     last = max(i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear))
     if any(isinstance(layer, MONOTONE) for layer in layers[last + 1:]):
         raise ZodriveError("a discrete policy's scores must come out of a Linear layer")
-    w, b = layers[last].weight.double(), layers[last].bias.double()
+    head = cast(nn.Linear, layers[last])
+    w, b = head.weight.double(), head.bias.double()
     if post == "quantiles":
         q = owner.n_quantiles
         w = w.view(q, -1, w.shape[1]).mean(dim=0)
@@ -164,7 +166,8 @@ def relu_scores(net: nn.Module) -> list[tuple[torch.Tensor, torch.Tensor]] | Non
     return affine[:-1] + [(w, b)]
 
 
-def box_of(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float, high: float) -> tuple[torch.Tensor, ...]:
+def box_of(x0: np.ndarray, eps: float | np.ndarray, mask: np.ndarray, low: float,
+           high: float) -> tuple[torch.Tensor, ...]:
     """The flattened states (N, dim) and their threat boxes' bounds, as float64 tensors."""
     flat = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(len(x0), -1))
     lo, hi = threat_box(flat.numpy(), eps, np.asarray(mask, dtype=np.float64).reshape(-1), low, high)
@@ -302,9 +305,10 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
 
         exact_network(network.net, network.kind)  # a network --exact cannot decide is refused before any episode
     env = scenario(preset)
-    victim = network_victim(network.net, network.kind, network.obs_shape)  # type: ignore[arg-type]
+    victim = network_victim(network.net, network.kind, network.obs_shape)
     states = episode_states(preset, victim, seed, episodes)
     mask = AttackSpec(eps=max(eps_values)).threat(env.features, env.bounds).mask(states.shape[1:])  # no eps in it
+    wins: dict[str, list[np.ndarray]]
     rows, verdicts, wins = [], [], {name: [] for name in attacks}
     for eps in eps_values:
         cert = certify(network.net, network.kind, states, eps, mask, *env.bounds, tol=tol)
