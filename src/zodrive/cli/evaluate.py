@@ -211,7 +211,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_certify(args: argparse.Namespace) -> int:
     from zodrive.attacks.registry import ATTACKS
     from zodrive.attacks.spec import load_attack
-    from zodrive.evaluation.certify import certify_model
+    from zodrive.evaluation.verify import certify_model
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED
     from zodrive.policies.policy import resolve
     from zodrive.runinfo import command_line, write_json
