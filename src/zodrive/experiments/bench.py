@@ -727,16 +727,18 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
 
 
 def plot_frontier(rows: list[dict[str, Any]], path: Path) -> None:
-    """Clean return against the return under the strongest attack at the largest ε, one panel per table of
-    official rows: which systems both drive well and hold up. Defended rows are squares, constant actions
-    grey; the line joins the rows no other row beats on both."""
+    """Clean return against the return under the strongest attack at the largest ε, one panel per current
+    protocol's table of official rows: which systems both drive well and hold up. Defended rows are squares,
+    constant actions grey; the line joins the rows no other row beats on both."""
     from zodrive.evaluation.report import headless_pyplot
 
     plt = headless_pyplot()
-    official = [r for r in rows if r["official"]]
+    current = {p.name() for p in PROTOCOLS.values()}  # an earlier version's table is history, not a choice
+    official = [r for r in rows if r["official"] and r["protocol"] in current]
     protocols = sorted({r["protocol"] for r in official})
     if not protocols:
-        raise ZodriveError("no official bench rows: the frontier compares rows of the protocols' episodes")
+        raise ZodriveError("no official bench rows of a current protocol: the frontier compares rows of the "
+                           "protocols' episodes")
     fig, axes = plt.subplots(1, len(protocols), figsize=(4.6 * len(protocols), 4.6), squeeze=False)
     for ax, name in zip(axes[0], protocols):
         table = sorted((r for r in official if r["protocol"] == name), key=lambda r: r["policy"])
