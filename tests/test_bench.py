@@ -19,6 +19,7 @@ from zodrive.experiments.bench import (
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ppo-highway-fast"
 
 
+@pytest.mark.integration
 def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) -> None:
     board = tmp_path / "board"
     args = ["bench", str(MODEL), "--scenario", "highway-fast", "--name", "ppo", "--episodes", "2",
@@ -244,6 +245,7 @@ class RowMean(BaseFeaturesExtractor):
 '''
 
 
+@pytest.mark.integration
 def test_a_network_of_the_users_own_is_benched_only_with_trust_and_its_row_says_so(tmp_path: Path, capsys,
                                                                                   monkeypatch) -> None:
     import gymnasium as gym
@@ -395,6 +397,7 @@ def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: P
     assert bench_row("m", "k", proto, folder, 100, 300)["eps_collisions_pass_brake"] == 0.0  # 10 % > 0 % there
 
 
+@pytest.mark.integration
 def test_a_capped_protocol_caps_its_black_box_attacks_and_not_pgd(tmp_path: Path) -> None:
     """Version 4: a black-box attack of the row spends at most the protocol's queries on a step; PGD, white-box,
     runs as before (its cells are those of the earlier version, reused)."""
@@ -411,6 +414,7 @@ def test_a_capped_protocol_caps_its_black_box_attacks_and_not_pgd(tmp_path: Path
     assert row["attacked"][0]["queries_to_crash"] is None or row["attacked"][0]["queries_to_crash"] > 0
 
 
+@pytest.mark.integration
 def test_a_row_of_an_earlier_version_gives_way_and_keeps_the_cells_both_share(tmp_path: Path, monkeypatch) -> None:
     from zodrive.experiments.bench import Protocol, bench
 

@@ -23,6 +23,7 @@ def tiny_dqn(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.integration
 def test_train_writes_a_complete_run_folder(tiny_dqn: Path) -> None:
     for name in ("model.zip", "config.yaml", "run.json", "train.json", "progress.csv", "monitor.monitor.csv"):
         assert (tiny_dqn / name).is_file(), name
@@ -60,6 +61,7 @@ def test_evaluate_writes_summary_and_records(tiny_dqn: Path, tmp_path: Path, cap
     assert "mean return" in capsys.readouterr().out
 
 
+@pytest.mark.integration
 def test_evaluation_is_deterministic_and_resumes(tiny_dqn: Path, tmp_path: Path) -> None:
     args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--attack", "zo-signsgd", "--steps", "5",
             "--env-set", "max_episode_steps=60"]
@@ -175,6 +177,7 @@ def test_console_script_exits_nonzero_without_traceback(tmp_path: Path) -> None:
     assert proc.stderr.strip().splitlines() == [f"zodrive: error: model file not found: {tmp_path / 'nope.zip'}"]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("attack", [[], ["--attack", "random-search", "--steps", "5"]], ids=["clean", "attacked"])
 def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path, attack: list[str]) -> None:
     args = ["evaluate", str(tiny_dqn), "--episodes", "3", "--no-progress", "--env-set", "max_episode_steps=40", *attack]
@@ -187,6 +190,7 @@ def test_workers_do_not_change_the_numbers(tiny_dqn: Path, tmp_path: Path, attac
     assert one.get("queries_per_step") == two.get("queries_per_step")
 
 
+@pytest.mark.integration
 def test_train_refuses_an_existing_run_and_resumes_from_a_checkpoint(tmp_path: Path, capsys, recwarn) -> None:
     out = tmp_path / "run"
     base = ["train", "--algo", "dqn", "--out", str(out), "--no-progress",
@@ -255,6 +259,7 @@ def test_bad_yaml_values_and_hyperparameters(tmp_path: Path, capsys) -> None:
     assert "learning_rate must be a number" in err and not out.exists()
 
 
+@pytest.mark.integration
 def test_select_picks_a_checkpoint_on_tuning_seeds(tmp_path: Path, capsys) -> None:
     run = tmp_path / "run"
     assert main(["train", "--algo", "dqn", "--steps", "200", "--out", str(run), "--no-progress", "--env-set",
@@ -283,6 +288,7 @@ def test_compare_over_query_budgets_draws_the_budget_curve(tiny_dqn: Path, tmp_p
     assert "Budget/step" in capsys.readouterr().out
 
 
+@pytest.mark.integration
 def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "curve"
     pgd = tmp_path / "configs" / "pgd.yaml"  # steps for PGD alone: uniform noise takes none (--attack-set would be refused)
@@ -308,6 +314,7 @@ def test_compare_over_eps_and_defenses_gives_each_its_strongest_attack(tiny_dqn:
     assert (out / "robustness.png").stat().st_size > 0
 
 
+@pytest.mark.integration
 def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
     out = tmp_path / "video"
     assert main(["render", "baseline:slower", "--out", str(out), "--env-set", "max_episode_steps=12"]) == 0
@@ -317,6 +324,7 @@ def test_render_writes_png_gif_and_mp4(tmp_path: Path, capsys) -> None:
     assert "episode.mp4" in capsys.readouterr().out
 
 
+@pytest.mark.integration
 def test_render_through_the_filter(tiny_dqn: Path, tmp_path: Path) -> None:
     out = tmp_path / "defended"
     assert main(["render", str(tiny_dqn), "--out", str(out), "--env-set", "max_episode_steps=8", "--defense",
@@ -335,6 +343,7 @@ def test_compare_on_ray_gives_the_local_numbers(tiny_dqn: Path, tmp_path: Path) 
     assert local == ray  # same cells, same order, same numbers
 
 
+@pytest.mark.integration
 def test_a_td3_row_trains_and_is_read_like_a_ddpg(tmp_path: Path) -> None:
     out = tmp_path / "td3"
     assert main(["train", "--algo", "td3", "--steps", "200", "--set", "hyperparameters.learning_starts=50",

@@ -34,6 +34,7 @@ def _options(config: dict, extra: dict) -> dict:
     return opts
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("preset,overrides,extras", CASES)
 def test_fast_observation_matches_stock(preset: str, overrides: list[str], extras: list[dict]) -> None:
     """Every option set is compared on the same 100+ states: the trajectory is the costly part."""

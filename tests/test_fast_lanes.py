@@ -70,6 +70,7 @@ def test_ties_go_to_the_first_lane_and_broken_input_to_highway_env() -> None:
             RoadNetwork.get_closest_lane_index(network, np.array([28.0, 0.0]), 0.0)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["intersection", "roundabout"])
 def test_same_episode_with_either_search(name: str, monkeypatch) -> None:
     """Same seed and actions: the same observations and rewards, step for step, with highway-env's search."""

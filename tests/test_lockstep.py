@@ -44,6 +44,7 @@ CASES = [("dqn-driver", "discrete", name) for name in available("attacks")] + [
 ]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("case", CASES, ids=["-".join(c[::2] + c[3:]) for c in CASES])
 def test_lockstep_equals_one_episode_at_a_time(case: tuple[str, ...], tmp_path: Path) -> None:
     model, preset, attack, *overrides = case

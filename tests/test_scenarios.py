@@ -27,6 +27,7 @@ def test_env_list_shows_every_scenario_in_one_line_each(capsys) -> None:
     assert "--env-id" in lines[-1]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", FAST_SCENARIOS)
 def test_the_fast_observation_is_exact_in_every_scenario(name: str) -> None:
     preset = load_preset(name, ["highway.simulation_frequency=5"])
