@@ -305,6 +305,7 @@ class Search:
         self.free = int(np.argmax(self.mask))  # a coordinate the attacker may change (any, if none)
         self.iterations = np.zeros(self.n, dtype=np.int64)
         self.records: list[dict[str, np.ndarray]] = []
+        self.ranks = type(attack).merit is not Attack.merit  # an attack that ranks points itself
         attack._streams(self.n)
 
     # -- the threat model and the objective -------------------------------------------
@@ -437,7 +438,7 @@ class Search:
         attack, best = self.attack, self.best
         l1, l2, f, ok = self.values(cand, out, rows)
         attack.observe(rows, ok)
-        rank = attack.merit(f, cand, self.flat0[rows], ok)
+        rank = attack.merit(f, cand, self.flat0[rows], ok) if self.ranks else f  # no copy of x0 per iteration
         has_ok = ok.any(axis=1)
         pick = np.where(has_ok, np.where(ok, rank, np.inf).argmin(axis=1), rank.argmin(axis=1))
         ar = np.arange(len(rows))

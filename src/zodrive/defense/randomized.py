@@ -125,11 +125,14 @@ class Smoothing:
         return out.reshape(len(batch), self.votes, *batch.shape[1:])
 
     def shares(self, victim: Victim, batch: np.ndarray, together: bool = False) -> np.ndarray:
-        """(B, n_actions) vote shares of `victim` on each observation's copies. A row's votes never depend on
+        """(B, n_actions) vote shares of `victim` on each observation's copies (`votes_of`)."""
+        return self.votes_of(victim, self.noise(np.asarray(batch)), together)
+
+    def votes_of(self, victim: Victim, copies: np.ndarray, together: bool = False) -> np.ndarray:
+        """(B, n_actions) vote shares of `victim` on copies (B, VOTES, *obs). A row's votes never depend on
         the batch it came in: each observation's VOTES copies go in a call of their own, or, `together`, all
         in one call where the network is known to give a row the same outputs in any batch of VOTES rows or
         more (`oracle.stable_batch`)."""
-        copies = self.noise(np.asarray(batch))
         if len(copies) == 0:
             return np.zeros((0, 0), dtype=np.float32)
         if together:
@@ -167,7 +170,7 @@ class Smoothing:
                 offset = x.new_tensor(cloud) - flat.detach()[:, None]  # the copies, as offsets from x
                 mean = (net((flat[:, None] + offset).reshape(-1, *self.obs_shape))
                         .reshape(len(flat), self.votes, -1).mean(1))
-                value = mean.new_tensor(query(flat.detach().cpu().numpy()))
+                value = mean.new_tensor(self.votes_of(victim, cloud, together))  # the same copies: noise drawn once
                 return (mean + (value - mean).detach()).reshape(*x.shape[: x.ndim - len(self.obs_shape)], -1)
 
         return Victim(query=query, kind="discrete", obs_shape=victim.obs_shape, differentiable=differentiable,
