@@ -1,4 +1,5 @@
-"""highway-env's closest-lane search against zodrive's FastLaneNetwork, in one run.
+"""highway-env's closest-lane search against zodrive's FastLaneNetwork (`--search lanes`), or its neighbour
+search against FastNeighbourRoad (`--search neighbours`), in one run.
 
 Per scenario, the same episodes (same seeds, same actions) are stepped with each search in turn,
 interleaved episode by episode so that load on the machine hits both alike; the trajectories must be
@@ -16,17 +17,19 @@ import numpy as np
 import zodrive.envs.highway as zodrive_envs
 from zodrive.envs import load_preset, make_env
 
-FAST = zodrive_envs.use_fast_lanes
+SWITCHES = {"lanes": "use_fast_lanes", "neighbours": "use_fast_neighbours"}  # --search -> what zodrive's envs call
 
 
-def episode(preset: str, seed: int, fast: bool) -> tuple[list[np.ndarray], float, int]:
+def episode(preset: str, seed: int, fast: bool, search: str) -> tuple[list[np.ndarray], float, int]:
     """One episode of random actions; its observations, its stepping time and its steps."""
-    zodrive_envs.use_fast_lanes = FAST if fast else (lambda network: None)
+    switch = SWITCHES[search]
+    real = getattr(zodrive_envs, switch)
+    setattr(zodrive_envs, switch, real if fast else (lambda road_or_network: None))
     try:
         env = make_env(load_preset(preset))
         obs, _ = env.reset(seed=seed)
     finally:
-        zodrive_envs.use_fast_lanes = FAST
+        setattr(zodrive_envs, switch, real)
     env.action_space.seed(seed)
     trace, wall, steps = [obs], 0.0, 0
     while True:
@@ -45,6 +48,7 @@ def main() -> None:
     parser.add_argument("--scenarios", nargs="+", default=["intersection", "roundabout", "merge", "highway-fast"])
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=100000)
+    parser.add_argument("--search", choices=sorted(SWITCHES), default="lanes")
     args = parser.parse_args()
     for preset in args.scenarios:
         wall = {True: 0.0, False: 0.0}
@@ -52,7 +56,7 @@ def main() -> None:
         for seed in range(args.seed, args.seed + args.episodes):
             runs = {}
             for fast in (False, True):
-                runs[fast], seconds, n = episode(preset, seed, fast)
+                runs[fast], seconds, n = episode(preset, seed, fast, args.search)
                 wall[fast] += seconds
             steps += n
             assert len(runs[True]) == len(runs[False]) and all(
