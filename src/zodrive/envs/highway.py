@@ -3,9 +3,9 @@
 `zodrive/<id>` is highway-env's `<id>` (same class, same defaults, same simulator) whose
 observation factory also accepts `type: FastKinematics`: the exact, pandas-free
 `KinematicObservation` of `fast_kinematics`. Its road network answers the closest-lane search of
-every vehicle and step with `fast_lanes`, which measures fewer lanes and gives the same lane, and its road
-the neighbour search of every vehicle with `fast_neighbours`, which measures fewer vehicles and gives the
-same leader and follower. Nothing else is swapped.
+every vehicle and step with `fast_lanes`, which measures fewer lanes and gives the same lane, and on
+highway its road answers the neighbour search of every vehicle with `fast_neighbours`, which projects
+fewer vehicles and gives the same leader and follower. Nothing else is swapped.
 """
 
 from __future__ import annotations
@@ -47,8 +47,10 @@ class FastObservationMixin:
 
 class FastLanesMixin:
     """Build the road as highway-env does (`_create_road` on highway, `_make_road` elsewhere), then let
-    its network search lanes with `FastLaneNetwork` and the road neighbours with `FastNeighbourRoad`,
-    before any vehicle is placed."""
+    its network search lanes with `FastLaneNetwork`, before any vehicle is placed; on highway (many
+    vehicles on few lanes: each lane is asked about dozens of times a round) the road also searches
+    neighbours with `FastNeighbourRoad`. Elsewhere it was no faster (`benchmarks/lane_search.py
+    --search neighbours`), so highway-env's search stays."""
 
     def _create_road(self, *args: Any, **kwargs: Any) -> None:
         super()._create_road(*args, **kwargs)  # type: ignore[misc]
@@ -58,7 +60,6 @@ class FastLanesMixin:
     def _make_road(self, *args: Any, **kwargs: Any) -> None:
         super()._make_road(*args, **kwargs)  # type: ignore[misc]
         use_fast_lanes(self.road.network)  # type: ignore[attr-defined]
-        use_fast_neighbours(self.road)  # type: ignore[attr-defined]
 
 
 class ZodriveHighwayEnv(FastObservationMixin, FastLanesMixin, HighwayEnv):
