@@ -32,8 +32,8 @@ from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.seeds import EVAL_SEED, MAX_EPISODES
-from zodrive.system import AttackWrapper as _AttackWrapper, attack_observations, build_attacker, load_policy, \
-    make_policy_env
+from zodrive.system import AttackWrapper as _AttackWrapper, Schedule, attack_observations, build_attacker, \
+    load_policy, make_policy_env
 
 __all__ = ["AttackWrapper", "Result", "attack", "evaluate"]
 
@@ -173,7 +173,7 @@ def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defe
            episodes: int, seed: int, envs: int):
     """Episodes of an in-memory policy, in this process."""
     max_return = scenario_of(preset).max_return
-    if envs > 1 and (defense is None or not keeps_state(defense)):
+    if envs > 1 and (defense is None or not keeps_state(defense)) and (spec is None or not spec.sparse_in_time):
         from zodrive.envs import make_env
 
         victim = load_policy(policy, preset, defense)
@@ -215,6 +215,9 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
         raise ZodriveError(f"observations of shape {obs.shape[1:]} per row; {where.name} gives {where.obs_shape}")
     spec = _spec(attack, where, {"seed": seed, **options})
     assert spec is not None  # an attack is named
+    if spec.sparse_in_time:
+        raise ZodriveError("a frequency budget (attack_share, when) chooses steps of an episode; attack() attacks one "
+                           "batch of states: use evaluate or AttackWrapper")
     attacker, objective, oracle = build_attacker(spec, resolved.victim(preset), preset)
     attacker.reseed([seed * 1_000_003 + row for row in range(len(obs))])
     result, _ = attack_observations(obs, attacker, objective, oracle)
@@ -239,4 +242,5 @@ class AttackWrapper(_AttackWrapper):
         where = scenario_of_env(env)
         spec = _spec(attack, where, options)
         assert spec is not None  # an attack is named
-        super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where))
+        super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where),
+                         schedule=Schedule.of(spec))

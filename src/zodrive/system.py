@@ -7,7 +7,9 @@ both use it; inside SB3's vectorized envs each copy attacks its own environment.
 
 from __future__ import annotations
 
+import math
 import time
+from dataclasses import dataclass
 from typing import Any, Sequence, cast
 
 import gymnasium as gym
@@ -44,11 +46,12 @@ def attack_observations(
 
 
 def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
-    """The per-step record of one environment row (goes into `info["attack"]`).
+    """The per-step record of one environment row (goes into `info["attack"]`); under a frequency
+    budget it says whether the step was attacked (`attacked`; without one, every step is).
 
     Wall time is kept out of `info` (it would make seeded steps differ); the wrappers expose
     it as `last_wall_time`."""
-    return {
+    stats = {
         "queries": int(result.queries[row]),
         "iterations": int(result.iterations[row]),
         "success": bool(result.success[row]),
@@ -56,20 +59,95 @@ def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
         "linf": float(result.linf[row]),
         "l2": float(result.l2[row]),
     }
+    if result.attacked is not None:
+        stats["attacked"] = bool(result.attacked[row])
+    return stats
+
+
+def preference_gap(outputs: np.ndarray) -> np.ndarray:
+    """How much a discrete policy cares which action it takes (Lin et al., "Tactics of Adversarial
+    Attack on Deep Reinforcement Learning Agents", IJCAI 2017): max - min of softmax over its scores,
+    per row, in [0, 1). Near 0 where the choice hardly matters: a budget is spent where it is large."""
+    z = np.exp(outputs - outputs.max(axis=-1, keepdims=True))
+    p = z / z.sum(axis=-1, keepdims=True)
+    return p.max(axis=-1) - p.min(axis=-1)
+
+
+ONE_AT_A_TIME = ("a frequency budget decides an episode's steps one by one: its episodes run one at a time "
+                 "(--envs 1)")
+
+
+@dataclass
+class Schedule:
+    """An episode's frequency budget (`attack_share`, `when`): which steps the attack runs on.
+
+    At step t (0-based) the attacked steps so far may be at most floor(share * (t + 1)): a budget
+    that holds at every moment of an episode, whatever its length. `every` spends it as soon as it
+    allows (share 1/k: the k-th, 2k-th, ... steps); `gap` only on a step whose preference gap
+    (`preference_gap` of the victim's scores on the clean observation, read through the oracle:
+    one counted query a step) is at least `min_gap`. A step not attacked feeds the clean observation."""
+
+    share: float
+    when: str
+    min_gap: float | None = None
+    steps: int = 0     # decision steps of the episode so far
+    attacked: int = 0  # of them attacked
+
+    @classmethod
+    def of(cls, spec: AttackSpec) -> Schedule | None:
+        """The schedule of `spec`, or None where it attacks every step."""
+        return cls(spec.attack_share, spec.when, spec.min_gap) if spec.sparse_in_time else None
+
+    @property
+    def reads_scores(self) -> bool:
+        return self.when == "gap"
+
+    def begin_episode(self) -> None:
+        self.steps = self.attacked = 0
+
+    def decide(self, gap: float | None) -> bool:
+        """Whether the next step is attacked (counted as decided): the budget allows one more and,
+        under `gap`, the step's preference gap `gap` reaches `min_gap`."""
+        allowed = self.attacked < math.floor(self.share * (self.steps + 1) + 1e-9)
+        if self.when == "gap":
+            assert gap is not None and self.min_gap is not None  # read by the caller; required by the spec
+            allowed = allowed and gap >= self.min_gap
+        self.steps += 1
+        self.attacked += allowed
+        return allowed
+
+
+def clean_result(obs: np.ndarray, queries: int) -> AttackResult:
+    """What a step the frequency budget skipped feeds: the clean observations `obs` (N, *obs), no
+    iteration, `queries` victim queries a row (the preference gap's read, or none)."""
+    n = len(obs)
+    nothing = np.full((n, 0), np.nan, dtype=np.float32)  # no output of the attack's
+    return AttackResult(x_adv=np.array(obs, copy=True), success=np.zeros(n, dtype=bool),
+                        already=np.zeros(n, dtype=bool), iterations=np.zeros(n, dtype=np.int64),
+                        queries=np.full(n, queries, dtype=np.int64), linf=np.zeros(n), l2=np.zeros(n),
+                        adv_outputs=nothing, clean_outputs=nothing.copy(), attacked=np.zeros(n, dtype=bool))
 
 
 class Attacker:
     """One attack's episode lifecycle, the same for one environment (`AttackWrapper`) and for N
     run in lockstep (`zodrive.evaluation.rollout.run_lockstep`): each row's random stream is
     seeded by its episode's seed, nothing is carried across episodes, and the oracle counts
-    each row's queries per step and per episode."""
+    each row's queries per step and per episode. With a `schedule` (a frequency budget) it decides,
+    step by step, whether to call the attack at all: the timing rule is the system's, not an attack's,
+    and it runs one environment at a time."""
 
-    def __init__(self, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False) -> None:
+    def __init__(self, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False,
+                 schedule: Schedule | None = None) -> None:
         self.attack, self.objective, self.oracle, self.trace = attack, objective, oracle, trace
+        self.schedule = schedule
 
     def start(self, env_seeds: Sequence[int | None]) -> None:
         """Rows begin episodes reset with `env_seeds` (one None: an unseeded reset, whose
         attack stream goes on where it was)."""
+        if self.schedule is not None:
+            if len(env_seeds) != 1:
+                raise ZodriveError(ONE_AT_A_TIME)
+            self.schedule.begin_episode()
         if any(seed is None for seed in env_seeds):
             self.attack.begin_episode()
         else:
@@ -80,6 +158,8 @@ class Attacker:
 
     def restart_row(self, row: int, env_seed: int) -> None:
         """Row `row` begins the episode reset with `env_seed` while the others go on."""
+        if self.schedule is not None:
+            raise ZodriveError(ONE_AT_A_TIME)
         self.attack.restart_row(row, episode_seed(self.attack.seed, env_seed))
         self.oracle.begin_episode(row)
 
@@ -89,8 +169,26 @@ class Attacker:
         self.oracle.keep_rows(rows)
 
     def step(self, obs: np.ndarray) -> tuple[AttackResult, float]:
-        """Attack one step's observations (N rows); the result and the wall time [s]."""
-        return attack_observations(obs, self.attack, self.objective, self.oracle, trace=self.trace)
+        """Attack one step's observations (N rows); the result and the wall time [s]. Under a
+        schedule (one row), a step it skips feeds the clean observation (`clean_result`), and the
+        gap's read is counted in the step's queries whether the step is attacked or not."""
+        if self.schedule is None:
+            return attack_observations(obs, self.attack, self.objective, self.oracle, trace=self.trace)
+        if len(obs) != 1:
+            raise ZodriveError(ONE_AT_A_TIME)
+        if not np.all(np.isfinite(obs)):
+            raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
+        start = time.perf_counter()
+        self.oracle.begin_step(rows=1)
+        gap = float(preference_gap(self.oracle(obs))[0]) if self.schedule.reads_scores else None
+        reads = self.oracle.step_queries  # the attack's own step counts its queries from zero
+        if not self.schedule.decide(gap):
+            self.attack.fed_clean(obs)
+            return clean_result(obs, reads), time.perf_counter() - start
+        result, _ = attack_observations(obs, self.attack, self.objective, self.oracle, trace=self.trace)
+        result.queries = result.queries + reads
+        result.attacked = np.ones(1, dtype=bool)
+        return result, time.perf_counter() - start
 
 
 class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -100,11 +198,12 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, attack: Attack, objective: Objective, oracle: QueryOracle,
-                 *, trace: bool = False) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, attack=attack, objective=objective, oracle=oracle, trace=trace)
+                 *, trace: bool = False, schedule: Schedule | None = None) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, attack=attack, objective=objective, oracle=oracle, trace=trace,
+                                                 schedule=schedule)
         gym.ObservationWrapper.__init__(self, env)
         self.attack, self.objective, self.oracle = attack, objective, oracle
-        self.attacker = Attacker(attack, objective, oracle, trace=trace)
+        self.attacker = Attacker(attack, objective, oracle, trace=trace, schedule=schedule)
         self.last: AttackResult | None = None
         self.last_stats: dict[str, Any] = {}
         self.last_wall_time = 0.0  # [s] spent attacking the latest observation
@@ -115,8 +214,9 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.clean_obs = observation
         result, wall = self.attacker.step(observation[None])
         self.last, self.last_stats, self.last_wall_time = result, step_stats(result, 0), wall
-        self._episode_hits += int(result.success[0])
-        self._episode_applicable += int(not result.already[0])
+        if result.attacked is None or result.attacked[0]:
+            self._episode_hits += int(result.success[0])
+            self._episode_applicable += int(not result.already[0])
         return result.x_adv[0]
 
     def reset(self, **kwargs: Any):
@@ -162,7 +262,7 @@ def make_attacked_env(preset: dict[str, Any], victim: Victim, spec: AttackSpec |
     if spec is None:
         return env
     attack, objective, oracle = build_attacker(spec, victim, preset)
-    return AttackWrapper(env, attack, objective, oracle, trace=trace)
+    return AttackWrapper(env, attack, objective, oracle, trace=trace, schedule=Schedule.of(spec))
 
 
 def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: AttackSpec | None = None, *,

@@ -74,6 +74,7 @@ class AttackResult:
     adv_outputs: np.ndarray      # (N, k) victim outputs on x_adv (seen by the attacker)
     clean_outputs: np.ndarray    # (N, k) victim outputs on x0
     trace: list[dict[str, np.ndarray]] = field(default_factory=list)  # per iteration: l1, l2 of the base point
+    attacked: np.ndarray | None = None  # (N,) whether the attack ran (a frequency budget skips steps); None: it did
 
 
 class Best:
@@ -163,6 +164,12 @@ class Attack(abc.ABC):
     def begin_episode(self) -> None:
         """Forget the previous step's perturbation: a new episode starts from scratch."""
         self._carry = self._fed = None
+
+    def fed_clean(self, x0: np.ndarray) -> None:
+        """The step of clean observations `x0` (N, *obs) was not attacked (a frequency budget skipped
+        it): with max_change, the next fed perturbation drifts from none, the one the victim last saw."""
+        if self.max_change is not None:
+            self._fed = np.zeros((len(x0), int(np.prod(x0.shape[1:]))), dtype=np.float32)
 
     def restart_row(self, row: int, seed: int) -> None:
         """Row `row` begins a new episode (lockstep): a fresh stream, nothing carried."""

@@ -59,6 +59,10 @@ class AttackOptions(Strict):
         "reported distortion)")
     frozen: tuple[str, ...] = option(DEFAULT_FROZEN, "features the attacker may not touch (none: every feature may "
                                      "change)", metavar="FEATURE")
+    vehicles: Optional[StrictInt] = option(
+        None, "at most this many vehicle rows of a Kinematics observation perturbed per step (the ego's row counts; "
+        "the rows the attack moved most are kept, the others set back to clean); none: every row", ge=1,
+        metavar="K")
     steps: StrictInt = option(100, "T, iterations per environment step", ge=1, le=MAX_ITERATIONS, metavar="T")
     n_directions: StrictInt = option(20, "q, random directions per iteration", ge=1, le=MAX_DIRECTIONS, metavar="Q")
     mu: float = option(DEFAULT_MU, "smoothing radius of the finite differences", gt=0, le=MAX_NUMBER)
@@ -86,6 +90,15 @@ class AttackOptions(Strict):
     access: Literal["score", "decision"] = option(
         "score", "what each query returns to the attacker: score (the victim's outputs: Q-values, or a continuous "
         "action) or decision (a discrete victim's action alone, one-hot; only decision-based attacks run on it)")
+    attack_share: float = option(
+        1.0, "the frequency budget: at most this share of an episode's steps is attacked (at every step, of the steps "
+        "so far); the others feed the clean observation", gt=0, le=1, metavar="F")
+    when: Literal["every", "gap"] = option(
+        "every", "which steps the frequency budget attacks: every (as soon as it allows: every 1/F-th step) or gap "
+        "(only where the victim's preference gap, max - min of softmax(scores), is at least --min-gap; Lin et al. "
+        "2017; one counted query a step)")
+    min_gap: Optional[float] = option(
+        None, "with --when gap: the least preference gap (0-1) of a step that is attacked", ge=0, lt=1, metavar="B")
     query_budget: Optional[StrictInt] = option(None, "max queries per environment step; none: no cap",
                                                 ge=1, le=MAX_QUERIES, metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
@@ -98,7 +111,7 @@ class AttackOptions(Strict):
         metavar="R")
 
     @field_validator("eps", "mu", "step_size", "l2_weight", "weight", "kappa", "tol", "max_change",
-                     "check_below", mode="before")
+                     "check_below", "attack_share", "min_gap", mode="before")
     @classmethod
     def _finite_number(cls, value: Any) -> Any:
         if isinstance(value, bool) or (value is not None and not isinstance(value, numbers.Real)):
@@ -107,7 +120,7 @@ class AttackOptions(Strict):
             raise ValueError(f"must be a finite number, not {value}")
         return float(value) if value is not None else None
 
-    @field_validator("steps", "n_directions", "patience", "query_budget", "seed",
+    @field_validator("steps", "n_directions", "patience", "query_budget", "seed", "vehicles",
                      mode="before")
     @classmethod
     def _integer(cls, value: Any) -> Any:

@@ -40,6 +40,7 @@ class AttackSpec(AttackOptions):
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, "attack options", FIELDS)) from None
         _known(self)
+        _sparse(self)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], context: str = "attack config") -> "AttackSpec":
@@ -55,6 +56,7 @@ class AttackSpec(AttackOptions):
         except ValidationError as exc:
             raise ZodriveError(one_line(exc, context, FIELDS)) from None
         _known(spec)
+        _sparse(spec)
         return spec
 
     def with_overrides(self, clear: Sequence[str] = (), **changes: Any) -> "AttackSpec":
@@ -102,12 +104,18 @@ class AttackSpec(AttackOptions):
             frozen = ()
         low, high = (float(b) if np.ndim(b) == 0 else tuple(map(float, np.ravel(b))) for b in bounds)
         return ThreatModel(eps=self.eps, norm=self.norm, mode=self.mode, frozen=frozen,
-                           features=features, low=low, high=high, feature_axis=feature_axis)
+                           features=features, low=low, high=high, feature_axis=feature_axis, vehicles=self.vehicles)
 
     def _make(self, threat: ThreatModel, load_network: Any = None) -> Attack:
         return make_attack(self.attack, threat, **{name: getattr(self, name) for name in ENGINE_OPTIONS},
                            **{k: v for k, v in (("adversary", self.adversary), ("check_below", self.check_below),
                                                 ("load_network", load_network)) if v is not None})
+
+    @property
+    def sparse_in_time(self) -> bool:
+        """Whether a frequency budget skips steps (`attack_share` below 1, or `when` gap): an episode's
+        steps are then decided one by one, by `zodrive.system.Schedule`."""
+        return self.attack_share < 1 or self.when != "every"
 
     def check(self) -> None:
         """Validate the attack's options and budgets without a victim (before any episode runs)."""
@@ -167,6 +175,14 @@ class AttackSpec(AttackOptions):
         if self.access == "decision" and victim.kind != "discrete":
             raise ZodriveError("access decision changes nothing for a continuous victim (its output is its action, the "
                                "decision, already): drop --access decision")
+        if self.when == "gap" and victim.kind != "discrete":
+            raise ZodriveError("when gap reads a preference gap over discrete actions; a continuous victim states "
+                               "none: use --when every")
+        if self.vehicles is not None:
+            rows = threat.vehicle_rows(victim.obs_shape)
+            if self.vehicles >= rows:
+                raise ZodriveError(f"vehicles {self.vehicles} constrains nothing: the observation has {rows} rows; "
+                                   "drop --vehicles or give fewer")
         attack = self._make(threat, load_network)
         if victim.decisions_only and isinstance(attack, GradientEstimateAttack):
             log.warning("the policy answers with its decision alone (one-hot), so %s, which follows differences of "
@@ -202,6 +218,25 @@ def decision_refusal(cls: type[Attack]) -> str:
         why = "it reads the victim's scores"
     return (f"attack {cls.name} does not run with access decision ({why}); decision-based attacks: "
             f"{', '.join(decision_attacks())}")
+
+
+def _sparse(spec: AttackOptions) -> None:
+    """The sparse fields' rules that need no victim: `when gap` reads scores and needs its threshold,
+    `min_gap` is read by `when gap` alone, and `vehicles` fits neither the drift box of `max_change` nor
+    an adversary trained on every row."""
+    if spec.when == "gap" and spec.access == "decision":
+        raise ZodriveError("when gap reads the victim's scores (its preference gap), which access decision never "
+                           "shows: use --when every, or --access score")
+    if spec.when == "gap" and spec.min_gap is None:
+        raise ZodriveError("when gap attacks the steps whose preference gap is at least --min-gap B: give it")
+    if spec.when != "gap" and spec.min_gap is not None:
+        raise ZodriveError(f"min_gap is the threshold of --when gap; when {spec.when} never reads it")
+    if spec.vehicles is not None and spec.max_change is not None:
+        raise ZodriveError("vehicles with max_change: a row set back to clean may leave the drift box around "
+                           "the last step's perturbation; give one of them")
+    if spec.vehicles is not None and spec.attack == LEARNED:
+        raise ZodriveError("attack learned: the adversary was trained to move every row; vehicles would cut "
+                           "its perturbation to rows it was not trained for")
 
 
 def _known(spec: AttackOptions) -> None:

@@ -30,6 +30,12 @@ class ThreatModel:
     default `presence`) are never changed, and a clean coordinate is never moved by the box: a
     clean value outside it stays reachable. Where a guarantee cannot hold (a frozen feature the observation does
     not have), `mask` raises instead of skipping it.
+
+    `vehicles` (None: every row) makes the budget sparse in space: a point differs from the clean
+    observation in at most that many rows of a Kinematics observation (one row per vehicle, the ego's
+    first, features along the last axis). The projection keeps the rows whose change (after the mask,
+    the ball and the box) has the largest L2 norm, the lower row on a tie, and sets the others back to
+    their clean values; a point that already moves at most that many rows is left as it is.
     """
 
     eps: float = 0.2                      # [normalized units] 0.2 = 10 % of [-1, 1]
@@ -40,6 +46,7 @@ class ThreatModel:
     low: float | tuple[float, ...] = -1.0  # observation box (the preset's range, or per dimension)
     high: float | tuple[float, ...] = 1.0
     feature_axis: int = -1                 # the observation axis the features are named along
+    vehicles: int | None = None            # at most this many rows (vehicles) perturbed; None: every row
     _mask_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -55,6 +62,17 @@ class ThreatModel:
         low, high = np.asarray(self.low, dtype=np.float64), np.asarray(self.high, dtype=np.float64)
         if low.shape != high.shape or not np.all(low < high):
             raise ZodriveError(f"observation box [{self.low}, {self.high}] is empty")
+        if self.vehicles is not None and self.vehicles < 1:
+            raise ZodriveError(f"vehicles must be >= 1, not {self.vehicles}")
+
+    def vehicle_rows(self, obs_shape: Sequence[int]) -> int:
+        """The vehicle rows of observations of `obs_shape` that `vehicles` counts: a 2-D observation whose
+        named features run along its last axis (Kinematics); anything else has none, and is refused."""
+        shape = tuple(obs_shape)
+        if not (len(shape) == 2 and self.features and self.feature_axis in (-1, 1) and shape[1] == len(self.features)):
+            raise ZodriveError(f"vehicles counts the rows of a Kinematics observation (one per vehicle, features "
+                               f"along the last axis); observations of shape {shape} have none: drop --vehicles")
+        return shape[0]
 
     def box(self, dim: int) -> tuple[np.ndarray, np.ndarray]:
         """The observation box as two (dim,) arrays for flattened observations of `dim` values."""
@@ -91,7 +109,8 @@ class ThreatModel:
         """`project` around the flattened clean rows `x0` (N, dim) of observations of
         `obs_shape`, their box computed once (an attack projects around them every iteration);
         `integer`: the sensor gives integers (pixels), so every projected point is whole."""
-        return Projector(self, x0, self.mask(obs_shape).reshape(-1), integer)
+        rows = None if self.vehicles is None else self.vehicle_rows(obs_shape)
+        return Projector(self, x0, self.mask(obs_shape).reshape(-1), integer, rows)
 
     def random_delta(self, shape: tuple[int, ...], mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Uniform draws (shape = (N, dim)) from the budget set (L-inf box or L2 ball) on the
@@ -109,10 +128,13 @@ class ThreatModel:
 
 class Projector:
     """`ThreatModel.project` around fixed clean rows: candidates (A, M, dim) of rows `rows`
-    into the threat model, by the same arithmetic as `project` (broadcast, not repeated)."""
+    into the threat model, by the same arithmetic as `project` (broadcast, not repeated); with
+    `threat.vehicles`, the flat points are `vehicle_rows` rows of features each."""
 
-    def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray, integer: bool = False) -> None:
+    def __init__(self, threat: ThreatModel, x0: np.ndarray, mask: np.ndarray, integer: bool = False,
+                 vehicle_rows: int | None = None) -> None:
         self.threat, self.x0, self.mask, self.integer = threat, x0, mask, integer
+        self.vehicle_rows = vehicle_rows
         low, high = threat.box(x0.shape[1])
         self.low, self.high = np.minimum(low, x0), np.maximum(high, x0)  # never move a clean value
 
@@ -136,7 +158,23 @@ class Projector:
             inside -= x0  # and the point queried is the point fed (nothing is rounded after the search)
             np.trunc(inside, out=inside)
             inside += x0
+        if self.vehicle_rows is not None and t.vehicles is not None and t.vehicles < self.vehicle_rows:
+            inside = self._sparse(inside, x0, t.vehicles)
         return inside
+
+    def _sparse(self, x: np.ndarray, x0: np.ndarray, k: int) -> np.ndarray:
+        """Points (A, M, dim) around clean rows x0 (A, 1, dim) with every vehicle row but the k it moved most
+        (L2 norm of the row's change; the lower row on a tie) set back to clean."""
+        rows = self.vehicle_rows
+        assert rows is not None
+        change = (x - x0).reshape(*x.shape[:-1], rows, -1).astype(np.float64)
+        size = np.einsum("...f,...f->...", change, change)
+        order = np.argsort(-size, axis=-1, kind="stable")  # the largest first, ties in row order
+        keep = np.zeros(size.shape, dtype=bool)
+        np.put_along_axis(keep, order[..., :k], True, axis=-1)
+        keep &= size > 0
+        per_value = np.repeat(keep, x.shape[-1] // rows, axis=-1)
+        return np.where(per_value, x, np.broadcast_to(x0, x.shape)).astype(x.dtype, copy=False)
 
 
 def distortion(x: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

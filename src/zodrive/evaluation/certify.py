@@ -250,8 +250,9 @@ def episode_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int
     return np.stack(states)
 
 
-PER_EPISODE = ("warm_start", "max_change", "check_below")
-"""Attack settings about an episode's sequence of steps; the sandwich attacks each state on its own."""
+PER_EPISODE = ("warm_start", "max_change", "check_below", "min_gap")
+"""Attack settings about an episode's sequence of steps (and the frequency budget, `attack_share` and `when`);
+the sandwich attacks each state on its own."""
 
 CHUNK = 512  # states attacked per call
 
@@ -267,7 +268,7 @@ def sandwich(states: np.ndarray, certified: np.ndarray, attack: str, eps: float,
     from zodrive.attacks.spec import load_attack
 
     base = load_attack(attack)
-    spec = base.with_overrides(eps=eps, target="none", tol=tol, warm_start=False,
+    spec = base.with_overrides(eps=eps, target="none", tol=tol, warm_start=False, attack_share=1.0, when="every",
                                clear=[k for k in PER_EPISODE[1:] if getattr(base, k) is not None])
     attacker, objective, oracle = build_attacker(spec, victim, preset)
     won = np.zeros(len(states), dtype=bool)

@@ -90,6 +90,8 @@ def lockstep_blocker(job: EvalJob) -> str | None:
     policy that reads nothing but the observation and keeps no state between steps."""
     if job.defense is not None and keeps_state(job.defense):
         return f"the {job.defense} defense keeps its own state for one episode"
+    if job.attack is not None and AttackSpec.from_mapping(job.attack).sparse_in_time:
+        return "a frequency budget decides an episode's steps one by one"
     if resolve(job.model).reads_simulator:
         return f"{job.model} reads its own simulator"
     return None
@@ -530,12 +532,15 @@ def summarize(
         )
         if summary["eps"] is not None:
             summary["eps_means"] = eps_means(job.preset, summary["eps"])
-        if steps:
+        if AttackSpec.from_mapping(job.attack).sparse_in_time:  # a frequency budget: how much of it was spent
+            summary["attacked_share"] = steps_total / max(summary["victim_rows"]["decisions"], 1)
+        attacked = [s for s in steps or () if s.get("attacked", True)]  # the per-step figures of attacked steps
+        if attacked:
             summary.update(
-                mean_linf=float(np.mean([s["linf"] for s in steps])),
-                mean_l2=float(np.mean([s["l2"] for s in steps])),
-                iterations_per_step=float(np.mean([s["iterations"] for s in steps])),
-                attack_ms_per_step=float(1000 * np.mean([s["wall_time"] for s in steps])),
+                mean_linf=float(np.mean([s["linf"] for s in attacked])),
+                mean_l2=float(np.mean([s["l2"] for s in attacked])),
+                iterations_per_step=float(np.mean([s["iterations"] for s in attacked])),
+                attack_ms_per_step=float(1000 * np.mean([s["wall_time"] for s in attacked])),
             )
     summary["command"] = command_line()
     summary["versions"] = versions()

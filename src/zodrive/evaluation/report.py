@@ -64,6 +64,10 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"attack success: {what} (base rate {_percent(summary['target_base_rate'])}); "
                 f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
             )
+        if summary.get("attacked_share") is not None:  # a frequency budget: queries/step are per attacked step
+            rows = summary["victim_rows"]
+            lines.append(f"attacked steps: {summary['attacked_share']:.1%} of {rows['decisions']} decisions "
+                         f"(frequency budget); {rows['attack_queries']} attack queries in all")
     return "\n".join(lines)
 
 

@@ -97,18 +97,21 @@ class Episode:
         self.total = 0.0
         self.speeds: list[float] = []
         self.crashed = self.terminated = False
-        self.queries = self.successes = self.applicable = 0
+        self.queries = self.successes = self.applicable = self.attacked_steps = 0
         self.max_linf = 0.0
         space = env.action_space
         self.counts = (np.zeros(int(space.n), dtype=np.int64)
                        if policy.kind == "discrete" and hasattr(space, "n") else None)
 
     def acted(self, action: Any, attack: dict[str, Any] | None) -> None:
-        """The policy chose `action` on an observation the attack's step `attack` made (None: clean)."""
+        """The policy chose `action` on an observation the attack's step `attack` made (None: clean); a
+        step a frequency budget skipped (`attacked` false) counts only its queries (the gap's read)."""
         if self.counts is not None:
             self.counts[action] += 1
         if attack is not None:
             self.queries += attack["queries"]
+        if attack is not None and attack.get("attacked", True):
+            self.attacked_steps += 1
             self.successes += attack["success"]
             self.applicable += not attack["already"]
             self.max_linf = max(self.max_linf, attack["linf"])
@@ -130,7 +133,7 @@ class Episode:
             self.position = position
             self.on_road += bool(ego.on_road)
 
-    def record(self, attacked: bool) -> EpisodeRecord:
+    def record(self) -> EpisodeRecord:
         road, env = self.road, self.env
         core: Any = env.unwrapped
         return EpisodeRecord(
@@ -142,7 +145,7 @@ class Episode:
             distance=float(core.vehicle.position[0]) - self.start_x if road else 0.0, queries=self.queries,
             path_length=self.path if road else None,
             on_road_share=self.on_road / max(self.length, 1) if road else None,
-            attacked_steps=self.length if attacked else 0, successes=int(self.successes),
+            attacked_steps=int(self.attacked_steps), successes=int(self.successes),
             applicable=int(self.applicable), max_linf=self.max_linf,
             action_counts=self.counts.tolist() if self.counts is not None else None,
         )
@@ -186,7 +189,7 @@ def run_episode(
         done = terminated or truncated
         if on_tick is not None:
             on_tick(1)
-    return tracker.record(attacked)
+    return tracker.record()
 
 
 def run_lockstep(
@@ -248,7 +251,7 @@ def run_lockstep(
             obs[row], reward, terminated, truncated, info = env.step(action)
             tracker.stepped(reward, terminated, info)
             if terminated or truncated:
-                yield tracker.record(attack is not None)
+                yield tracker.record()
                 if waiting:
                     start(env, row)
                 else:
