@@ -298,23 +298,36 @@ def test_more_clean_episodes_than_attacked_ones(tmp_path: Path) -> None:
     assert bench_row("m", "k", proto, folder, 100)["official"] is False  # 100 clean episodes: not the protocol
 
 
-def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path) -> None:
-    """The clean cell of more episodes begins with the attacked grid's own clean episodes, and the brake
-    is paired with it episode by episode."""
+def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path, monkeypatch) -> None:
+    """The clean cell of more episodes begins with the attacked grid's own clean episodes (copied, not run
+    again), and the board's brake, run once for the scenario, is paired with it episode by episode."""
+    import zodrive.evaluation.evaluate as evaluation
     from zodrive.experiments.bench import Protocol, bench
 
     proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2)
-    row = bench("baseline:idle", proto, tmp_path, progress=False, envs=1)
+    board = tmp_path / "highway-fast"
+    seeds: dict[str, list[int]] = {}  # the clean episodes run, per policy
+    real = evaluation.run_episodes
+    monkeypatch.setattr(evaluation, "run_episodes", lambda job, indices, *a, **k: (
+        seeds.setdefault(job.model, []).extend(job.seed + i for i in indices if job.attack is None),
+        real(job, indices, *a, **k))[1])
+    row = bench("baseline:idle", proto, board / "idle", progress=False, envs=1)
 
     def returns(folder: Path) -> list[float]:
         (cell,) = (folder / "cells").glob("*-none")
         return [json.loads(line)["return"] for line in (cell / "episodes.jsonl").read_text().splitlines()]
 
-    assert len(returns(tmp_path / "clean")) == 2 and returns(tmp_path / "clean")[:1] == returns(tmp_path)
-    assert row["clean"]["return"] == pytest.approx(sum(returns(tmp_path / "clean")) / 2)
-    brake = returns(tmp_path / "brake")
-    mean = sum(a - b for a, b in zip(returns(tmp_path / "clean"), brake, strict=True)) / 2
+    clean = returns(board / "idle" / "clean")
+    assert len(clean) == 2 and clean[:1] == returns(board / "idle") and sorted(seeds["baseline:idle"]) == [100000, 100001]
+    assert row["clean"]["return"] == pytest.approx(sum(clean) / 2)
+    brake = returns(board / "brake")
+    assert not (board / "idle" / "brake").exists()
+    mean = sum(a - b for a, b in zip(clean, brake, strict=True)) / 2
     assert len(brake) == 2 and row["vs_brake"][0] == pytest.approx(mean)
+    assert seeds["baseline:slower"] == [100000, 100001]
+    other = bench("baseline:faster", proto, board / "faster", progress=False, envs=1)
+    assert seeds["baseline:slower"] == [100000, 100001]  # the second row reads the same brake, run once
+    assert other["brake"] == row["brake"] and not (board / "faster" / "brake").exists()
 
 
 def test_the_leaderboard_refuses_rows_it_cannot_read_in_one_line(tmp_path: Path, capsys) -> None:

@@ -27,6 +27,7 @@ from zodrive.defense import defense_version
 from zodrive.drivers.baselines import BASELINES, PREFIX, get_baseline
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
+from zodrive.evaluation.evaluate import RUN_FILES
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
 from zodrive.experiments.compare import cell_folder, compare, strongest
@@ -178,11 +179,12 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
                 shutil.rmtree(folder)
     clean_out = clean_folder(out, n, n_clean)
     if clean_out != out:
+        _start_from_grid(out, clean_out, cells, force)
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
                 preset=proto.scenario, force=force, envs=envs, trust=trust, defenses=defenses)
-    brake = out / "brake"
-    compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, force=force, envs=envs)
+    # the board's brake, run once for every row of the scenario (never forced: its cell's key decides)
+    compare([BRAKE], [], [], n_clean, brake_folder(out), workers=workers, progress=progress, seed=proto.seed,
+            preset=proto.scenario, envs=envs)
     key = resolved.key() if defense is None else f"{resolved.key()}+defense:{defense}" + (
         f":v{defense_version(defense)}" if defense_version(defense) is not None else "")
     row = bench_row(name or resolved.label, key, proto, out, n, n_clean, defense=defense)
@@ -190,6 +192,27 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         row["trust_model"] = True
     write_json(out / "row.json", row)
     return row
+
+
+def brake_folder(out: Path) -> Path:
+    """The constant brake's comparison a bench row in `out` is read against: the board's, one per scenario
+    (`BOARD/SCENARIO/brake`), or the row's own `brake/` where it has one (rows benched before the brake was
+    shared: the same seeds, the same episodes)."""
+    own = out / "brake"
+    return own if own.is_dir() else out.parent / "brake"
+
+
+def _start_from_grid(out: Path, clean_out: Path, cells: list[dict[str, Any]], force: bool) -> None:
+    """Seed the clean cell of more episodes with the attacked grid's clean cell: the same evaluation (same key,
+    same first seeds), so its first episodes are not run twice; the evaluation resumes from them."""
+    (cell,) = [c for c in cells if c["attack"] == "none"]
+    grid_cell, target = _cell_folder(out, cell), _cell_folder(clean_out, cell)
+    if force or target.exists() or not (grid_cell / "eval_key.json").is_file():
+        return
+    target.mkdir(parents=True)
+    for name in RUN_FILES:
+        if name != "summary.json" and (grid_cell / name).is_file():  # the summary is the finished run's own
+            shutil.copyfile(grid_cell / name, target / name)
 
 
 def _earlier_version(out: Path, proto: Protocol) -> bool:
@@ -233,7 +256,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     cells = _cells(out)
     same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
     clean = next(c for c in _cells(clean_folder(out, episodes, n_clean)) if c["attack"] == "none")
-    brake = next(c for c in _cells(out / "brake") if c["attack"] == "none")
+    brake = next(c for c in _cells(brake_folder(out)) if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in black_box_of(proto, defense)]
     white_box = [c for c in cells if _attack(c) == proto.white_box]
     if black_box:
@@ -249,7 +272,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     area = float(np.trapezoid(returns, grid) / (grid[-1] * same["mean_return"])) if same["mean_return"] > 0 else None
     # the smallest ε whose ball holds an attack that collides more often than the brake does clean, on the
     # same episodes (the brake's first `episodes`, not its 300 clean ones: another set of seeds)
-    brake_rate = _collision_rate(out / "brake", episodes)
+    brake_rate = _collision_rate(brake_folder(out), episodes)
     passes = 0.0 if same["collision_rate"] > brake_rate else \
         min((c["eps"] for c in black_box if c["collision_rate"] > brake_rate), default=None)
     return {
@@ -262,7 +285,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
         "clean_on_attacked_episodes": {"return": same["mean_return"], "collision_rate": same["collision_rate"]},
         "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
-        "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), out / "brake"),
+        "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), brake_folder(out)),
         "eps_units": physical_eps(proto),
         **({"defense": defense, "black_box": list(black_box_of(proto, defense))} if defense else {}),
         **({"query_budget": proto.query_budget} if proto.query_budget else {}),
