@@ -180,18 +180,20 @@ def test_the_committed_leaderboard_is_generated_from_the_committed_rows() -> Non
 
 
 def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
-    """Δ brake is computed from the row folder's clean and brake episodes, seed by seed: the brake's own row is
-    exactly 0, and the committed highway-fast DQN (seed 0) beats the brake by a margin its CI shows."""
-    from zodrive.experiments.bench import brake_margin, row_clean_folder
+    """Δ brake is computed from the row folder's clean episodes and the board's brake, seed by seed: the brake's
+    own row is exactly 0, and the committed highway-fast DQN (seed 0) beats the brake by a margin its CI shows."""
+    from zodrive.experiments.bench import brake_folder, brake_margin, row_clean_folder
 
     board = Path(__file__).resolve().parents[1] / "results" / "bench" / "highway-fast"
+    brake = board / "brake"  # one per scenario, no row keeps a copy
+    assert [brake_folder(row.parent) for row in board.glob("*/row.json")] == [brake] * len(list(board.glob("*/row.json")))
     for name in ("baseline-slower", "dqn-seed-0"):
         row = json.loads((board / name / "row.json").read_text())
-        assert brake_margin(row_clean_folder(row, board / name), board / name / "brake") == row["vs_brake"]
-    assert brake_margin(board / "baseline-slower" / "clean", board / "baseline-slower" / "brake") == [0.0, 0.0, 0.0]
-    mean, low, high = brake_margin(board / "dqn-seed-0" / "clean", board / "dqn-seed-0" / "brake")
+        assert brake_margin(row_clean_folder(row, board / name), brake) == row["vs_brake"]
+    assert brake_margin(board / "baseline-slower" / "clean", brake) == [0.0, 0.0, 0.0]
+    mean, low, high = brake_margin(board / "dqn-seed-0" / "clean", brake)
     assert 0 < low < mean < high
-    assert brake_margin(board / "dqn-seed-0", board / "dqn-seed-0" / "brake") is None  # 100 episodes against 300
+    assert brake_margin(board / "dqn-seed-0", brake) is None  # 100 episodes against 300
 
 
 def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same_table() -> None:

@@ -34,7 +34,7 @@ def describe(name: str, eps: dict[int, dict]) -> str:
 
 def main() -> None:
     plain = episodes(next((ROW / "clean" / "cells").glob("*-none")) / "episodes.jsonl")
-    brake = episodes(next((ROW / "brake" / "cells").glob("*-none")) / "episodes.jsonl")
+    brake = episodes(next((ROW.parent / "brake" / "cells").glob("*-none")) / "episodes.jsonl")
     print(describe("undefended", plain))
     print(describe("brake", brake))
     for defense in sys.argv[1:]:
