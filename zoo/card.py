@@ -1,6 +1,7 @@
 """Write the CARD.md of each zoo policy from its own records: the command and seed that trained it
 (`train.json`), the checkpoint chosen on tuning seeds (`selection.json`), its SHA-256, and its bench
-row (`results/bench/SCENARIO/NAME/row.json`). Nothing in a card is typed by hand.
+row (`results/bench/SCENARIO/NAME/row.json`) and its exact check (`exact.json` beside it). Nothing in a card is
+typed by hand.
 
 Run: python zoo/card.py
 """
@@ -15,6 +16,7 @@ from choose_checkpoint import EPISODES  # zoo/choose_checkpoint.py, beside this 
 from q_ensemble import STEPS  # zoo/q_ensemble.py, beside this script
 from train import DEFAULTS  # zoo/train.py, beside this script
 from zodrive.drivers.baselines import get_baseline
+from zodrive.experiments.exact_board import read_exact, why_not_shown
 from zodrive.runinfo import sha256
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,7 +154,21 @@ def _bench(run: Path, scenario: str) -> list[str]:
                     f"inside each ε-ball (docs/bench.md{attacked}): "
                     + ", ".join(
                         f"ε {p['eps']:g} {p['return']:.2f} ({100 * p['collision_rate']:.0f}%)" for p in row["attacked"])
-                    + ".", ""]
+                    + ".", ""] + _exact(row, row_path.parent)
+
+
+def _exact(row: dict, folder: Path) -> list[str]:
+    """The bench row's exact check (`exact.json`, docs/bench.md "The exact check"), if it is of this row."""
+    exact = read_exact(folder)
+    if exact is None or why_not_shown({**row, "exact": exact}):
+        return []
+    n, first, last = exact["states"], *exact["seeds"]
+    return [f"Exact check of the bench row (`{exact['command']}`): of the first {n} clean states (episodes "
+            f"{first}–{last}), exactly attackable "
+            + ", ".join(f"at ε {p['eps']:g} {p['attackable']}" + (f" ({p['unknown']} unknown)" if p["unknown"] else "")
+                        for p in exact["rows"])
+            + f"; of those, the black-box ensemble ({', '.join(exact['black_box'])}) missed "
+            + ", ".join(f"{p['ensemble']['missed']} of {p['attackable']}" for p in exact["rows"]) + ".", ""]
 
 
 def main() -> None:

@@ -64,9 +64,11 @@ def add_parsers(sub: Any) -> None:
     cert = sub.add_parser("certify", help="share of a model's clean states where no perturbation within eps can "
                                           "change the action (interval bounds; reads the weights: white-box)")
     cert.add_argument("model", help="SB3 / sb3-contrib zip or model folder (MLP policies)")
-    cert.add_argument("--eps", nargs="+", type=option_type("eps"), required=True, help="L-inf radii to certify")
+    cert.add_argument("--eps", nargs="+", type=option_type("eps"), help="L-inf radii to certify (required without "
+                                                                        "--row)")
     scenario_flags(cert, trust=False)
-    cert.add_argument("--episodes", type=episode_count, default=5, help="clean episodes whose states are certified")
+    cert.add_argument("--episodes", type=episode_count, default=None,
+                      help="clean episodes whose states are certified (default: 5)")
     cert.add_argument("--seed", type=seed_number, default=None, help="first episode seed (default: 100000)")
     cert.add_argument("--tol", type=option_type("tol"),
                       help="continuous policies: a state counts as certified if no action dimension can move more "
@@ -83,7 +85,13 @@ def add_parsers(sub: Any) -> None:
                       help="--exact: also bisect each state's smallest radius that changes its action (8 more exact "
                            "checks per state at most, started from the verdicts at the --eps radii, up to the largest)")
     cert.add_argument("--out", type=Path, help="folder for certify.json")
-    cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out")
+    cert.add_argument("--row", type=Path, metavar="FOLDER",
+                      help="the exact check of a bench row (results/bench/SCENARIO/NAME) for the leaderboard: its "
+                           "protocol's seeds, eps grid, black-box ensemble and query cap, written to FOLDER/exact.json "
+                           "(implies --exact; MODEL is the row's policy; docs/bench.md)")
+    cert.add_argument("--states", type=positive_int, metavar="N",
+                      help="--row: the first N clean states of the row's attacked episodes (default: 100)")
+    cert.add_argument("--force", action="store_true", help="overwrite certify.json in --out (exact.json with --row)")
 
 
 def _check_loss(args: argparse.Namespace, spec: Any, preset: dict[str, Any]) -> None:
@@ -220,6 +228,13 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if policy.kind != "model":
         raise ZodriveError("certify bounds an SB3 zip's rebuilt network; baselines, ONNX files and Python "
                            "policies have no network zodrive can read")
+    if args.row is not None:
+        return _certify_row(args)
+    if args.states is not None:
+        raise ZodriveError("--states samples a bench row's clean states: give --row")
+    if args.eps is None:
+        raise ZodriveError("certify needs --eps (or --row, whose protocol says them)")
+    args.episodes = 5 if args.episodes is None else args.episodes
     if args.out is not None:
         refuse_nonempty(args.out / "certify.json", args.force, "certificates")
     preset = preset_of(args)
@@ -270,6 +285,36 @@ def cmd_certify(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_json(args.out / "certify.json", {**result, "command": command_line()})
         print(f"results: {args.out}/certify.json")
+    return 0
+
+
+ROW_FIXES = ("eps", "episodes", "seed", "tol", "out", "preset", "env_id", "obs_bounds", "shifted")
+"""What a bench row's protocol fixes for `certify --row` (or what it does not apply to): refused beside it."""
+
+
+def _certify_row(args: argparse.Namespace) -> int:
+    """certify --row: the row's exact check, `exact.json` beside its `row.json` (`experiments.exact_row`)."""
+    from zodrive.experiments.exact_row import STATES, TIME_LIMIT, certify_row
+
+    given = [name for name in ROW_FIXES if getattr(args, name, None) not in (None, False)]
+    given += ["attack"] * bool(args.attack) + ["env_set"] * bool(args.env_set) + ["min_eps"] * bool(args.min_eps)
+    if given:
+        raise ZodriveError(f"--row takes its protocol's eps, seeds, scenario and attacks from the row: drop "
+                           f"--{given[0].replace('_', '-')}")
+    if not (args.row / "row.json").is_file():
+        raise ZodriveError(f"--row {args.row}: no bench row there (expected {args.row}/row.json)")
+    exact = certify_row(args.model, args.row, state_count=STATES if args.states is None else args.states,
+                        time_limit=TIME_LIMIT if args.time_limit is None else args.time_limit, force=args.force)
+    print(f"{exact['policy']} ({exact['protocol']}): the first {exact['states']} clean states of episodes "
+          f"{exact['seeds'][0]}-{exact['seeds'][1]}; ensemble {', '.join(exact['black_box'])}, untargeted, each state "
+          "on its own, " + (f"at most {exact['query_budget']} queries a state" if exact["query_budget"]
+                            else "each attack's own query bound"))
+    for row in exact["rows"]:
+        print(f"  eps {row['eps']:<6g} " + _exact_line({**row, "time_limit": exact["time_limit"]}, exact["states"]))
+        for name, gap in row["attacks"].items():
+            print(f"    {name}: " + _gap_line(gap))
+        print("    black-box ensemble: " + _gap_line(row["ensemble"]))
+    print(f"results: {args.row / 'exact.json'}")
     return 0
 
 

@@ -234,20 +234,29 @@ def margins(net: nn.Module, action: torch.Tensor, lo: torch.Tensor, hi: torch.Te
 
 def episode_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int) -> np.ndarray:
     """Every observation of `episodes` clean episodes from seeds seed, seed + 1, ..."""
+    return first_states(preset, victim, seed, episodes)[0]
+
+
+def first_states(preset: dict[str, Any], victim: Any, seed: int, episodes: int,
+                 limit: int | None = None) -> tuple[np.ndarray, int]:
+    """The observations of clean episodes from seeds seed, seed + 1, ... (at most `episodes` episodes),
+    only the first `limit` of them if given, and how many episodes they span."""
     from zodrive.envs import make_env
     from zodrive.evaluation.rollout import act
 
     env = make_env(preset)
-    states = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
+    states: list[np.ndarray] = []
+    driven = 0
+    while driven < episodes and (limit is None or len(states) < limit):
+        obs, _ = env.reset(seed=seed + driven)
+        driven += 1
         done = False
-        while not done:
+        while not done and (limit is None or len(states) < limit):
             states.append(obs)
             obs, _, terminated, truncated, _ = env.step(act(victim, obs, env.action_space))
             done = terminated or truncated
     env.close()
-    return np.stack(states)
+    return np.stack(states), driven
 
 
 PER_EPISODE = ("warm_start", "max_change", "check_below", "min_gap")
@@ -258,17 +267,20 @@ CHUNK = 512  # states attacked per call
 
 
 def sandwich(states: np.ndarray, certified: np.ndarray, attack: str, eps: float, victim: Any,
-             preset: dict[str, Any], seed: int, tol: float) -> tuple[dict[str, Any], np.ndarray]:
+             preset: dict[str, Any], seed: int, tol: float,
+             query_budget: int | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Attack every state on its own with `attack` (untargeted: any other action, or an action
-    moved by >= `tol`; its config otherwise, minus what is about episodes, `PER_EPISODE`) at
-    `eps`, beside the certified share on the same states. success + certified <= 1 whenever
+    moved by >= `tol`; its config otherwise, minus what is about episodes, `PER_EPISODE`; at most
+    `query_budget` queries a state, as a bench protocol caps a step) at `eps`, beside the certified
+    share on the same states. success + certified <= 1 whenever
     the certificate is sound: a state both won and certified is a contradiction (counted, and
     it must be 0); `unknown` = 1 - success - certified is what neither side decides. Returns the
     summary and which states the attack won."""
     from zodrive.attacks.spec import load_attack
 
     base = load_attack(attack)
-    spec = base.with_overrides(eps=eps, target="none", tol=tol, warm_start=False, attack_share=1.0, when="every",
+    spec = base.with_overrides(eps=eps, target="none", tol=tol, warm_start=False, query_budget=query_budget,
+                               attack_share=1.0, when="every",
                                clear=[k for k in PER_EPISODE[1:] if getattr(base, k) is not None])
     attacker, objective, oracle = build_attacker(spec, victim, preset)
     won = np.zeros(len(states), dtype=bool)

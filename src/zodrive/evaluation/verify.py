@@ -8,15 +8,18 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.evaluation.certify import certify, episode_states, sandwich
+from zodrive.evaluation import certify as bounds  # its functions looked up when called (tests replace the episodes)
+from zodrive.evaluation.certify import certify, sandwich
 from zodrive.evaluation.exact import attack_gap, exact_network, exact_summary, min_eps, min_eps_summary
 
 
 def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *, episodes: int, seed: int,
                   tol: float = 0.2, attacks: tuple[str, ...] = (), exact_limit: float | None = None,
-                  min_eps_steps: int = 0) -> dict[str, Any]:
-    """The certified share of a model's clean states at each eps (see `certify`), for each of
-    `attacks` its success on the same states (`sandwich`), and with `exact_limit` (seconds per
+                  min_eps_steps: int = 0, state_count: int | None = None,
+                  query_budget: int | None = None) -> dict[str, Any]:
+    """The certified share of a model's clean states at each eps (see `certify`; the states of
+    `episodes` clean episodes, or with `state_count` only the first that many), for each of `attacks` its
+    success on the same states (`sandwich`, at most `query_budget` queries a state), and with `exact_limit` (seconds per
     state) the complete verdicts of `exact.exact` on them: then each attack's distance from optimal
     (`exact.attack_gap`: its misses among the exactly attackable states, alone and for the union of
     the black-box attacks), per-state verdicts and wins as strings (`per_state`), and with
@@ -32,7 +35,10 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
         exact_network(network.net, network.kind)  # a network --exact cannot decide is refused before any episode
     env = scenario(preset)
     victim = network_victim(network.net, network.kind, network.obs_shape)
-    states = episode_states(preset, victim, seed, episodes)
+    if state_count is None:
+        states = bounds.episode_states(preset, victim, seed, episodes)
+    else:  # the first `state_count` observations; `episodes`: how many episodes they span
+        states, episodes = bounds.first_states(preset, victim, seed, episodes, state_count)
     mask = AttackSpec(eps=max(eps_values)).threat(env.features, env.bounds).mask(states.shape[1:])  # no eps in it
     wins: dict[str, list[np.ndarray]]
     rows, verdicts, wins = [], [], {name: [] for name in attacks}
@@ -41,7 +47,8 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
         row: dict[str, Any] = {"eps": eps, "certified_share": float(cert.certified.mean()),
                                "states": len(states), "mean_bound": float(np.mean(cert.bound))}
         if attacks:  # from above: each attack, and the states any of them won
-            sides = [sandwich(states, cert.certified, name, eps, victim, preset, seed, tol) for name in attacks]
+            sides = [sandwich(states, cert.certified, name, eps, victim, preset, seed, tol, query_budget)
+                     for name in attacks]
             row["attacks"] = [side for side, _ in sides]
             anyone = np.any([won for _, won in sides], axis=0)
             row["any_attack"] = {"success_share": float(anyone.mean()),
@@ -68,7 +75,7 @@ def certify_model(model: str, preset: dict[str, Any], eps_values: list[float], *
            "exact_method": None if exact_limit is None else (
                "MILP per state (Tjeng et al. 2019: big-M on CROWN's bounds, HiGHS) after a gradient search; "
                "every counterexample confirmed by the float32 network"),
-           "tol": tol if network.kind == "continuous" else None, "rows": rows}
+           "tol": tol if network.kind == "continuous" else None, "query_budget": query_budget, "rows": rows}
     if exact_limit is not None and min_eps_steps > 0:
         found = min_eps(network.net, network.kind, states, eps_values, verdicts, mask, env.bounds, exact_limit,
                         steps=min_eps_steps)

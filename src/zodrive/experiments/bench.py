@@ -31,6 +31,7 @@ from zodrive.evaluation.evaluate import RUN_FILES
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
 from zodrive.experiments.compare import cell_folder, compare, strongest
+from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_notes, read_exact
 from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
@@ -466,7 +467,7 @@ class _Row(BaseModel):
     eps_collisions_pass_brake: float | None
 
 
-def _read_row(path: Path) -> dict[str, Any]:
+def read_row(path: Path) -> dict[str, Any]:
     """One `row.json`, read only if it is a regular file of a row's size, and checked for the fields the
     leaderboard reads: anything else is one line naming the file."""
     if not path.is_file() or path.stat().st_size > MAX_ROW_BYTES:
@@ -491,9 +492,10 @@ def read_rows(board: Path) -> list[dict[str, Any]]:
     """Every `row.json` under `board` (one folder per scenario, one per policy)."""
     rows = []
     for path in sorted(board.glob("*/*/row.json")):
-        row = _read_row(path)
+        row = read_row(path)
         if "vs_brake" not in row:  # a row written before the column: from its own cells
-            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent), path.parent / "brake")
+            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent), brake_folder(path.parent))
+        row["exact"] = read_exact(path.parent)
         rows.append((row, path.parent))
     constant_margins(rows)
     defense_margins(rows)
@@ -520,7 +522,11 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "fewer episodes than the protocol's (`--episodes`) are unofficial: they stand in a table of their own",
              "under each ranked table, never ranked, never bold. Defense: what stands between the sensor and the",
              "policy in a defended row (`zodrive bench MODEL --defense NAME`); its attacks query the defended",
-             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md).", ""]
+             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md). Exact attackable:",
+             "of a sample of the row's clean states (said under the table), those where some perturbation inside the",
+             "ε-ball changes the action, decided by a complete check of the network (`zodrive certify MODEL --row",
+             "FOLDER`; ReLU MLPs); ensemble miss: of those, the ones no black-box attack of the ensemble changed (PGD",
+             "not counted); – where a row has no such check (docs/bench.md, \"The exact check\").", ""]
     for proto in sorted({r["protocol"] for r in rows}):  # rows of two versions never share a table
         group = sorted((r for r in rows if r["protocol"] == proto),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
@@ -535,12 +541,14 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
         unofficial = [r for r in group if not r["official"]]
         if official:
             lines += _table(official, ranked=True)
+            lines += exact_notes(official)
             lines += _identical(official)
             lines += _defended(official)
         if unofficial:
             lines += [f"Unofficial rows of {scenario} (fewer episodes than the protocol's: not ranked, no margin in "
                       "bold; their CIs are wide):", ""]
             lines += _table(unofficial, ranked=False)
+            lines += exact_notes(unofficial)
     return "\n".join(lines)
 
 
@@ -558,8 +566,9 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
               + "Policy | Defense | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
               "Collisions | Speed (m/s) | " + (f"Clean, first {n} | " if split else "")
               + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
-              + f" | PGD ε {eps[-1]:g} | Area | ε past brake | Queries to crash (median) |",
-              "|---" * (10 + len(eps) + int(ranked) + int(split)) + "|"]
+              + f" | PGD ε {eps[-1]:g} | Area | ε past brake | Queries to crash (median) | "
+              + " | ".join(exact_headers(eps)) + " |",
+              "|---" * (12 + len(eps) + int(ranked) + int(split)) + "|"]
     for rank, r in enumerate(group, 1):
         c = r["clean"]
         cells = [f"{p['return']:.2f} / {100 * p['collision_rate']:.0f}%" for p in r["attacked"]]
@@ -578,7 +587,7 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
                                                if split else "")
                      + " | ".join(cells) + f" | {pgd} | "
                      f"{'–' if r['robustness_area'] is None else format(r['robustness_area'], '.2f')} | {past} | "
-                     f"{'–' if q is None else format(q, ',.0f')} |")
+                     f"{'–' if q is None else format(q, ',.0f')} | " + " | ".join(exact_cells(r)) + " |")
     lines.append("")
     return lines
 
