@@ -34,7 +34,7 @@ def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
 
 def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
-    return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of 450), "
+    return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of the maximum), "
             f"collision rate {summary['collision_rate']:.0%}, off-road {summary.get('offroad_rate', 0):.0%}, "
             f"mean speed {summary['mean_speed']:.1f} m/s, "
             + (f"{summary['lane_changes_per_episode']:.1f} lane changes per episode, "
