@@ -55,6 +55,7 @@ CLOSE_HEADWAY, CLOSE_MARGIN = 0.3, 5.0  # [s], [m] `baseline:close-rules`: the s
 # tuned for return on seeds 50000-50019 (347.39 -> 375.56) and checked on 70000-70019 (356.18 -> 374.82)
 # (results/close-rules/README.md)
 BESIDE = 8.0           # [m] |dx| within which a vehicle beside the ego blocks a lane change
+OFFSETS = np.array([0, -1, 1, -2, 2])  # the lanes `rooms` measures, from the ego's: own, left, right, and beyond each
 MID_CHANGE_VY = 0.9    # [m/s] |lateral speed| from which the ego may be in the first half of a lane change
 """highway-env's lane change moves the ego sideways at >= 1.0 m/s until it crosses into the
 target lane (tests/test_slow_shield.py measures it on the real env); a second LANE_RIGHT then
@@ -109,33 +110,28 @@ class ObservationRules:
         closing = np.maximum(-dvx + svx, 0.0)
         safe = desired_gap(ASSUMED_SPEED, closing, self.headway)
         slack = dx - sx - CAR_LENGTH - safe   # per vehicle: its gap beyond the safe gap, if ahead
-        rows = np.arange(len(dx))
 
-        def inside(offset: int) -> np.ndarray:
-            """The vehicles that may be in lane `offset` (pessimistic within the budget when eps > 0)."""
-            return present & (np.abs(dy - offset * LANE_WIDTH) < LANE_WIDTH / 2 + sy)
-
-        def room(within: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            """Gap ahead minus the safe gap over the vehicles `within`, and whether one is beside
-            (see the module docstring)."""
-            ahead = within & (dx + sx > 0)
-            gaps = np.where(ahead, slack, np.inf)
-            if self.eps > 0:  # every vehicle that may be ahead in the lane counts
-                value = gaps.min(axis=1)
-            else:  # the nearest one, as tuned
-                value = gaps[rows, np.where(ahead, dx, np.inf).argmin(axis=1)]
-            return value, (within & (np.abs(dx) < BESIDE + sx)).any(axis=1)
+        # (B, lanes, V), the lanes `OFFSETS` from the ego's: the vehicles that may be in each (pessimistic
+        # within the budget when eps > 0), those of them ahead, and their gaps beyond the safe gap
+        within = present[:, None, :] & (np.abs(dy[:, None, :] - OFFSETS[None, :, None] * LANE_WIDTH)
+                                        < LANE_WIDTH / 2 + sy)
+        ahead = within & (dx + sx > 0)[:, None, :]
+        gaps = np.where(ahead, slack[:, None, :], np.inf)
+        if self.eps > 0:  # every vehicle that may be ahead in the lane counts
+            value = gaps.min(axis=2)
+        else:  # the nearest one, as tuned
+            nearest = np.where(ahead, dx[:, None, :], np.inf).argmin(axis=2)
+            value = np.take_along_axis(gaps, nearest[:, :, None], axis=2)[:, :, 0]
+        beside = (within & (np.abs(dx) < BESIDE + sx)[:, None, :]).any(axis=2)  # (see the module docstring)
 
         def exists(offset: int) -> np.ndarray:
             return (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
 
-        own_lane = inside(0)
-        out: dict[str, np.ndarray] = {"own": np.where(exists(0), room(own_lane)[0], -np.inf)}
-        for side, sign in (("left", -1), ("right", +1)):
-            near, beyond = inside(sign), inside(2 * sign)
-            value, beside = room(near)
-            out[side], out[f"{side}_blocked"] = np.where(exists(sign), value, -np.inf), beside | ~exists(sign)
-            out[f"{side}2"], out[f"{side}2_blocked"] = room(beyond)
+        out: dict[str, np.ndarray] = {"own": np.where(exists(0), value[:, 0], -np.inf)}
+        for side, sign, near, beyond in (("left", -1, 1, 3), ("right", +1, 2, 4)):
+            out[side] = np.where(exists(sign), value[:, near], -np.inf)
+            out[f"{side}_blocked"] = beside[:, near] | ~exists(sign)
+            out[f"{side}2"], out[f"{side}2_blocked"] = value[:, beyond], beside[:, beyond]
         # the lanes the ego may truly be in, its lateral position being within eps too (the shield's test)
         lane_lo = np.clip(np.rint((ego[:, 2] - sy) / LANE_WIDTH), 0, self.lanes - 1)
         lane_hi = np.clip(np.rint((ego[:, 2] + sy) / LANE_WIDTH), 0, self.lanes - 1)

@@ -114,11 +114,12 @@ def physical_eps(proto: Protocol) -> dict[str, dict[str, float]]:
 
 class _Clock:
     """What is left of a bench, said on stderr after each cell of its grid: the attacked cells left at the
-    pace of those done, and the extra clean episodes of the policy and the brake at the clean cell's pace."""
+    pace of those done, then at the clean cell's pace the policy's clean episodes beyond the grid's (its first
+    ones are the grid's own) and the board's brake, unless the brake has run already."""
 
-    def __init__(self, episodes: int, clean_episodes: int) -> None:
+    def __init__(self, episodes: int, clean_episodes: int, brake_done: bool = False) -> None:
         self.start = self.last = time.perf_counter()
-        self.episodes, self.clean_episodes = episodes, clean_episodes
+        self.episodes, self.clean_episodes, self.brake_done = episodes, clean_episodes, brake_done
         self.clean_s: float | None = None
         self.attacked: list[float] = []
 
@@ -132,8 +133,8 @@ class _Clock:
         if not self.attacked or self.clean_s is None:
             return  # nothing to go by yet: a resumed cell takes no time, the first attacked one says the pace
         left = (total - done) * float(np.mean(self.attacked))
-        # then the policy's clean cell of more episodes (if the protocol has one) and the brake's, at the clean pace
-        left += self.clean_s * self.clean_episodes / self.episodes * (2 if self.clean_episodes > self.episodes else 1)
+        extra = max(self.clean_episodes - self.episodes, 0) + (0 if self.brake_done else self.clean_episodes)
+        left += self.clean_s * extra / self.episodes
         print(f"bench: {done}/{total} cells of the grid in {_minutes(now - self.start)}; about {_minutes(left)} "
               "left", file=sys.stderr, flush=True)
 
@@ -169,7 +170,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
     earlier = _earlier_version(out, proto)
-    clock = _Clock(n, n_clean)
+    clock = _Clock(n, n_clean, brake_done=(brake_folder(out) / "table.json").is_file())
     cells = compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
                     preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
                     attack_budgets=capped)
