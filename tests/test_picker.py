@@ -125,7 +125,7 @@ def test_a_picker_fitted_for_something_else_is_a_one_line_error(tmp_path: Path) 
         build(gate_victim(), tmp_path / "eps" / "..")
     with pytest.raises(ZodriveError, match="names no folder"):
         load_attack("vertex-hold:")
-    with pytest.raises(ZodriveError, match="applies to learned:DIR, vertex-hold:DIR and vertex-check:DIR, not zo-signsgd"):
+    with pytest.raises(ZodriveError, match="applies to learned:DIR, vertex-hold:DIR, vertex-check:DIR and transfer:DIR, not zo-signsgd"):
         AttackSpec(attack="zo-signsgd", adversary=str(tmp_path)).build(gate_victim(), **context("discrete"))
     assert load_attack(f"vertex-hold:{tmp_path}").adversary == str(tmp_path)
     for name, bad in (("candidates", 0), ("switch", "a"), ("switch", 1.5), ("width", 10**6), ("obs_shape", "ab"),

@@ -42,7 +42,25 @@ def attack_observations(
         raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
     start = time.perf_counter()
     result = attack.perturb(obs, oracle, objective, trace=trace)
-    return result, time.perf_counter() - start
+    wall = time.perf_counter() - start
+    if attack.refereed:
+        referee(result, obs, oracle, objective)
+    return result, wall
+
+
+def referee(result: AttackResult, obs: np.ndarray, oracle: QueryOracle, objective: Objective) -> None:
+    """Judge the step of an attack that asked the victim nothing (`Attack.refereed`: transfer), after it has
+    returned: the victim's outputs on the clean observations `obs` and on the fed ones (the oracle's
+    `referee`, counted apart) give `success`, `already` and the outputs; the attack never sees them."""
+    import torch
+
+    n = len(obs)
+    out = oracle.referee(np.concatenate([np.asarray(obs, dtype=np.float32), result.x_adv.astype(np.float32)]))
+    clean, fed = torch.from_numpy(out[:n].astype(np.float32)), torch.from_numpy(out[n:].astype(np.float32))
+    result.already = objective.already(clean).numpy()
+    result.success = objective.success(fed[:, None], clean)[:, 0].numpy() & ~result.already
+    result.clean_outputs, result.adv_outputs = clean.numpy(), fed.numpy()
+    result.referee_queries = np.full(n, 2, dtype=np.int64)
 
 
 def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
@@ -61,6 +79,8 @@ def step_stats(result: AttackResult, row: int) -> dict[str, Any]:
     }
     if result.attacked is not None:
         stats["attacked"] = bool(result.attacked[row])
+    if result.referee_queries is not None:
+        stats["referee_queries"] = int(result.referee_queries[row])
     return stats
 
 

@@ -75,6 +75,7 @@ class AttackResult:
     clean_outputs: np.ndarray    # (N, k) victim outputs on x0
     trace: list[dict[str, np.ndarray]] = field(default_factory=list)  # per iteration: l1, l2 of the base point
     attacked: np.ndarray | None = None  # (N,) whether the attack ran (a frequency budget skips steps); None: it did
+    referee_queries: np.ndarray | None = None  # (N,) rows the harness sent to judge the step (`refereed`); None: none
 
 
 class Best:
@@ -97,6 +98,9 @@ class Attack(abc.ABC):
     black_box: ClassVar[bool] = True
     search: ClassVar[bool] = True  # runs the driver below (T iterations of q proposals); False: its own perturb
     queries_clean: ClassVar[bool] = True  # asks the victim about the clean observation (so a base rate is known)
+    refereed: ClassVar[bool] = False
+    """It makes no victim query and states no verdict (transfer): after each step the harness asks the victim
+    about the clean and the fed observation (`QueryOracle.referee`, counted apart) to judge it."""
     no_search: ClassVar[str] = ""  # an attack that is no search (`search = False`): why the search options do nothing
     reads: ClassVar[frozenset[str]] = frozenset(TUNABLE)  # the tunable options it reads; another one given is an error
     reference: ClassVar[str] = ""

@@ -77,6 +77,7 @@ class QueryOracle:
         self.calls = 0
         self.stable_batch: int | None = None  # measured when first needed
         self.calibration_queries = 0
+        self.referee_queries = 0
 
     @property
     def episode_queries(self) -> int:
@@ -150,6 +151,17 @@ class QueryOracle:
         if not np.all(np.isfinite(outputs)):
             raise ZodriveError("victim returned NaN or infinite outputs (NaN observation?)")
         self._count(len(batch))
+        return outputs
+
+    def referee(self, batch: np.ndarray) -> np.ndarray:
+        """The HARNESS's look, not an attack's: the victim's outputs on observations (B, *obs), one row per
+        call as the policy acts, to judge a step of an attack that makes no query (`Attack.refereed`: was
+        the target taken on the fed point, and on the clean one?). Called after the attack has returned,
+        its outputs never reach it; counted apart (`referee_queries`), outside every row's budget."""
+        outputs = np.concatenate([np.asarray(self.victim.query(batch[i:i + 1])) for i in range(len(batch))])
+        if not np.all(np.isfinite(outputs)):
+            raise ZodriveError("victim returned NaN or infinite outputs (NaN observation?)")
+        self.referee_queries += len(batch)
         return outputs
 
     def gradient(

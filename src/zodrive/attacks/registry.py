@@ -27,26 +27,30 @@ ATTACKS: dict[str, type[Attack]] = {
 
 PICKER_ATTACKS = ("vertex-hold", "vertex-check")  # the attacks that read a picker (`NAME:DIR`)
 KNOWN = (*(name for name in ATTACKS if name != VertexCheck.name), "learned:DIR",
-         *(f"{name}:DIR" for name in PICKER_ATTACKS))
+         *(f"{name}:DIR" for name in PICKER_ATTACKS), "transfer:DIR")
 """Every attack name: the attacks above (ten searches, one of them decision-based (hsja), and vertex
 hold; vertex check runs only with a picker), the learned adversary (`learned`, read from a folder
 `zodrive attack-train` wrote; `zodrive.attacks.learned`), which has no place in the registry of
 attacks that run from nothing but their options, and vertex hold and vertex check with a picker
-(`vertex-hold:DIR`, `vertex-check:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`)."""
+(`vertex-hold:DIR`, `vertex-check:DIR`, fitted by `zodrive picker-train`; `zodrive.attacks.picker`), and transfer
+from a surrogate (`transfer:DIR`, fitted by `zodrive surrogate-train`; `zodrive.attacks.transfer`)."""
 
 
 def make_attack(name: str, threat: ThreatModel, **hyper: Any) -> Attack:
     """Build an attack by name with validated hyperparameters (`learned` needs `adversary`)."""
     from zodrive.attacks.learned import NAME, LearnedAdversary
+    from zodrive.attacks.transfer import NAME as TRANSFER, Transfer
 
     if name != "vertex-check" and hyper.pop("check_below", None) is not None:
         raise ZodriveError(f"check_below (a picker's rating) applies to vertex-check:DIR, not {name}")
     if name == NAME:
         return LearnedAdversary(threat, **hyper)
     hyper.pop("load_network", None)  # only a learned adversary reads a network from a folder
+    if name == TRANSFER:
+        return Transfer(threat, **hyper)
     if name not in PICKER_ATTACKS and hyper.pop("adversary", None) is not None:  # NAME:DIR reads a picker
-        raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR, vertex-hold:DIR and "
-                           f"vertex-check:DIR, not {name}")
+        raise ZodriveError(f"adversary (a trained folder) applies to learned:DIR, vertex-hold:DIR, "
+                           f"vertex-check:DIR and transfer:DIR, not {name}")
     try:
         cls = ATTACKS[name]
     except KeyError:

@@ -51,7 +51,7 @@ class AttackOptions(Strict):
     attack: str = option(
         "zo-signsgd", "the attack: a registry name; on the command line also an attack config (name or YAML), "
         "learned:DIR (an adversary trained by attack-train), vertex-hold:DIR or vertex-check:DIR (a picker fitted by "
-        "picker-train)", flag="--attack", metavar="NAME")
+        "picker-train), transfer:DIR (a surrogate fitted by surrogate-train)", flag="--attack", metavar="NAME")
     eps: float = option(0.2, "budget radius of the perturbation [normalized units]", gt=0, le=MAX_NUMBER)
     norm: Literal["linf", "l2"] = option("linf", "the norm of the budget ball")
     mode: Literal["budgeted", "paper"] = option(
@@ -103,7 +103,8 @@ class AttackOptions(Strict):
                                                 ge=1, le=MAX_QUERIES, metavar="N")
     seed: StrictInt = option(0, "the attack's random stream", ge=0, flag="--attack-seed", metavar="SEED")
     adversary: Optional[str] = option(
-        None, "the trained folder of learned / vertex-hold / vertex-check (on the command line: --attack NAME:DIR)",
+        None, "the trained folder of learned / vertex-hold / vertex-check / transfer (on the command line: --attack "
+        "NAME:DIR)",
         flag="--attack")
     check_below: Optional[float] = option(
         None, "vertex-check:DIR: a held vertex the picker rates at least this (0-1) is fed without a check; the saved "

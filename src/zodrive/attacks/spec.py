@@ -23,8 +23,9 @@ from zodrive.validation import one_line
 log = logging.getLogger(__name__)
 
 LEARNED = "learned"
-FOLDER_ATTACKS = (LEARNED, *PICKER_ATTACKS)
-"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, a picker."""
+TRANSFER = "transfer"
+FOLDER_ATTACKS = (LEARNED, *PICKER_ATTACKS, TRANSFER)
+"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, a picker, a surrogate."""
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 FIELDS = set(AttackOptions.model_fields)
 
@@ -126,8 +127,10 @@ class AttackSpec(AttackOptions):
         """An option the attack never reads is an error (`Attack.reads`), and so is a goal defined by the
         clean observation for an attack that never queries it (`queries_clean`)."""
         from zodrive.attacks.learned import LearnedAdversary
+        from zodrive.attacks.transfer import Transfer
 
-        cls = LearnedAdversary if self.attack == LEARNED else ATTACKS.get(self.attack)
+        folder: dict[str, type[Attack]] = {LEARNED: LearnedAdversary, TRANSFER: Transfer}
+        cls = folder.get(self.attack) or ATTACKS.get(self.attack)
         if cls is None:
             return  # an unknown attack: building it says so
         refuse_unread(cls, self.model_dump())
@@ -209,6 +212,8 @@ def decision_refusal(cls: type[Attack]) -> str:
     """Why attack `cls` does not run with `access: decision` (queries return only the action taken), in one line."""
     if cls.name == LEARNED:
         why = "the learned adversary makes no query at attack time, so access changes nothing"
+    elif cls.name == TRANSFER:
+        why = "transfer crafts on its surrogate and makes no victim query at attack time, so access changes nothing"
     elif not cls.black_box:
         why = "it reads the network's gradient, which a decision-only attacker never sees"
     elif issubclass(cls, GradientEstimateAttack):
@@ -240,7 +245,7 @@ def _sparse(spec: AttackOptions) -> None:
 
 
 def _known(spec: AttackOptions) -> None:
-    if spec.attack not in ATTACKS and spec.attack != LEARNED:
+    if spec.attack not in ATTACKS and spec.attack not in (LEARNED, TRANSFER):
         import difflib
 
         close = difflib.get_close_matches(spec.attack, list(KNOWN), n=1)
@@ -254,11 +259,11 @@ def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     """An attack spec from `configs/attacks/<name>.yaml` (or a path); registry names work too,
     `learned:DIR` is the adversary trained into DIR (`zodrive attack-train`), `vertex-hold:DIR` and
     `vertex-check:DIR` vertex hold and vertex check with the picker fitted into DIR (`zodrive picker-train`;
-    vertex check has no other form)."""
+    vertex check has no other form), `transfer:DIR` PGD on the surrogate fitted into DIR (`zodrive surrogate-train`)."""
     from zodrive.config import available
 
     head, colon, folder = name.partition(":")
-    if name == LEARNED or (colon and head in FOLDER_ATTACKS):
+    if name in (LEARNED, TRANSFER) or (colon and head in FOLDER_ATTACKS):
         if colon and not folder:
             raise ZodriveError(f"attack {name!r} names no folder: {head}:DIR")
         data: dict[str, Any] = {"attack": head, "adversary": folder or None}

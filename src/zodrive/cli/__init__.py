@@ -1,7 +1,7 @@
 """The `zodrive` command line. Every user-facing failure is one line on stderr, exit 2.
 
 One module per command group: `evaluate` (evaluate, render, demo, certify), `train` (train,
-adv-train, robust-train, attack-train, picker-train, select, export), `experiments` (reproduce,
+adv-train, robust-train, attack-train, picker-train, surrogate-train, select, export), `experiments` (reproduce,
 compare, curves, card), `info` (env, baselines); `attack` generates the attack flags from the
 attack schema, `common` holds what the commands share. Each group adds its parsers
 (`add_parsers`) and names its commands (`COMMANDS`); `main` parses, checks what can be checked
@@ -40,6 +40,7 @@ INTERRUPTED = {
     "adv-train": "the run folder is incomplete: rerun with --force",
     "attack-train": "the adversary folder is incomplete: rerun with --force",
     "picker-train": "a picker is written at the end: rerun (with --force if --out holds files)",
+    "surrogate-train": "a surrogate is written at the end: rerun (with --force if --out holds files)",
     "robust-train": "the run folder is incomplete: rerun with --force",
 }
 """What a command interrupted by Ctrl-C leaves, and how to go on (default: run it again to resume)."""

@@ -1,5 +1,5 @@
-"""Making models: `train`, `adv-train`, `robust-train`, `attack-train`, `picker-train`, `select`,
-`export`.
+"""Making models: `train`, `adv-train`, `robust-train`, `attack-train`, `picker-train`, `surrogate-train`,
+`select`, `export`.
 
 The commands import the training code (torch, stable-baselines3, highway-env) inside their
 functions: `zodrive --help` builds these parsers without loading it.
@@ -21,6 +21,7 @@ from zodrive.cli.common import (
 )
 from zodrive.errors import ZodriveError
 from zodrive.training.picker import PickerFit  # torch-free
+from zodrive.training.surrogate import SurrogateFit  # torch-free
 
 VICTIM_HELP = "SB3 zip or model folder: the victim (fixed)"
 PRESET_HELP = ("preset the model trains on (default: where its run folder or rl-zoo3 / Hugging Face files say it was "
@@ -154,6 +155,21 @@ def add_parsers(sub: Any) -> None:
     scenario_flags(pick, trust=False)
     pick.add_argument("--force", action="store_true", help="overwrite a picker already in --out")
 
+    sur = sub.add_parser("surrogate-train", help="fit a surrogate of a model from its clean decisions on tuning seeds "
+                                                  "(watched, not queried); use it with --attack transfer:DIR")
+    sur.add_argument("model", help=VICTIM_HELP)
+    sur.add_argument("--out", type=Path, required=True, help="the surrogate's folder")
+    sur.add_argument("--seed", type=seed_number, default=0, help="fit seed: clean episodes on tuning seeds "
+                                                                 "50000 + 10000*seed + i")
+    for flag, what in (("episodes", "clean episodes of the victim watched, the held-out ones included"),
+                       ("held_out", "of them, the last ones, never fitted on: the agreement is measured there"),
+                       ("epochs", "passes over the watched decisions"),
+                       ("width", "hidden units of each of the MLP's two layers")):
+        sur.add_argument(f"--{flag.replace('_', '-')}", type=positive_int,
+                         help=f"{what} (default: {getattr(SurrogateFit, flag)})")
+    scenario_flags(sur)
+    sur.add_argument("--force", action="store_true", help="overwrite a surrogate already in --out")
+
     sel = sub.add_parser("select",
                          help="pick a training run's best checkpoint on tuning seeds (never evaluation seeds)")
     sel.add_argument("run", type=Path, help="training run folder (with checkpoints/)")
@@ -274,6 +290,18 @@ def cmd_picker_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_surrogate_train(args: argparse.Namespace) -> int:
+    from zodrive.training.surrogate import surrogate_train
+
+    given = {f.name: getattr(args, f.name) for f in fields(SurrogateFit) if getattr(args, f.name) is not None}
+    path = surrogate_train(str(args.model), preset_of(args), args.out, replace(SurrogateFit(), **given),
+                           seed=args.seed, trust=args.trust_model, force=args.force,
+                           report=lambda line: print(line, flush=True))
+    scenario = f" --preset {args.preset}" if args.preset else ""
+    print(f"saved {path} (use: --attack transfer:{path} --eps EPS{scenario})")
+    return 0
+
+
 def cmd_select(args: argparse.Namespace) -> int:
     from zodrive.experiments.select import select_checkpoint, selection_markdown
 
@@ -294,5 +322,6 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"train": cmd_train, "adv-train": cmd_adv_train, "robust-train": cmd_robust_train,
-            "attack-train": cmd_attack_train, "picker-train": cmd_picker_train, "select": cmd_select,
+            "attack-train": cmd_attack_train, "picker-train": cmd_picker_train,
+            "surrogate-train": cmd_surrogate_train, "select": cmd_select,
             "export": cmd_export}

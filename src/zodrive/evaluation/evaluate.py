@@ -24,7 +24,7 @@ import numpy as np
 from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.registry import ATTACKS
 from zodrive.attacks.schema import removed_message, removed_settings, without_removed
-from zodrive.attacks.spec import PICKER_ATTACKS, AttackSpec
+from zodrive.attacks.spec import PICKER_ATTACKS, TRANSFER, AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.defense import defense_version, keeps_state
 from zodrive.envs import make_env, scenario
@@ -69,6 +69,10 @@ class EvalJob:
                 from zodrive.attacks.picker import digest
 
                 key["adversary"] = digest(attack["adversary"])
+            elif attack.get("attack") == TRANSFER:
+                from zodrive.attacks.transfer import digest as surrogate_digest
+
+                key["adversary"] = surrogate_digest(attack["adversary"])
             else:
                 key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
         if self.defense is not None:
@@ -261,6 +265,10 @@ def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict
         from zodrive.attacks.picker import check_picker
 
         check_picker(attack["adversary"], model_file=model, preset=preset, defense=defense)
+    if attack is not None and attack.get("attack") == TRANSFER and attack.get("adversary") is not None:
+        from zodrive.attacks.transfer import check_surrogate
+
+        check_surrogate(attack["adversary"], model_file=model, preset=preset, defense=defense)
 
 
 RUN_FILES = ("eval_key.json", "episodes.jsonl", "steps.jsonl", "summary.json")
@@ -526,7 +534,10 @@ def summarize(
             # every row the victim received: the attack's queries and the policy's own decisions
             # (one a step); the harness sends it none (it calibrates on its own copy of a network)
             victim_rows={"attack_queries": int(sum(r["queries"] for r in records)),
-                         "decisions": int(sum(r["length"] for r in records))},
+                         "decisions": int(sum(r["length"] for r in records)),
+                         # a transfer attack's steps judged by the harness (clean and fed), never seen by it
+                         **({"referee": int(sum(r.get("referee_queries", 0) for r in records))}
+                            if any(r.get("referee_queries") for r in records) else {})},
             max_linf=float(max(r["max_linf"] for r in records)),
             attack_config=job.attack,
         )

@@ -64,6 +64,9 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"attack success: {what} (base rate {_percent(summary['target_base_rate'])}); "
                 f"{summary['queries_per_step']:.1f} queries/step; max Linf {summary['max_linf']:.4f}"
             )
+        if summary.get("victim_rows", {}).get("referee"):  # transfer: the harness judged each step
+            lines.append(f"transfer judged by the harness after each step: {summary['victim_rows']['referee']} victim "
+                         "rows (the clean and the fed observation), counted apart and never seen by the attack")
         if summary.get("attacked_share") is not None:  # a frequency budget: queries/step are per attacked step
             rows = summary["victim_rows"]
             lines.append(f"attacked steps: {summary['attacked_share']:.1%} of {rows['decisions']} decisions "
@@ -76,9 +79,11 @@ def _percent(value: float | None) -> str:
 
 
 def _picker(summary: dict[str, Any]) -> str:
-    """`, picker DIR` for an attack with a picker (`vertex-hold:DIR`, `vertex-check:DIR`), else nothing
-    (the learned adversary's folder is shown as its adversary)."""
+    """`, picker DIR` for an attack with a picker (`vertex-hold:DIR`, `vertex-check:DIR`), `, surrogate DIR` for
+    transfer, else nothing (the learned adversary's folder is shown as its adversary)."""
     folder = (summary.get("attack_config") or {}).get("adversary")
+    if summary.get("attack") == "transfer":
+        return f", surrogate {folder}"
     return f", picker {folder}" if summary.get("attack") != "learned" and folder else ""
 
 

@@ -36,10 +36,13 @@ class EpisodeRecord:
     applicable: int = 0        # steps where the clean policy did not already meet it
     max_linf: float = 0.0
     action_counts: list[int] | None = None
+    referee_queries: int = 0   # rows the harness sent the victim to judge a transfer attack's steps (0: none)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["return"] = data.pop("return_")
+        if not data["referee_queries"]:  # written only where a referee ran: other records stay as they were
+            del data["referee_queries"]
         return data
 
 
@@ -97,7 +100,7 @@ class Episode:
         self.total = 0.0
         self.speeds: list[float] = []
         self.crashed = self.terminated = False
-        self.queries = self.successes = self.applicable = self.attacked_steps = 0
+        self.queries = self.successes = self.applicable = self.attacked_steps = self.referee = 0
         self.max_linf = 0.0
         space = env.action_space
         self.counts = (np.zeros(int(space.n), dtype=np.int64)
@@ -110,6 +113,7 @@ class Episode:
             self.counts[action] += 1
         if attack is not None:
             self.queries += attack["queries"]
+            self.referee += attack.get("referee_queries", 0)
         if attack is not None and attack.get("attacked", True):
             self.attacked_steps += 1
             self.successes += attack["success"]
@@ -148,6 +152,7 @@ class Episode:
             attacked_steps=int(self.attacked_steps), successes=int(self.successes),
             applicable=int(self.applicable), max_linf=self.max_linf,
             action_counts=self.counts.tolist() if self.counts is not None else None,
+            referee_queries=int(self.referee),
         )
 
 
