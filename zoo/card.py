@@ -83,6 +83,29 @@ def imitation_card(run: Path) -> str:
     return "\n".join(lines + _bench(run, scenario))
 
 
+ROBUST_KINDS = {"sa-dqn": "SA-DQN's regularizer (Zhang et al., NeurIPS 2020: the Q-values' argmax held over the "
+                           "ε-ball, by PGD)",
+                "adversarial": "adversarial training (the paper's Algorithm 2: the agent learns from the observations "
+                               "its own attacker perturbs, at every step)"}
+"""`zodrive robust-train --method sa | at` runs, by the `kind` their train.json records."""
+
+
+def robust_card(run: Path) -> str:
+    """A zoo driver made robust by `zodrive robust-train --method sa|at`: no checkpoint is chosen."""
+    train = json.loads((run / "train.json").read_text())
+    command = json.loads((run / "run.json").read_text())["command"]
+    scenario = yaml.safe_load((run / "config.yaml").read_text())["preset"]["name"]  # the run's own record
+    source = Path(train["source_model"]).parent
+    lines = [f"# {run.parent.name} / {run.name}", "",
+             f"The zoo's [`{source.parent.name}/{source.name}`](../../{source.parent.name}/{source.name}/CARD.md) "
+             f"for `{scenario}` made robust by {ROBUST_KINDS[train['kind']]}, {train['total_timesteps']:,} more "
+             f"steps (the first {train['warmup_steps']:,} acting only), seed {train['seed']}, "
+             f"{train['wall_time_s'] / 60:.0f} min on a shared core:", "",
+             f"`{command}`", "",
+             "No checkpoint is chosen: the model after the last step is the model.", ""]
+    return "\n".join(lines + _bench(run, scenario))
+
+
 def ensemble_card(run: Path) -> str:
     """An ensemble built by zoo/q_ensemble.py from runs' checkpoints: nothing trained, no checkpoint chosen."""
     build = json.loads((run / "build.json").read_text())
@@ -180,6 +203,8 @@ def main() -> None:
     for run in runs:
         if run.parent.name.endswith("-imitation") and (run / "model.zip").is_file():
             (run / "CARD.md").write_text(imitation_card(run))
+        elif (run / "train.json").is_file() and json.loads((run / "train.json").read_text()).get("kind") in ROBUST_KINDS:
+            (run / "CARD.md").write_text(robust_card(run))
         elif (run / "build.json").is_file():
             (run / "CARD.md").write_text(ensemble_card(run))
         elif (run / "selection.json").is_file():
