@@ -38,14 +38,19 @@ def attack_observations(
     obs: np.ndarray, attack: Attack, objective: Objective, oracle: QueryOracle, *, trace: bool = False
 ) -> tuple[AttackResult, float]:
     """Attack a batch of clean observations; returns the result and wall time [s]."""
-    if not np.all(np.isfinite(obs)):
-        raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
+    _refuse_non_finite(obs)
     start = time.perf_counter()
     result = attack.perturb(obs, oracle, objective, trace=trace)
     wall = time.perf_counter() - start
     if attack.refereed:
         referee(result, obs, oracle, objective)
     return result, wall
+
+
+def _refuse_non_finite(obs: np.ndarray) -> None:
+    """One line, not an attack on garbage: an observation with NaN or infinite values is refused."""
+    if not np.all(np.isfinite(obs)):
+        raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
 
 
 def referee(result: AttackResult, obs: np.ndarray, oracle: QueryOracle, objective: Objective) -> None:
@@ -196,8 +201,7 @@ class Attacker:
             return attack_observations(obs, self.attack, self.objective, self.oracle, trace=self.trace)
         if len(obs) != 1:
             raise ZodriveError(ONE_AT_A_TIME)
-        if not np.all(np.isfinite(obs)):
-            raise ZodriveError("observation contains NaN or infinite values; refusing to attack it")
+        _refuse_non_finite(obs)
         start = time.perf_counter()
         self.oracle.begin_step(rows=1)
         gap = float(preference_gap(self.oracle(obs))[0]) if self.schedule.reads_scores else None
