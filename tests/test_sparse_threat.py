@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from toys import FEATURES, blind_picker, context, linear_victim, observations, readable
+from toys import FEATURES, blind_picker, context, linear_victim, logging_victim, observations, readable
 from zodrive.attacks import ATTACKS, AttackSpec
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
@@ -29,17 +29,6 @@ from zodrive.system import AttackWrapper, Schedule, preference_gap
 ROOT = Path(__file__).resolve().parents[1]
 BLACK_BOX = sorted(name for name, cls in ATTACKS.items() if cls.black_box)  # every one runs with score access
 EPS = 0.3
-
-
-def logging_victim(victim: Victim, log: list[np.ndarray]) -> Victim:
-    """`victim` that logs every batch it is asked about (calibration apart)."""
-
-    def query(x: np.ndarray) -> np.ndarray:
-        log.append(np.array(x, copy=True))
-        return np.asarray(victim.query(x))
-
-    return Victim(query=query, kind=victim.kind, obs_shape=victim.obs_shape, differentiable=victim.differentiable,
-                  calibrate=victim.calibrate)
 
 
 @pytest.fixture

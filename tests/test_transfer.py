@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from toys import context, linear_victim, observations
+from toys import context, linear_victim, logging_victim, observations
 from zodrive.attacks import AttackSpec
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.spec import load_attack
@@ -35,17 +35,6 @@ def surrogate_folder(folder: Path, seed: int = 0, width: int = 16) -> Path:
             "obs_shape": [5, 5], "n_actions": 5, "widths": [width, width]}
     (folder / META_FILE).write_text(json.dumps(meta))
     return folder
-
-
-def logging_victim(victim: Victim, log: list[np.ndarray]) -> Victim:
-    """`victim` that logs every batch it is sent (calibration apart)."""
-
-    def query(x: np.ndarray) -> np.ndarray:
-        log.append(np.array(x, copy=True))
-        return np.asarray(victim.query(x))
-
-    return Victim(query=query, kind=victim.kind, obs_shape=victim.obs_shape, differentiable=victim.differentiable,
-                  calibrate=victim.calibrate)
 
 
 def build(folder: Path, victim: Victim, **options):

@@ -108,3 +108,14 @@ def blind_picker(eps: float) -> str:
             "switch": 0.0}
     (folder / META_FILE).write_text(json.dumps(meta))
     return str(folder)
+
+
+def logging_victim(victim: Victim, log: list[np.ndarray]) -> Victim:
+    """`victim` that logs every batch it is asked about (calibration apart)."""
+
+    def query(x: np.ndarray) -> np.ndarray:
+        log.append(np.array(x, copy=True))
+        return np.asarray(victim.query(x))
+
+    return Victim(query=query, kind=victim.kind, obs_shape=victim.obs_shape, differentiable=victim.differentiable,
+                  calibrate=victim.calibrate)
