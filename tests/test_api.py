@@ -69,6 +69,23 @@ def test_the_wrapper_reads_the_environment(model: DQN) -> None:
             break
 
 
+def test_the_wrapper_is_the_engines_and_gymnasium_rebuilds_it(model: DQN) -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    from zodrive.system import AttackWrapper
+
+    assert zodrive.AttackWrapper is AttackWrapper  # one class: the engine builds it with from_attacker
+    env = zodrive.AttackWrapper(gym.make("CartPole-v1"), model, attack="random-search", eps=0.05, steps=5)
+    check_env(env, skip_render_check=True)  # rebuilds it from env.spec: the user's own arguments
+    again = env.spec.make()
+    assert isinstance(again, AttackWrapper) and again.oracle is not env.oracle
+    np.testing.assert_array_equal(again.reset(seed=3)[0], env.reset(seed=3)[0])  # the same attack, built anew
+    with pytest.raises(ZodriveError, match="already queries its victim"):
+        zodrive.AttackWrapper(gym.make("CartPole-v1"), model, env.attacker)
+    with pytest.raises(ZodriveError, match="already queries its victim"):
+        zodrive.AttackWrapper(gym.make("CartPole-v1"), None, env.attacker, eps=0.1)
+
+
 def test_the_api_refuses_in_one_line(model: DQN, tmp_path) -> None:
     model.save(tmp_path / "m")
     with pytest.raises(ZodriveError, match="holds no environment .* say where it drives"):

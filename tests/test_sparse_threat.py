@@ -178,7 +178,7 @@ def _episode(spec: AttackSpec, seed: int = 5) -> tuple[Road, list[np.ndarray], l
     policy = Victim(query=acts, kind="discrete", obs_shape=(5, 5))
     attack, objective, oracle = spec.build(logging_victim(network, log), **context())
     env = Road()
-    wrapped = AttackWrapper(env, attack, objective, oracle, schedule=Schedule.of(spec))
+    wrapped = AttackWrapper.from_attacker(env, attack, objective, oracle, schedule=Schedule.of(spec))
     steps: list[dict] = []
     record = run_episode(wrapped, network, episode=0, seed=seed, max_return=None, on_step=steps.append, policy=policy)
     assert record.queries == sum(s["queries"] for s in steps) == oracle.total_queries == sum(len(b) for b in log)

@@ -16,14 +16,15 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 __all__ = ["AttackSpec", "AttackWrapper", "Policy", "Result", "attack", "evaluate", "resolve"]
 
-_HOMES = {"AttackWrapper": "zodrive.api", "Result": "zodrive.api", "attack": "zodrive.api",
+_HOMES = {"AttackWrapper": "zodrive.system", "Result": "zodrive.api", "attack": "zodrive.api",
           "evaluate": "zodrive.api", "AttackSpec": "zodrive.attacks.spec", "Policy": "zodrive.policies.policy",
           "resolve": "zodrive.policies.policy"}
 
 if TYPE_CHECKING:
-    from zodrive.api import AttackWrapper, Result, attack, evaluate
+    from zodrive.api import Result, attack, evaluate
     from zodrive.attacks.spec import AttackSpec
     from zodrive.policies.policy import Policy, resolve
+    from zodrive.system import AttackWrapper
 
 
 def __getattr__(name: str) -> Any:

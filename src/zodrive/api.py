@@ -4,7 +4,8 @@
   `Result` (summary, per-episode records, a plot);
 - `attack(policy, observations, scenario, ...)` attacks a batch of observations once;
 - `AttackWrapper(env, policy, attack="random-search", eps=0.05)` attacks what an agent observes
-  in any gymnasium environment, reading features, bounds and actions from the environment.
+  in any gymnasium environment, reading features, bounds and actions from the environment (the
+  engine's own wrapper, `zodrive.system.AttackWrapper`, re-exported here).
 
 `policy` is anything `zodrive.policies.policy.resolve` reads: a model path, `baseline:NAME`,
 `FILE.py:NAME`, a stable-baselines3 model, a torch module or a numpy callable. Attack options are
@@ -17,12 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from zodrive.attacks.base import AttackResult
-from zodrive.attacks.spec import AttackSpec, load_attack
-from zodrive.envs import Scenario, scenario_of_env
+from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import scenario as scenario_of
 from zodrive.defense import keeps_state
 from zodrive.errors import ZodriveError
@@ -32,8 +31,8 @@ from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.seeds import EVAL_SEED, MAX_EPISODES
-from zodrive.system import AttackWrapper as _AttackWrapper, Schedule, attack_observations, build_attacker, \
-    load_policy, make_policy_env
+from zodrive.system import AttackWrapper, attack_observations, build_attacker, load_policy, make_policy_env, \
+    spec_for
 
 __all__ = ["AttackWrapper", "Result", "attack", "evaluate"]
 
@@ -105,25 +104,6 @@ def _check_counts(*, episodes: int, seed: int, envs: int) -> None:
             raise ZodriveError(f"{name} must be an integer in [{least:,}, {most:,}], not {value!r}")
 
 
-def _spec(attack: str | AttackSpec | None, where: Scenario, options: dict[str, Any]) -> AttackSpec | None:
-    """The attack spec from a name (or spec) and keyword options; the default target is the
-    paper's where the scenario has that action, else untargeted."""
-    if attack is None:
-        if options:
-            raise ZodriveError(f"attack options {sorted(options)} given without an attack")
-        return None
-    spec = attack if isinstance(attack, AttackSpec) else load_attack(attack)
-    if "target" not in options and spec.target == "auto" and not _paper_target_fits(where):
-        options = {**options, "target": "none"}
-    return spec.with_overrides(**options) if options else spec
-
-
-def _paper_target_fits(where: Scenario) -> bool:
-    if where.kind == "discrete":
-        return "FASTER" in where.action_names
-    return tuple(where.action_names) == ("acceleration", "steering")
-
-
 def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: str | AttackSpec | None = None, *,
              defense: str | None = None, episodes: int = 10, seed: int = EVAL_SEED, envs: int = 1,
              env_id: str | None = None, out: str | Path | None = None, force: bool = False,
@@ -152,7 +132,7 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
     if trust_model and resolved.kind != "model":
         raise ZodriveError(f"trust_model applies to stable-baselines3 zips; {resolved.label} is read without it")
     preset, source = _scenario(resolved, scenario, env_id, shifted)
-    spec = _spec(attack, scenario_of(preset), options)
+    spec = spec_for(attack, scenario_of(preset), options)
     attack_dict = spec.to_dict() if spec is not None else None
     if not resolved.in_memory:
         job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model,
@@ -213,7 +193,7 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
         obs = obs[None]
     if obs.shape[1:] != where.obs_shape:
         raise ZodriveError(f"observations of shape {obs.shape[1:]} per row; {where.name} gives {where.obs_shape}")
-    spec = _spec(attack, where, {"seed": seed, **options})
+    spec = spec_for(attack, where, {"seed": seed, **options})
     assert spec is not None  # an attack is named
     if spec.sparse_in_time:
         raise ZodriveError("a frequency budget (attack_share, when) chooses steps of an episode; attack() attacks one "
@@ -222,25 +202,3 @@ def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any]
     attacker.reseed([seed * 1_000_003 + row for row in range(len(obs))])
     result, _ = attack_observations(obs, attacker, objective, oracle)
     return result
-
-
-class AttackWrapper(_AttackWrapper):
-    """A gymnasium wrapper that feeds the agent attacked observations of any Box-observation
-    environment: the threat model's features and bounds and the target's actions are read from
-    `env` (highway-env's observer, or the observation space's box). The default target is the
-    paper's (FASTER) where the environment has that action, else untargeted.
-
-    :param env: the environment (reset once here, with seed 0, to read highway-env's observer).
-    :param policy: the victim the attacker queries (anything `evaluate` takes).
-    :param attack: the attack's name or `AttackSpec`.
-    :param options: the attack's options (`eps=0.05`, ...).
-    """
-
-    def __init__(self, env: gym.Env, policy: Any, attack: str | AttackSpec = "random-search", **options: Any) -> None:
-        if not isinstance(env, gym.Env):
-            raise ZodriveError(f"AttackWrapper wraps a gymnasium environment, not a {type(env).__name__}")
-        where = scenario_of_env(env)
-        spec = _spec(attack, where, options)
-        assert spec is not None  # an attack is named
-        super().__init__(env, *build_attacker(spec, resolve(policy).victim_on(where), where),
-                         schedule=Schedule.of(spec))

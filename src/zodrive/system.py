@@ -2,7 +2,9 @@
 
 `AttackWrapper` (a gymnasium wrapper) replaces each observation the agent receives with the
 attacked one; the simulator's true state is untouched. Evaluation and adversarial training
-both use it; inside SB3's vectorized envs each copy attacks its own environment.
+both use it; inside SB3's vectorized envs each copy attacks its own environment. A user builds
+it from a policy and an attack's name (`zodrive.AttackWrapper(env, policy, "random-search", eps=0.05)`),
+the engine from an attack it has built (`AttackWrapper.from_attacker`): one class either way.
 """
 
 from __future__ import annotations
@@ -18,12 +20,13 @@ import numpy as np
 from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.spec import AttackSpec
+from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.attacks.victim import Victim
 from zodrive.defense import EpisodeFilter, keeps_state, make_defense
 from zodrive.defense.wrappers import FilterWrapper, defended_victim
 from zodrive.drivers import baselines as bl
-from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape
+from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape, \
+    scenario_of_env
 from zodrive.errors import ZodriveError
 from zodrive.policies.loading import load_network
 from zodrive.policies.policy import Policy, resolve
@@ -216,23 +219,56 @@ class Attacker:
 
 
 class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
-    """Feed the policy attacked observations; `info["attack"]` has the step's stats.
+    """A gymnasium wrapper that feeds the agent attacked observations of any Box-observation
+    environment; `info["attack"]` has the step's stats and `info["clean_obs"]` the true
+    observation (for rendering what was really there).
 
-    `info["clean_obs"]` keeps the true observation (for rendering what was really there).
+    `AttackWrapper(env, policy, attack="random-search", eps=0.05)` (`zodrive.AttackWrapper`) reads
+    the threat model's features and bounds and the target's actions from `env` (highway-env's
+    observer, or the observation space's box); the default target is the paper's (FASTER) where
+    the environment has that action, else untargeted. `AttackWrapper.from_attacker` wraps an
+    attack already built (the engine's way: `make_attacked_env`, against a preset).
+
+    :param env: the environment (reset once here, with seed 0, to read highway-env's observer).
+    :param policy: the victim the attacker queries (anything `zodrive.evaluate` takes); None with an `Attacker`.
+    :param attack: the attack's name or `AttackSpec`, or an `Attacker` already built against its
+        victim (what `from_attacker` passes, and gymnasium's `env.spec` records to rebuild it).
+    :param options: the attack's options (`eps=0.05`, ...).
     """
 
-    def __init__(self, env: gym.Env, attack: Attack, objective: Objective, oracle: QueryOracle,
-                 *, trace: bool = False, schedule: Schedule | None = None) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, attack=attack, objective=objective, oracle=oracle, trace=trace,
-                                                 schedule=schedule)
+    def __init__(self, env: gym.Env, policy: Any, attack: str | AttackSpec | Attacker = "random-search",
+                 **options: Any) -> None:
+        if not isinstance(env, gym.Env):
+            raise ZodriveError(f"AttackWrapper wraps a gymnasium environment, not a {type(env).__name__}")
+        if isinstance(attack, Attacker):
+            if policy is not None or options:
+                raise ZodriveError("an Attacker already queries its victim: give it without a policy or options")
+            attacker = attack
+            # copied, as gymnasium does by default: `env.spec.make()` gets an attacker of its own
+            gym.utils.RecordConstructorArgs.__init__(self, policy=None, attack=attacker)
+        else:
+            # the caller's own arguments, not copied (a model can be large): `env.spec.make()` builds anew from them
+            gym.utils.RecordConstructorArgs.__init__(self, _disable_deepcopy=True, policy=policy, attack=attack,
+                                                     **options)
+            where = scenario_of_env(env)
+            spec = spec_for(attack, where, options)
+            assert spec is not None  # an attack is named
+            attacker = Attacker(*build_attacker(spec, resolve(policy).victim_on(where), where),
+                                schedule=Schedule.of(spec))
         gym.ObservationWrapper.__init__(self, env)
-        self.attack, self.objective, self.oracle = attack, objective, oracle
-        self.attacker = Attacker(attack, objective, oracle, trace=trace, schedule=schedule)
+        self.attacker = attacker
+        self.attack, self.objective, self.oracle = attacker.attack, attacker.objective, attacker.oracle
         self.last: AttackResult | None = None
         self.last_stats: dict[str, Any] = {}
         self.last_wall_time = 0.0  # [s] spent attacking the latest observation
         self.clean_obs: np.ndarray | None = None
         self._episode_hits = self._episode_applicable = 0
+
+    @classmethod
+    def from_attacker(cls, env: gym.Env, attack: Attack, objective: Objective, oracle: QueryOracle, *,
+                      trace: bool = False, schedule: Schedule | None = None) -> AttackWrapper:
+        """The wrapper around an attack already built against its victim (`build_attacker`)."""
+        return cls(env, None, Attacker(attack, objective, oracle, trace=trace, schedule=schedule))
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         self.clean_obs = observation
@@ -270,6 +306,25 @@ class AttackWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return info
 
 
+def spec_for(attack: str | AttackSpec | None, where: Scenario, options: dict[str, Any]) -> AttackSpec | None:
+    """The attack spec of the Python API from a name (or spec) and keyword options; the default
+    target is the paper's where the scenario has that action, else untargeted."""
+    if attack is None:
+        if options:
+            raise ZodriveError(f"attack options {sorted(options)} given without an attack")
+        return None
+    spec = attack if isinstance(attack, AttackSpec) else load_attack(attack)
+    if "target" not in options and spec.target == "auto" and not _paper_target_fits(where):
+        options = {**options, "target": "none"}
+    return spec.with_overrides(**options) if options else spec
+
+
+def _paper_target_fits(where: Scenario) -> bool:
+    if where.kind == "discrete":
+        return "FASTER" in where.action_names
+    return tuple(where.action_names) == ("acceleration", "steering")
+
+
 def build_attacker(spec: AttackSpec, victim: Victim,
                    where: dict[str, Any] | Scenario) -> tuple[Attack, Objective, QueryOracle]:
     """The attack `spec` against `victim` on the observation of `where` (a preset, or the
@@ -286,7 +341,7 @@ def make_attacked_env(preset: dict[str, Any], victim: Victim, spec: AttackSpec |
     if spec is None:
         return env
     attack, objective, oracle = build_attacker(spec, victim, preset)
-    return AttackWrapper(env, attack, objective, oracle, trace=trace, schedule=Schedule.of(spec))
+    return AttackWrapper.from_attacker(env, attack, objective, oracle, trace=trace, schedule=Schedule.of(spec))
 
 
 def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: AttackSpec | None = None, *,
