@@ -108,6 +108,27 @@ class Attack(abc.ABC):
     """Meaningful when each query returns only the decision (`access: decision`, one-hot outputs): it needs
     no score margin (it samples, or reads only whether the goal is met). Others are refused there
     (`spec.decision_refusal` says why)."""
+    trained: ClassVar[str] = ""
+    """What it reads from a trained folder (`NAME:DIR`, the spec's `adversary`), fitted against one model on one
+    preset: "adversary" (learned), "picker" (vertex hold and vertex check), "surrogate" (transfer); "" for the
+    attacks that read none. An evaluation refuses a folder fitted against another system (`check_folder`) and
+    keys its results on the folder's content (`folder_digest`)."""
+    goal: ClassVar[bool] = True
+    """It aims at a per-step goal (a target, or a changed action), so a step can succeed; the learned adversary
+    lowers the return over an episode and has none (no success rate, no base rate)."""
+
+    @classmethod
+    def check_folder(cls, folder: str | None, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                     defense_version: int | None = None) -> None:
+        """Refuse the trained folder `folder` (None: none given) where it was fitted against another model file,
+        preset or defense than this evaluation's (one line saying which); an attack that reads none has
+        nothing to check."""
+
+    @classmethod
+    def folder_digest(cls, folder: str) -> str:
+        """What an evaluation's key records of the trained folder `folder`: its content's SHA-256 (a refitted
+        folder is another attack)."""
+        raise ZodriveError(f"attack {cls.name} reads no trained folder")
 
     def __init__(
         self,

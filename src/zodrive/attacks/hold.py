@@ -39,7 +39,7 @@ import torch
 from zodrive.attacks.base import Attack, AttackResult
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.picker import Picker, objective_target
+from zodrive.attacks.picker import Picker, check_picker, digest, objective_target
 from zodrive.attacks.threat import ThreatModel, distortion
 from zodrive.errors import ZodriveError
 
@@ -53,6 +53,17 @@ class VertexHold(Attack):
     reference = ("zodrive's rule over decision-based access (Brendel et al., ICLR 2018) and constant "
                  "perturbations over time (CopyCAT, Hussenot et al., AAMAS 2020)")
     on_decisions = True  # it reads only whether the victim took the target
+    trained = "picker"  # optional for vertex hold (without one it draws vertices blind)
+
+    @classmethod
+    def check_folder(cls, folder: str | None, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                     defense_version: int | None = None) -> None:
+        if folder is not None:
+            check_picker(folder, model_file=model_file, preset=preset, defense=defense)
+
+    @classmethod
+    def folder_digest(cls, folder: str) -> str:
+        return digest(folder)
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         """`adversary`: a picker's folder (`vertex-hold:DIR`), else vertices are drawn blind."""

@@ -125,6 +125,21 @@ class LearnedAdversary(Attack):
     no_search = "the adversary was trained to lower the victim's return; it has no per-step objective or search"
     reads: ClassVar[frozenset[str]] = frozenset()
     reference = "Zhang et al., SA-RL (learned optimal adversary), ICLR 2021"
+    trained = "adversary"
+    goal = False
+
+    @classmethod
+    def check_folder(cls, folder: str | None, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                     defense_version: int | None = None) -> None:
+        if folder is None:
+            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
+        check_adversary(folder, model_file=model_file, preset=preset, defense=defense, defense_version=defense_version)
+
+    @classmethod
+    def folder_digest(cls, folder: str) -> str:
+        from zodrive.runinfo import sha256
+
+        return "sha256:" + sha256(Path(folder) / "model.zip")
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None,
                  load_network: Callable[[str], Any] | None = None, **kwargs: Any) -> None:

@@ -13,7 +13,7 @@ from zodrive.attacks.base import ENGINE_OPTIONS, Attack, GradientEstimateAttack,
 from zodrive.attacks.hold import PLAIN_CHECK, VertexCheck
 from zodrive.attacks.objectives import Objective, make_objective, target_has_fallback, target_reads_clean
 from zodrive.attacks.oracle import QueryOracle
-from zodrive.attacks.registry import ATTACKS, KNOWN, PICKER_ATTACKS, make_attack
+from zodrive.attacks.registry import ATTACKS, FOLDER_ONLY, KNOWN, attack_class, make_attack
 from zodrive.attacks.schema import DEFAULT_FROZEN, AttackOptions, removed_message, removed_settings, without_removed
 from zodrive.attacks.threat import ThreatModel
 from zodrive.config import load_config
@@ -24,8 +24,9 @@ log = logging.getLogger(__name__)
 
 LEARNED = "learned"
 TRANSFER = "transfer"
-FOLDER_ATTACKS = (LEARNED, *PICKER_ATTACKS, TRANSFER)
-"""The attacks that read a trained folder (`NAME:DIR`): the learned adversary's, a picker, a surrogate."""
+FOLDER_ATTACKS = tuple(name for name in (*FOLDER_ONLY, *ATTACKS) if attack_class(name).trained)
+"""The attacks that read a trained folder (`NAME:DIR`; `Attack.trained`): the learned adversary's, a picker, a
+surrogate."""
 PAPER_TARGETS = {"discrete": "FASTER", "continuous": (1.0, 0.5)}
 FIELDS = set(AttackOptions.model_fields)
 
@@ -92,7 +93,8 @@ class AttackSpec(AttackOptions):
                   action_bounds: tuple[Any, Any] | None = None) -> Objective:
         """The per-step objective for a victim of this kind (a learned adversary has no per-step
         target: untargeted; its fitted start, `agents.amortized`, asks a search spec for one)."""
-        return make_objective(kind, None if self.attack == LEARNED else self.resolved_target(kind, action_names),
+        goal = attack_class(self.attack).goal
+        return make_objective(kind, self.resolved_target(kind, action_names) if goal else None,
                               loss=self.loss, weight=self.weight, kappa=self.kappa, tol=self.tol,
                               n_actions=n_actions, action_names=action_names, action_bounds=action_bounds)
 
@@ -112,6 +114,18 @@ class AttackSpec(AttackOptions):
                            **{k: v for k, v in (("adversary", self.adversary), ("check_below", self.check_below),
                                                 ("load_network", load_network)) if v is not None})
 
+    def check_folder(self, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                     defense_version: int | None = None) -> None:
+        """Refuse the attack's trained folder (`adversary`; `Attack.trained` says what it holds) where it was
+        fitted against another model file, preset or defense: one line saying which."""
+        attack_class(self.attack).check_folder(self.adversary, model_file=model_file, preset=preset, defense=defense,
+                                               defense_version=defense_version)
+
+    def folder_digest(self) -> str | None:
+        """The content digest of the attack's trained folder, which an evaluation's key records (a refitted
+        folder is another attack); None without one."""
+        return None if self.adversary is None else attack_class(self.attack).folder_digest(self.adversary)
+
     @property
     def sparse_in_time(self) -> bool:
         """Whether a frequency budget skips steps (`attack_share` below 1, or `when` gap): an episode's
@@ -126,13 +140,7 @@ class AttackSpec(AttackOptions):
     def _check_unread(self) -> None:
         """An option the attack never reads is an error (`Attack.reads`), and so is a goal defined by the
         clean observation for an attack that never queries it (`queries_clean`)."""
-        from zodrive.attacks.learned import LearnedAdversary
-        from zodrive.attacks.transfer import Transfer
-
-        folder: dict[str, type[Attack]] = {LEARNED: LearnedAdversary, TRANSFER: Transfer}
-        cls = folder.get(self.attack) or ATTACKS.get(self.attack)
-        if cls is None:
-            return  # an unknown attack: building it says so
+        cls = attack_class(self.attack)
         refuse_unread(cls, self.model_dump())
         if self.access == "decision" and not cls.on_decisions:
             raise ZodriveError(decision_refusal(cls))
@@ -245,7 +253,7 @@ def _sparse(spec: AttackOptions) -> None:
 
 
 def _known(spec: AttackOptions) -> None:
-    if spec.attack not in ATTACKS and spec.attack not in (LEARNED, TRANSFER):
+    if spec.attack not in ATTACKS and spec.attack not in FOLDER_ONLY:
         import difflib
 
         close = difflib.get_close_matches(spec.attack, list(KNOWN), n=1)
@@ -263,7 +271,7 @@ def load_attack(name: str, overrides: list[str] | None = None) -> AttackSpec:
     from zodrive.config import available
 
     head, colon, folder = name.partition(":")
-    if name in (LEARNED, TRANSFER) or (colon and head in FOLDER_ATTACKS):
+    if name in FOLDER_ONLY or (colon and head in FOLDER_ATTACKS):
         if colon and not folder:
             raise ZodriveError(f"attack {name!r} names no folder: {head}:DIR")
         data: dict[str, Any] = {"attack": head, "adversary": folder or None}

@@ -149,6 +149,17 @@ class Transfer(Attack):
     no_search = "transfer runs PGD on its surrogate and never queries the victim"
     reads: ClassVar[frozenset[str]] = frozenset({"steps", "step_size", "kappa", "target"})
     reference = "Papernot et al., transferability of adversarial samples, 2016; PGD (Madry et al., ICLR 2018)"
+    trained = "surrogate"
+
+    @classmethod
+    def check_folder(cls, folder: str | None, *, model_file: str, preset: dict[str, Any], defense: str | None,
+                     defense_version: int | None = None) -> None:
+        if folder is not None:  # (none: building the attack says that it needs one)
+            check_surrogate(folder, model_file=model_file, preset=preset, defense=defense)
+
+    @classmethod
+    def folder_digest(cls, folder: str) -> str:
+        return digest(folder)
 
     def __init__(self, threat: ThreatModel, *, adversary: str | None = None, **kwargs: Any) -> None:
         """`adversary`: the surrogate's folder (`transfer:DIR`, written by `zodrive surrogate-train`)."""

@@ -22,9 +22,9 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from zodrive.attacks.base import ENGINE_VERSION
-from zodrive.attacks.registry import ATTACKS
+from zodrive.attacks.registry import attack_class
 from zodrive.attacks.schema import removed_message, removed_settings, without_removed
-from zodrive.attacks.spec import PICKER_ATTACKS, TRANSFER, AttackSpec
+from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
 from zodrive.defense import defense_version, keeps_state
 from zodrive.envs import make_env, scenario
@@ -33,7 +33,7 @@ from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
 from zodrive.policies.policy import resolve
-from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, sha256, to_json, versions,
+from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, to_json, versions,
                              write_atomic, write_json)
 from zodrive.seeds import EVAL_SEED
 from zodrive.system import build_attacker, load_policy, make_policy_env
@@ -64,17 +64,9 @@ class EvalJob:
         model = resolve(self.model).key()
         attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
         key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
-        if attack is not None and attack.get("adversary") is not None:  # a retrained adversary is another attack
-            if attack.get("attack") in PICKER_ATTACKS:
-                from zodrive.attacks.picker import digest
-
-                key["adversary"] = digest(attack["adversary"])
-            elif attack.get("attack") == TRANSFER:
-                from zodrive.attacks.transfer import digest as surrogate_digest
-
-                key["adversary"] = surrogate_digest(attack["adversary"])
-            else:
-                key["adversary"] = "sha256:" + sha256(Path(attack["adversary"]) / "model.zip")
+        folder = None if self.attack is None else AttackSpec.from_mapping(self.attack).folder_digest()
+        if folder is not None:  # a refitted trained folder is another attack
+            key["adversary"] = folder
         if self.defense is not None:
             key["defense"] = self.defense
             if defense_version(self.defense) is not None:
@@ -252,23 +244,12 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int, envs: int = 1,
 
 def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any],
                          defense: str | None) -> None:
-    """Refuse a trained folder (`learned:DIR`'s adversary, `vertex-hold:DIR`'s or `vertex-check:DIR`'s
-    picker) fitted against another model file, preset or defense: one line saying which."""
-    if attack is not None and attack.get("attack") == "learned":
-        from zodrive.attacks.learned import check_adversary
-
-        if attack.get("adversary") is None:
-            raise ZodriveError("attack learned needs a trained adversary: --attack learned:DIR")
-        check_adversary(attack["adversary"], model_file=model, preset=preset, defense=defense,
-                        defense_version=defense_version(defense) if defense is not None else None)
-    if attack is not None and attack.get("attack") in PICKER_ATTACKS and attack.get("adversary") is not None:
-        from zodrive.attacks.picker import check_picker
-
-        check_picker(attack["adversary"], model_file=model, preset=preset, defense=defense)
-    if attack is not None and attack.get("attack") == TRANSFER and attack.get("adversary") is not None:
-        from zodrive.attacks.transfer import check_surrogate
-
-        check_surrogate(attack["adversary"], model_file=model, preset=preset, defense=defense)
+    """Refuse an attack's trained folder (`Attack.trained`: a learned adversary, a picker, a surrogate) fitted
+    against another model file, preset or defense: one line saying which."""
+    if attack is not None:
+        AttackSpec.from_mapping(attack).check_folder(
+            model_file=model, preset=preset, defense=defense,
+            defense_version=defense_version(defense) if defense is not None else None)
 
 
 RUN_FILES = ("eval_key.json", "episodes.jsonl", "steps.jsonl", "summary.json")
@@ -514,8 +495,9 @@ def summarize(
         steps_total = sum(r["attacked_steps"] for r in records)
         applicable = sum(r["applicable"] for r in records)
         successes = sum(r["successes"] for r in records)
-        learned = job.attack["attack"] == "learned"  # no per-step goal: no success rate, no base rate
-        blind = job.attack["attack"] in ATTACKS and not ATTACKS[job.attack["attack"]].queries_clean
+        kind = attack_class(job.attack["attack"])
+        learned = not kind.goal  # no per-step goal: no success rate, no base rate
+        blind = not kind.queries_clean
         summary.update(
             attack=job.attack["attack"],
             # paper mode is unconstrained: eps sets no budget (it only sizes random starting points)

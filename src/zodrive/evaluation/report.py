@@ -36,8 +36,7 @@ def format_summary(summary: dict[str, Any]) -> str:
             + (f"{summary['norm']}, eps={summary['eps']}" + (f" ({summary['eps_means']})" if summary.get("eps_means")
                                                               else "") + ", budgeted" if summary.get("eps") is not None
                else "unconstrained: paper mode, no budget")
-            + (f", adversary {(summary.get('attack_config') or {}).get('adversary')})" if summary["attack"] == "learned"
-               else f", target={summary['target']}" + _picker(summary) + ")")
+            + _goal_and_folder(summary) + ")"
             + _options(summary.get("attack_config") or {})
         )
         if summary["attack_success_rate"] is None:  # a learned adversary: no per-step goal
@@ -78,13 +77,21 @@ def _percent(value: float | None) -> str:
     return "n/a" if value is None or value != value else f"{value:.1%}"
 
 
-def _picker(summary: dict[str, Any]) -> str:
-    """`, picker DIR` for an attack with a picker (`vertex-hold:DIR`, `vertex-check:DIR`), `, surrogate DIR` for
-    transfer, else nothing (the learned adversary's folder is shown as its adversary)."""
+def _goal_and_folder(summary: dict[str, Any]) -> str:
+    """`, target=T` for an attack with a per-step goal (`Attack.goal`), and what its trained folder holds
+    (`Attack.trained`: `, picker DIR`, `, surrogate DIR`; the learned adversary, which has no goal:
+    `, adversary DIR`)."""
+    from zodrive.attacks.registry import attack_class
+    from zodrive.errors import ZodriveError
+
+    try:
+        kind = attack_class(summary["attack"])
+        goal, trained = kind.goal, kind.trained
+    except ZodriveError:  # a summary of an attack this zodrive does not know
+        goal, trained = True, ""
     folder = (summary.get("attack_config") or {}).get("adversary")
-    if summary.get("attack") == "transfer":
-        return f", surrogate {folder}"
-    return f", picker {folder}" if summary.get("attack") != "learned" and folder else ""
+    held = f", {trained} {folder}" if trained and folder else ""
+    return f", target={summary['target']}{held}" if goal else held
 
 
 def _options(config: dict) -> str:

@@ -146,10 +146,9 @@ def default_attacks(attack_set: list[str] | None = None) -> tuple[list[str], dic
 
 
 def _black_box(attack: str, attack_set: list[str] | None) -> bool:
-    from zodrive.attacks.registry import ATTACKS
+    from zodrive.attacks.registry import attack_class
 
-    name = load_attack(attack, attack_set).attack
-    return name not in ATTACKS or ATTACKS[name].black_box  # the learned adversary only sees observations
+    return attack_class(load_attack(attack, attack_set).attack).black_box
 
 
 def attack_name(attack: str) -> str:
