@@ -9,6 +9,7 @@ from typing import Any
 
 from zodrive.cli.common import check_trust, defense_name, episode_count, progress_flag, trust_flag, workers_flag
 from zodrive.errors import ZodriveError
+from zodrive.experiments.tracks import DENSE, RESERVED, TRACKS
 
 BOARD = Path("results/bench")
 SCENARIOS = ("highway-fast", "merge", "roundabout", "intersection", "discrete")
@@ -18,9 +19,15 @@ def add_parsers(sub: Any) -> None:
     bench = sub.add_parser("bench", help="a policy's row under a scenario's fixed protocol (docs/bench.md)")
     bench.add_argument("model", help="the policy: SB3 zip or folder, ONNX file, FILE.py:NAME or baseline:NAME")
     bench.add_argument("--scenario", required=True, choices=SCENARIOS, help="the protocol's scenario")
+    bench.add_argument("--track", choices=(DENSE, *TRACKS), default=DENSE,
+                       help="the threat model, a protocol of its own: dense (every feature of every vehicle, every "
+                            "step, score access), decision (the attacker sees only the action taken), one-object (at "
+                            "most one vehicle row moved a step), sparse (at most 10%% of the steps attacked); "
+                            "docs/bench.md, \"Tracks\" (default: dense)")
     bench.add_argument("--name", help="the row's name on the leaderboard (default: the model's label)")
     bench.add_argument("--board", type=Path, default=BOARD,
-                       help="leaderboard folder: the row goes to BOARD/SCENARIO/NAME (default: results/bench)")
+                       help="leaderboard folder: the row goes to BOARD/SCENARIO/NAME, a track's to "
+                            "BOARD/SCENARIO/tracks/TRACK/NAME (default: results/bench)")
     bench.add_argument("--episodes", type=episode_count, default=None,
                        help="N episodes, clean and attacked alike, for a quick look: the row is marked unofficial "
                             "(default: the protocol's)")
@@ -47,10 +54,10 @@ def add_parsers(sub: Any) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
-    from zodrive.experiments.bench import ROW_NAME, bench, protocol, write_leaderboard
+    from zodrive.experiments.bench import ROW_NAME, bench, protocol, row_folder, write_leaderboard
     from zodrive.policies.policy import resolve
 
-    proto = protocol(args.scenario)
+    proto = protocol(args.scenario, args.track)
     check_trust(args)
     name = (resolve(args.model).label.replace(":", "-") + (f"+{args.defense}" if args.defense else "")
             if args.name is None else args.name)
@@ -58,7 +65,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise ZodriveError(f"--name {name!r}: a row's name is one folder name of letters, digits and ._+@=- (at most "
                            "100, not starting with one of ._+@=-): tables and plots show it as it is"
                            + ("" if args.name is not None else "; pass --name"))
-    out = args.board / args.scenario / name
+    if name in RESERVED:
+        raise ZodriveError(f"--name {name}: the board's own folder of a scenario ({', '.join(RESERVED)}), not a row's: "
+                           "pass another --name")
+    out = row_folder(args.board, args.scenario, name, args.track)
     start = time.perf_counter()
     row = bench(args.model, proto, out, name=name, episodes=args.episodes, workers=args.workers,
                 progress=not args.no_progress, force=args.force, trust=args.trust_model, defense=args.defense)

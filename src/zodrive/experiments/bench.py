@@ -7,6 +7,9 @@ runs at every ε; the row keeps, per ε, the cell that hurts the policy most amo
 the ε-ball, smaller ε and clean included) and white-box PGD as a
 separate, labelled column where the policy has gradients. Every cell is an ordinary resumable
 evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt from the cells.
+A track (`zodrive.experiments.tracks`: decision access, one object, 10 % of steps) is a protocol of its
+own on the same grid with another threat model; its rows live in SCENARIO/tracks/TRACK and get tables of
+their own.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
 from zodrive.experiments.compare import cell_folder, compare, strongest
 from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_notes, read_exact
+from zodrive.experiments.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
+                                        threat_fields)
 from zodrive.policies.policy import resolve
 from zodrive.runinfo import read_jsonl, write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
@@ -73,13 +78,18 @@ class Protocol:
     seed: int = EVAL_SEED
     version: int = VERSION
     black_box: tuple[str, ...] = BLACK_BOX
-    white_box: str = WHITE_BOX
+    white_box: str | None = WHITE_BOX
+    """The white-box column's attack (None: the row has none, as on the decision track)."""
     query_budget: int | None = None
     """The most victim queries a black-box attack of the row may spend on one step (None: its own
     settings' bound, 2,002 for random search); PGD, white-box, is not capped."""
+    track: str = DENSE
+    """The threat model's track (`zodrive.experiments.tracks`): its protocol has an id and versions of its own."""
+    attack_set: tuple[str, ...] = ()
+    """The threat-model fields every attack of the row runs with (`KEY=VALUE`; the track's)."""
 
     def name(self) -> str:
-        return f"{self.scenario}-v{self.version}"
+        return f"{self.scenario}{'' if is_dense(self.track) else '-' + self.track}-v{self.version}"
 
     def counts(self, episodes: int | None = None) -> tuple[int, int]:
         """(attacked, clean) episodes: the protocol's, or `episodes` for both (a quick, unofficial look)."""
@@ -98,11 +108,46 @@ PROTOCOLS = {
 }
 
 
-def protocol(name: str) -> Protocol:
-    """The current protocol of scenario `name`."""
+TRACK_GRID: dict[str, Any] = {"episodes": 100, "eps": (0.01, 0.02, 0.05), "clean_episodes": 300,
+                               "query_budget": QUERY_CAP}
+"""Every track's seeds, episodes and ε: its scenario's dense protocol's (highway-fast-v4 and merge-v3 alike; a test
+holds them equal, so that a change there is a decision here), and version 4's cap on its black-box attacks on
+both scenarios (docs/bench.md, "Tracks")."""
+TRACK_PROTOCOLS = {(scenario, name): Protocol(scenario, **TRACK_GRID, version=1, track=name,
+                                              black_box=track.black_box or BLACK_BOX,
+                                              white_box=WHITE_BOX if track.white_box else None,
+                                              attack_set=track.attack_set)
+                   for scenario in TRACK_SCENARIOS for name, track in TRACKS.items()}
+"""The current protocol of each track on each scenario that has it (`highway-fast-one-object-v1`)."""
+
+
+def protocol(name: str, track: str = DENSE) -> Protocol:
+    """The current protocol of scenario `name` on `track` (the dense one by default)."""
     if name not in PROTOCOLS:
         raise ZodriveError(f"no bench protocol for scenario {name!r} (protocols: {', '.join(PROTOCOLS)})")
-    return PROTOCOLS[name]
+    if is_dense(track):
+        return PROTOCOLS[name]
+    if track not in TRACKS:
+        raise ZodriveError(f"no bench track {track!r} (tracks: {', '.join((DENSE, *TRACKS))})")
+    if (name, track) not in TRACK_PROTOCOLS:
+        raise ZodriveError(f"scenario {name} has no {track} track (its tracks are benched on "
+                           f"{' and '.join(TRACK_SCENARIOS)}): bench it on the dense track, without --track")
+    return TRACK_PROTOCOLS[(name, track)]
+
+
+def current_protocols() -> dict[str, Protocol]:
+    """Every current protocol, dense and tracks, by id."""
+    return {p.name(): p for p in (*PROTOCOLS.values(), *TRACK_PROTOCOLS.values())}
+
+
+def row_folder(board: Path, scenario: str, name: str, track: str = DENSE) -> Path:
+    """Where a bench row lives: BOARD/SCENARIO/NAME on the dense track, BOARD/SCENARIO/tracks/TRACK/NAME on another."""
+    return board / scenario / name if is_dense(track) else board / scenario / TRACKS_FOLDER / track / name
+
+
+def scenario_folder(out: Path, track: str = DENSE) -> Path:
+    """The scenario's folder of row folder `out` (`row_folder` backwards): where the board's brake is."""
+    return out.parent if is_dense(track) else out.parents[2]
 
 
 def physical_eps(proto: Protocol) -> dict[str, dict[str, float]]:
@@ -163,17 +208,25 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     if defense is not None and resolved.kind == "baseline" and get_baseline(resolved.ref).reads != "observation":
         raise ZodriveError(f"{resolved.ref} does not read the observation: a defense between its sensor and it "
                            "changes nothing (bench it without --defense)")
-    attacks = [*black_box_of(proto, defense), proto.white_box]
+    if defense is not None and not is_dense(proto.track):
+        raise ZodriveError(f"--defense with --track {proto.track}: a defended row is benched on the dense track, whose "
+                           "ensemble adds the attacks that adapt to its defense; no track defines them (they drift "
+                           "within max_change, which one object does not fit): drop one of the two")
+    attacks = [*black_box_of(proto, defense), *([proto.white_box] if proto.white_box else [])]
     capped: dict[str, list[int | None]] | None = (
         {attack: [proto.query_budget] for attack in black_box_of(proto, defense)} if proto.query_budget else None)
     defenses = [defense]
     if force:  # the row of what ran here before is never read beside the new cells (zodrive leaderboard)
         (out / "row.json").unlink(missing_ok=True)
     earlier = _earlier_version(out, proto)
-    clock = _Clock(n, n_clean, brake_done=(brake_folder(out) / "table.json").is_file())
+    brake = brake_folder(out, proto.track)
+    if not is_dense(proto.track) and not force:  # the clean cells are the dense row's own evaluation: not run twice
+        share_clean(policy, proto.scenario, proto.seed, scenario_folder(out, proto.track) / out.name, out,
+                    (n, n_clean), trust)
+    clock = _Clock(n, n_clean, brake_done=(brake / "table.json").is_file())
     cells = compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
                     preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
-                    attack_budgets=capped)
+                    attack_budgets=capped, attack_set=list(proto.attack_set) or None)
     if earlier:  # cells of the earlier version that this one does not keep (git's history has them)
         keep = {_cell_folder(out, cell) for cell in cells}
         for folder in sorted((out / "cells").iterdir()):
@@ -184,8 +237,9 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
         _start_from_grid(out, clean_out, cells, force)
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
                 preset=proto.scenario, force=force, envs=envs, trust=trust, defenses=defenses)
-    # the board's brake, run once for every row of the scenario (never forced: its cell's key decides)
-    compare([BRAKE], [], [], n_clean, brake_folder(out), workers=workers, progress=progress, seed=proto.seed,
+    # the board's brake, run once for every row of the scenario and every track (never forced: its cell's key
+    # decides): it reads nothing, so no threat model changes what it does
+    compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, envs=envs)
     key = resolved.key() if defense is None else f"{resolved.key()}+defense:{defense}" + (
         f":v{defense_version(defense)}" if defense_version(defense) is not None else "")
@@ -196,12 +250,12 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     return row
 
 
-def brake_folder(out: Path) -> Path:
-    """The constant brake's comparison a bench row in `out` is read against: the board's, one per scenario
-    (`BOARD/SCENARIO/brake`), or the row's own `brake/` where it has one (rows benched before the brake was
-    shared: the same seeds, the same episodes)."""
+def brake_folder(out: Path, track: str = DENSE) -> Path:
+    """The constant brake's comparison a bench row in `out` (of `track`) is read against: the board's, one per
+    scenario and for every track (`BOARD/SCENARIO/brake`), or the row's own `brake/` where it has one (rows
+    benched before the brake was shared: the same seeds, the same episodes)."""
     own = out / "brake"
-    return own if own.is_dir() else out.parent / "brake"
+    return own if own.is_dir() else scenario_folder(out, track) / "brake"
 
 
 def _start_from_grid(out: Path, clean_out: Path, cells: list[dict[str, Any]], force: bool) -> None:
@@ -258,9 +312,10 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     cells = _cells(out)
     same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
     clean = next(c for c in _cells(clean_folder(out, episodes, n_clean)) if c["attack"] == "none")
-    brake = next(c for c in _cells(brake_folder(out)) if c["attack"] == "none")
+    brakes = brake_folder(out, proto.track)
+    brake = next(c for c in _cells(brakes) if c["attack"] == "none")
     black_box = [c for c in cells if c["attack"] in black_box_of(proto, defense)]
-    white_box = [c for c in cells if _attack(c) == proto.white_box]
+    white_box = [c for c in cells if proto.white_box is not None and _attack(c) == proto.white_box]
     if black_box:
         inside = _inside(black_box, same, proto.eps)
         pgd_inside = _inside(white_box, same, proto.eps) if white_box else {}
@@ -274,7 +329,7 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     area = float(np.trapezoid(returns, grid) / (grid[-1] * same["mean_return"])) if same["mean_return"] > 0 else None
     # the smallest ε whose ball holds an attack that collides more often than the brake does clean, on the
     # same episodes (the brake's first `episodes`, not its 300 clean ones: another set of seeds)
-    brake_rate = _collision_rate(brake_folder(out), episodes)
+    brake_rate = _collision_rate(brakes, episodes)
     passes = 0.0 if same["collision_rate"] > brake_rate else \
         min((c["eps"] for c in black_box if c["collision_rate"] > brake_rate), default=None)
     return {
@@ -287,10 +342,12 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
         "clean_on_attacked_episodes": {"return": same["mean_return"], "collision_rate": same["collision_rate"]},
         "brake": {"return": brake["mean_return"], "collision_rate": brake["collision_rate"]},
         "attacked": per_eps, "robustness_area": area, "eps_collisions_pass_brake": passes,
-        "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), brake_folder(out)),
+        "vs_brake": brake_margin(clean_folder(out, episodes, n_clean), brakes),
         "eps_units": physical_eps(proto),
         **({"defense": defense, "black_box": list(black_box_of(proto, defense))} if defense else {}),
         **({"query_budget": proto.query_budget} if proto.query_budget else {}),
+        **({} if is_dense(proto.track) else {"track": proto.track, "threat": threat_fields(proto.attack_set),
+                                             "black_box": list(proto.black_box), "white_box": proto.white_box}),
     }
 
 
@@ -466,6 +523,7 @@ class _Row(BaseModel):
     attacked: list[_Point] = Field(min_length=1)
     robustness_area: float | None
     eps_collisions_pass_brake: float | None
+    track: str | None = Field(default=None, pattern=r"^[a-z][a-z0-9-]{0,39}$")  # a table's heading shows it
 
 
 def read_row(path: Path) -> dict[str, Any]:
@@ -490,12 +548,14 @@ def read_row(path: Path) -> dict[str, Any]:
 
 
 def read_rows(board: Path) -> list[dict[str, Any]]:
-    """Every `row.json` under `board` (one folder per scenario, one per policy)."""
+    """Every `row.json` under `board` (one folder per scenario, one per policy; a track's rows in
+    SCENARIO/tracks/TRACK, `row_folder`)."""
     rows = []
-    for path in sorted(board.glob("*/*/row.json")):
+    for path in sorted([*board.glob("*/*/row.json"), *board.glob(f"*/{TRACKS_FOLDER}/*/*/row.json")]):
         row = read_row(path)
         if "vs_brake" not in row:  # a row written before the column: from its own cells
-            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent), brake_folder(path.parent))
+            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent),
+                                           brake_folder(path.parent, row.get("track") or DENSE))
         row["exact"] = read_exact(path.parent)
         rows.append((row, path.parent))
     constant_margins(rows)
@@ -528,16 +588,22 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "ε-ball changes the action, decided by a complete check of the network (`zodrive certify MODEL --row",
              "FOLDER`; ReLU MLPs); ensemble miss: of those, the ones no black-box attack of the ensemble changed (PGD",
              "not counted); – where a row has no such check (docs/bench.md, \"The exact check\").", ""]
-    for proto in sorted({r["protocol"] for r in rows}):  # rows of two versions never share a table
-        group = sorted((r for r in rows if r["protocol"] == proto),
+    def table(r: dict[str, Any]) -> tuple[str, str, str]:
+        return r["scenario"], r.get("track") or DENSE, r["protocol"]
+
+    # rows of two versions or two tracks never share a table; a scenario's tracks follow its dense table
+    for place, track, proto in sorted({table(r) for r in rows}, key=lambda t: (t[0], not is_dense(t[1]), t[1], t[2])):
+        group = sorted((r for r in rows if table(r) == (place, track, proto)),
                        key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
-        scenario = group[0]["scenario"]
-        title = f"## {scenario} (protocol {proto})"
-        current = PROTOCOLS.get(scenario)
+        where = place if is_dense(track) else f"{place}, track {track}"
+        title = f"## {where} (protocol {proto})"
+        current = PROTOCOLS.get(place) if is_dense(track) else TRACK_PROTOCOLS.get((place, track))
         if current is not None and proto != current.name():
             title += (f" — an earlier version: `zodrive bench` with each row's own command runs it under "
                       f"{current.name()}, reusing its finished cells")
         lines += [title, ""]
+        if not is_dense(track):
+            lines += _threat_model(track, current_protocols().get(proto))
         official = [r for r in group if r["official"]]
         unofficial = [r for r in group if not r["official"]]
         if official:
@@ -546,11 +612,24 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
             lines += _identical(official)
             lines += _defended(official)
         if unofficial:
-            lines += [f"Unofficial rows of {scenario} (fewer episodes than the protocol's: not ranked, no margin in "
+            lines += [f"Unofficial rows of {where} (fewer episodes than the protocol's: not ranked, no margin in "
                       "bold; their CIs are wide):", ""]
             lines += _table(unofficial, ranked=False)
             lines += exact_notes(unofficial)
     return "\n".join(lines)
+
+
+def _threat_model(track: str, proto: Protocol | None) -> list[str]:
+    """A track's threat model under its table's heading, with each ε in metres and m/s (`physical_eps`), for a
+    protocol this zodrive knows (an unknown one: its name alone, in the heading)."""
+    if proto is None or track not in TRACKS:
+        return []
+    units = "; ".join(f"ε {eps}: " + ", ".join(f"{f} {v:g} {'m/s' if f.startswith('v') else 'm'}"
+                                               for f, v in moved.items())
+                      for eps, moved in physical_eps(proto).items())
+    cap = f"; at most {proto.query_budget} queries a step for a black-box attack" if proto.query_budget else ""
+    return [f"Threat model: {TRACKS[track].threat}. Per ε, how far a feature may move: {units}{cap} "
+            f"(`zodrive bench MODEL --scenario {proto.scenario} --track {track}`; docs/bench.md, \"Tracks\").", ""]
 
 
 def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
@@ -766,7 +845,7 @@ def plot_frontier(rows: list[dict[str, Any]], path: Path) -> None:
     from zodrive.evaluation.report import headless_pyplot
 
     plt = headless_pyplot()
-    current = {p.name() for p in PROTOCOLS.values()}  # an earlier version's table is history, not a choice
+    current = set(current_protocols())  # an earlier version's table is history, not a choice
     official = [r for r in rows if r["official"] and r["protocol"] in current]
     protocols = sorted({r["protocol"] for r in official})
     if not protocols:

@@ -39,6 +39,9 @@ def certify_row(model: str, folder: Path, *, state_count: int = STATES, time_lim
     if row.get("defense"):
         raise ZodriveError(f"{folder} is a defended row ({row['defense']}): the exact check decides the network "
                            "alone, not the network behind its defense")
+    if row.get("track"):
+        raise ZodriveError(f"{folder} is a row of the {row['track']} track: the exact check decides the dense threat "
+                           "model (every row, every step) against the dense ensemble; check the policy's dense row")
     policy = resolve(model)
     if policy.kind != "model":
         raise ZodriveError(f"{model}: the exact check reads an SB3 zip's network (the row's own policy)")
