@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from zodrive.drivers.baselines import BASELINES
-from zodrive.policies.resolve import load_victim, policy_kind, policy_label
+from zodrive.policies.policy import resolve
+from zodrive.policies.resolve import load_victim
 from zodrive.system import make_policy_env
 from zodrive.cli import main
 from zodrive.envs import load_preset
@@ -114,9 +115,9 @@ def test_driving_metrics_of_a_constant_policy() -> None:
 
 
 def test_policy_names() -> None:
-    assert policy_kind("baseline:brake") == "continuous"
-    assert policy_kind("baseline:idm-mobil") == "discrete"
-    assert policy_label("baseline:idle") == "baseline:idle"
+    assert resolve("baseline:brake").action_kind() == "continuous"
+    assert resolve("baseline:idm-mobil").action_kind() == "discrete"
+    assert resolve("baseline:idle").label == "baseline:idle"
     assert {"slower", "idle", "brake", "idm-mobil"} <= set(BASELINES)
 
 

@@ -348,10 +348,10 @@ def test_a_td3_row_trains_and_is_read_like_a_ddpg(tmp_path: Path) -> None:
     out = tmp_path / "td3"
     assert main(["train", "--algo", "td3", "--steps", "200", "--set", "hyperparameters.learning_starts=50",
                  "--out", str(out), "--no-progress"]) == 0
-    from zodrive.policies.resolve import policy_kind
+    from zodrive.policies.policy import resolve
     from zodrive.policies.safe_load import load_policy_network
 
-    assert policy_kind(str(out)) == "continuous"
+    assert resolve(str(out)).action_kind() == "continuous"
     assert load_policy_network(out / "model.zip").n_outputs == 2  # the actor, rebuilt without unpickling
     assert json.loads((out / "train.json").read_text())["algo"] == "td3"
 

@@ -230,13 +230,12 @@ def test_a_named_preset_that_drops_the_models_config_is_refused_unless_shifted(z
 
 
 def test_another_version_of_the_environment_is_refused(tmp_path: Path) -> None:
-    from zodrive.policies.folders import trained_in_memory
     from zodrive.policies.resolve import resolve_scenario
 
     model = PPO("MlpPolicy", gym.make("merge-v0"), n_steps=64, seed=0, device="cpu")
     with pytest.raises(ZodriveError, match="environment merge-v1, not merge-v0"):
         zodrive.evaluate(model, "merge", episodes=1)  # the model still holds the merge-v0 it was trained on
-    assert resolve_scenario("memory:ppo", None, said=trained_in_memory(model))[0]["env_id"] == "merge-v0"
+    assert resolve_scenario(model, None)[0]["env_id"] == "merge-v0"  # where the model in memory says it was trained
     folder = tmp_path / "exit"
     folder.mkdir()
     PPO("MlpPolicy", gym.make("exit-v0"), n_steps=64, seed=0, device="cpu").save(folder / "ppo-exit-v0")  # HF's name

@@ -81,14 +81,14 @@ def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, mo
     from zodrive.cli.attack import attack_spec_from_args
     from zodrive.cli.common import preset_of
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
-    from zodrive.policies.resolve import policy_ref
+    from zodrive.policies.policy import resolve
 
     monkeypatch.chdir(ROOT)  # the commands name repository paths
     folder = ROOT / cell
     command = json.loads((folder / "summary.json").read_text())["command"]
     args = build_parser().parse_args(shlex.split(command)[1:])
     spec = attack_spec_from_args(args)
-    job = EvalJob(model=policy_ref(args.model), preset=preset_of(args), attack=spec.to_dict(),
+    job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=spec.to_dict(),
                   seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
     on_disk = json.loads((folder / "eval_key.json").read_text())
     assert same_evaluation(on_disk, json.loads(json.dumps(job.key())))

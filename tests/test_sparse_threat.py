@@ -275,12 +275,12 @@ def _committed_job(monkeypatch: pytest.MonkeyPatch, *extra: str):
     from zodrive.cli.attack import attack_spec_from_args
     from zodrive.cli.common import preset_of
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
-    from zodrive.policies.resolve import policy_ref
+    from zodrive.policies.policy import resolve
 
     monkeypatch.chdir(ROOT)
     command = json.loads((ROOT / COMMITTED / "summary.json").read_text())["command"]
     args = build_parser().parse_args(shlex.split(command)[1:] + list(extra))
-    return EvalJob(model=policy_ref(args.model), preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
+    return EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
                    seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
 
 

@@ -27,7 +27,6 @@ from zodrive.defense import keeps_state
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
 from zodrive.evaluation.rollout import run_episode, run_lockstep
-from zodrive.policies.folders import trained_in_memory
 from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.seeds import EVAL_SEED, MAX_EPISODES
@@ -89,8 +88,7 @@ def _scenario(policy: Policy, scenario: str | dict[str, Any] | None, env_id: str
     """Where `policy` drives, by the CLI's rules (`resolve_scenario`): the scenario named, else
     where its files (or the environment an SB3 model holds) say it was trained; a named scenario
     that differs from that is refused unless `shifted`."""
-    said = trained_in_memory(policy.obj) if policy.kind == "sb3" else None
-    found = resolve_scenario(policy.ref, scenario, None, env_id, shifted=shifted, said=said)
+    found = resolve_scenario(policy, scenario, None, env_id, shifted=shifted)
     if shifted:
         refuse_unused_shift([found[1]], "shifted=True")
     return found

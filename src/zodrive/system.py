@@ -351,7 +351,7 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
     and, with `defense`, in the defense between the (attacked) sensor and the policy; the
     attacker then queries the defended system. `model` is anything `resolve` reads."""
     policy = resolve(model)
-    if defense is not None and policy.kind == "baseline" and bl.get_baseline(policy.ref).reads == "nothing":
+    if defense is not None and policy.reads == "nothing":
         raise ZodriveError(f"{policy.ref} takes one constant action whatever it observes: the {defense} defense "
                            "between its sensor and it changes nothing (evaluate it without --defense)")
     if policy.reads_simulator:
@@ -360,7 +360,8 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
             raise ZodriveError(f"{policy.ref} reads the simulator: an observation defense does not apply to it")
         env = make_env(preset, render_mode=render_mode)
         kind = action_kind(preset)
-        driver = bl.simulator_driver(bl.get_baseline(policy.ref), env, preset, kind)
+        assert policy.baseline is not None  # only baselines read the simulator
+        driver = bl.simulator_driver(policy.baseline, env, preset, kind)
         victim = bl.driver_victim(driver, kind, observation_shape(preset), n_actions(preset))
         return victim, env
     if defense is None or not keeps_state(defense):

@@ -16,7 +16,6 @@ import json
 from pathlib import Path
 from typing import Any, Callable
 
-from zodrive.drivers.baselines import get_baseline
 from zodrive.policies.policy import resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.attacks.spec import load_attack
@@ -62,7 +61,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     for model, policy, name, (model_preset, source) in zip(models, policies, names, sources):
         policy.check(model_preset)
         ref, gradients = policy.ref, policy.gradients
-        reads = get_baseline(ref).reads if policy.kind == "baseline" else "observation"
+        reads = policy.reads
         reads_obs = reads == "observation"
         usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
         for defense in defenses if reads_obs else [None]:

@@ -41,7 +41,7 @@ from torch.nn import functional as F
 from zodrive.attacks.threat import ThreatModel, worst_in_ball
 from zodrive.attacks.victim import ActionKind, Victim
 from zodrive.compute import one_torch_thread
-from zodrive.drivers.baselines import check_baseline_fits, driver_victim, get_baseline, simulator_driver
+from zodrive.drivers.baselines import check_baseline_fits, driver_victim, simulator_driver
 from zodrive.envs import action_names, attack_context, make_env, n_actions, observation_shape
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.rollout import act, clean_states, states_driven, to_action
@@ -78,12 +78,13 @@ def distill(model: str, preset: dict[str, Any], eps: float | None, steps: int, o
         raise ZodriveError("--method distill on a DDPG/TD3 model clones a --teacher with --dagger ROUNDS "
                            "(e.g. --teacher baseline:idm-mobil --dagger 4 --kappa 0)")
     readers = ("observation", "simulator") if dagger is not None else ("observation",)
-    if teacher is not None and not (resolve(teacher).kind == "baseline" and get_baseline(teacher).reads in readers):
+    taught = resolve(teacher).baseline if teacher is not None else None
+    if teacher is not None and not (taught is not None and taught.reads in readers):
         also = " or, with --dagger, baseline:idm-mobil or baseline:planner" if dagger is not None else ""
         raise ZodriveError("--teacher must be an observation-reading baseline (baseline:rules, "
                            f"baseline:robust-rules@EPS){also}, not {teacher!r}")
-    if teacher is not None:
-        check_baseline_fits(get_baseline(teacher), preset)
+    if taught is not None:
+        check_baseline_fits(taught, preset)
     if dagger is not None:
         return dagger_distill(model, preset, eps, steps, out, teacher=teacher, rounds=dagger, seed=seed,
                               kappa=kappa, pgd_steps=pgd_steps, epochs=epochs)
@@ -425,9 +426,10 @@ def teacher_and_env(teacher: str | None, source: PolicyNetwork, preset: dict[str
     otherwise the observation-reading baseline, or the source network itself, beside a fresh
     environment."""
 
-    if teacher is not None and get_baseline(teacher).reads == "simulator":
+    baseline = resolve(teacher).baseline if teacher is not None else None
+    if baseline is not None and baseline.reads == "simulator":
         env = make_env(preset)
-        driver = simulator_driver(get_baseline(teacher), env, preset, source.kind, replan=True)
+        driver = simulator_driver(baseline, env, preset, source.kind, replan=True)
         return driver_victim(driver, source.kind, observation_shape(preset), n_actions(preset)), env
     guide = resolve(teacher).victim(preset) if teacher else network_victim(source.net, source.kind, source.obs_shape)
     return guide, make_env(preset)
