@@ -311,7 +311,7 @@ def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path,
     seeds: dict[str, list[int]] = {}  # the clean episodes run, per policy
     real = evaluation.run_episodes
     monkeypatch.setattr(evaluation, "run_episodes", lambda job, indices, *a, **k: (
-        seeds.setdefault(job.model, []).extend(job.seed + i for i in indices if job.attack is None),
+        seeds.setdefault(job.model.ref, []).extend(job.seed + i for i in indices if job.attack is None),
         real(job, indices, *a, **k))[1])
     row = bench("baseline:idle", proto, board / "idle", progress=False, envs=1)
 
@@ -450,7 +450,7 @@ def test_a_row_of_an_earlier_version_gives_way_and_keeps_the_cells_both_share(tm
     assert row["protocol"] == "highway-fast-v4"
     names = sorted(p.name for p in (tmp_path / "r" / "cells").iterdir())
     assert names == ["baseline-rules-none", "baseline-rules-uniform-noise-eps0.05-qb7"]  # the uncapped cell is gone
-    assert len(ran) == 1 and ran[0]["query_budget"] == 7  # only the capped cell ran: clean ones were reused
+    assert len(ran) == 1 and ran[0].query_budget == 7  # only the capped cell ran: clean ones were reused
 
 
 def _episodes(folder: Path, returns: list[float]) -> None:

@@ -123,7 +123,7 @@ def track_cells(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Any]
 
 def _attacked(cells: list[Any]) -> dict[str, AttackSpec]:
     """The attacked cells' specs by folder name."""
-    return {c.folder.name: AttackSpec.from_mapping(c.job.attack) for c in cells if c.job.attack is not None}
+    return {c.folder.name: c.job.attack for c in cells if c.job.attack is not None}
 
 
 def test_a_tracks_cells_carry_its_threat_model(track_cells: dict[str, list[Any]]) -> None:
@@ -290,7 +290,7 @@ def test_a_track_row_shares_the_brake_and_the_dense_rows_clean_cells(tmp_path: P
     ran: list[tuple[str, Any]] = []
     real = evaluation.run_episodes
     monkeypatch.setattr(evaluation, "run_episodes", lambda job, indices, *a, **k: (
-        indices and ran.append((job.model, job.attack)), real(job, indices, *a, **k))[1])
+        indices and ran.append((job.model.ref, job.attack)), real(job, indices, *a, **k))[1])
     assert main(["bench", "baseline:idle", *common, "--track", "one-object"]) == 0
     assert ran == []  # the idle driver reads nothing: its clean cell is the dense row's, and the brake is the board's
     folder = tmp_path / "highway-fast" / "tracks" / "one-object" / "baseline-idle"

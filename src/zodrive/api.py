@@ -23,15 +23,12 @@ import numpy as np
 from zodrive.attacks.base import AttackResult
 from zodrive.attacks.spec import AttackSpec
 from zodrive.envs import scenario as scenario_of
-from zodrive.defense import keeps_state
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation, summarize
-from zodrive.evaluation.rollout import run_episode, run_lockstep
+from zodrive.evaluation.evaluate import EvalJob, evaluate as run_evaluation
 from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.seeds import EVAL_SEED, MAX_EPISODES
-from zodrive.system import AttackWrapper, attack_observations, build_attacker, load_policy, make_policy_env, \
-    spec_for
+from zodrive.system import AttackWrapper, attack_observations, build_attacker, spec_for
 
 __all__ = ["AttackWrapper", "Result", "attack", "evaluate"]
 
@@ -131,40 +128,14 @@ def evaluate(policy: Any, scenario: str | dict[str, Any] | None = None, attack: 
         raise ZodriveError(f"trust_model applies to stable-baselines3 zips; {resolved.label} is read without it")
     preset, source = _scenario(resolved, scenario, env_id, shifted)
     spec = spec_for(attack, scenario_of(preset), options)
-    attack_dict = spec.to_dict() if spec is not None else None
-    if not resolved.in_memory:
-        job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, trust=trust_model,
-                      scenario_source=source)
-        records: list[dict[str, Any]] = []
-        summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress,
-                                 records=records, force=force)
-        return Result(summary, records)
-    if out is not None:
+    if resolved.in_memory and out is not None:
         raise ZodriveError(f"{resolved.label} lives in memory: a run folder is keyed on a model's content; "
-                       "save the model and pass its path to write and resume a run folder")
-    job = EvalJob(resolved.ref, preset, attack_dict, seed=seed, defense=defense, scenario_source=source)
-    records = [r.to_dict() for r in _drive(resolved, preset, spec, defense, episodes, seed, envs)]
-    return Result(summarize(records, job), records)
-
-
-def _drive(policy: Policy, preset: dict[str, Any], spec: AttackSpec | None, defense: str | None,
-           episodes: int, seed: int, envs: int):
-    """Episodes of an in-memory policy, in this process."""
-    max_return = scenario_of(preset).max_return
-    if envs > 1 and (defense is None or not keeps_state(defense)) and (spec is None or not spec.sparse_in_time):
-        from zodrive.envs import make_env
-
-        victim = load_policy(policy, preset, defense)
-        attacker = build_attacker(spec, victim, preset) if spec is not None else None
-        records = list(run_lockstep([make_env(preset) for _ in range(min(envs, episodes))], victim,
-                                    [(i, seed + i) for i in range(episodes)], max_return=max_return,
-                                    attacker=attacker))
-        return sorted(records, key=lambda r: r.episode)
-    victim, env = make_policy_env(policy, preset, spec, defense=defense)
-    try:
-        return [run_episode(env, victim, episode=i, seed=seed + i, max_return=max_return) for i in range(episodes)]
-    finally:
-        env.close()
+                           "save the model and pass its path to write and resume a run folder")
+    job = EvalJob(resolved, preset, spec, seed=seed, defense=defense, trust=trust_model, scenario_source=source)
+    records: list[dict[str, Any]] = []
+    summary = run_evaluation(job, episodes, Path(out) if out is not None else None, envs=envs, progress=progress,
+                             records=records, force=force)
+    return Result(summary, records)
 
 
 def attack(policy: Any, observations: np.ndarray, scenario: str | dict[str, Any] | None = None,

@@ -258,22 +258,24 @@ def preset_of(args: argparse.Namespace) -> dict[str, Any]:
     return scenario_of(args)[0]
 
 
-def scenario_of(args: argparse.Namespace) -> tuple[dict[str, Any], str | None]:
-    """`preset_of` and where a scenario the user did not name came from (`resolve_scenario`)."""
+def scenario_of(args: argparse.Namespace, policy: Any = None) -> tuple[dict[str, Any], str | None]:
+    """`preset_of` and where a scenario the user did not name came from (`resolve_scenario`), for
+    `policy` (`args.model`'s `Policy`, where the command has resolved it already) or `args.model`."""
     from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 
     shifted = getattr(args, "shifted", False)
-    found = resolve_scenario(args.model, args.preset, args.env_set, getattr(args, "env_id", None),
-                             getattr(args, "obs_bounds", None), shifted=shifted)
+    found = resolve_scenario(args.model if policy is None else policy, args.preset, args.env_set,
+                             getattr(args, "env_id", None), getattr(args, "obs_bounds", None), shifted=shifted)
     if shifted:
         refuse_unused_shift([found[1]], "--shifted")
     return found
 
 
-def check_trust(args: argparse.Namespace) -> None:
-    """--trust-model reads SB3 zips; for anything else it would be ignored: an error."""
+def check_trust(args: argparse.Namespace, policy: Any = None) -> None:
+    """--trust-model reads SB3 zips; for anything else it would be ignored: an error (`policy`: `args.model`'s
+    `Policy`, where the command has resolved it already)."""
     if getattr(args, "trust_model", False):
         from zodrive.policies.policy import resolve
 
-        if resolve(args.model).kind != "model":
+        if resolve(args.model if policy is None else policy).kind != "model":
             raise ZodriveError("--trust-model applies to stable-baselines3 zips; this model is read without it")

@@ -115,10 +115,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from zodrive.system import build_attacker
 
     spec = attack_spec_from_args(args)  # argument mistakes first, before any model is read
-    preset, source = scenario_of(args)
-    check_trust(args)
+    policy = resolve(args.model)  # read once: everything below asks the Policy
+    preset, source = scenario_of(args, policy)
+    check_trust(args, policy)
     _check_loss(args, spec, preset)
-    policy = resolve(args.model)
     policy.check(preset, attacked=spec is not None)
     if spec is not None:  # validate the whole attack before any episode runs
         build_attacker(spec, policy.victim(preset, trust=args.trust_model), preset)
@@ -126,12 +126,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         from zodrive.defense import make_defense
 
         make_defense(args.defense, preset)  # the preset must be one the defense understands
-    job = EvalJob(
-        model=policy.ref, preset=preset,
-        attack=spec.to_dict() if spec else None,
-        seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense, trust=args.trust_model,
-        scenario_source=source,
-    )
+    job = EvalJob(model=policy, preset=preset, attack=spec,
+                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense,
+                  trust=args.trust_model, scenario_source=source)
     if args.force and args.out is None:
         raise ZodriveError("--force replaces an evaluation in --out: give --out")
     summary = evaluate(job, args.episodes, args.out, workers=args.workers, envs=envs_of(args, job),
@@ -160,7 +157,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if spec is not None:
         from zodrive.evaluation.evaluate import check_trained_folder
 
-        check_trained_folder(spec.to_dict(), policy.ref, preset, args.defense)
+        check_trained_folder(spec, policy.ref, preset, args.defense)
     victim, env = make_policy_env(policy, preset, spec, render_mode="rgb_array", defense=args.defense,
                                   trust=args.trust_model)
     first = DEFAULT_EVAL_SEED if args.seed is None else args.seed
@@ -194,15 +191,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from zodrive.policies.policy import resolve
     from zodrive.policies.resolve import resolve_preset
 
-    model = args.model or str(demo_model())
+    policy = resolve(args.model or str(demo_model()))
     # the shipped driver was trained on the paper's discrete preset (its zip in the package has no folder to say so)
-    preset = load_preset("discrete") if args.model is None else resolve_preset(model, None, [])
-    policy = resolve(model)
-    ref, name = policy.ref, ("the shipped DQN driver (models/dqn-driver)" if args.model is None else policy.label)
+    preset = load_preset("discrete") if args.model is None else resolve_preset(policy, None, [])
+    name = "the shipped DQN driver (models/dqn-driver)" if args.model is None else policy.label
     spec = load_attack("zo-signsgd")
     results = {}
     for label, attack in (("clean", None), ("attacked", spec)):
-        job = EvalJob(model=ref, preset=preset, attack=attack.to_dict() if attack else None, seed=DEFAULT_EVAL_SEED)
+        job = EvalJob(model=policy, preset=preset, attack=attack, seed=DEFAULT_EVAL_SEED)
         print(f"== {label}: {plural(args.episodes, 'episode')} of {name}" + (f" under {spec.attack}" if attack else ""))
         results[label] = evaluate(job, args.episodes, args.out / label, progress=True)
         print(format_summary(results[label]))

@@ -17,7 +17,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -26,13 +26,13 @@ from zodrive.attacks.registry import attack_class
 from zodrive.attacks.schema import removed_message, removed_settings, without_removed
 from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
-from zodrive.defense import defense_version, keeps_state
+from zodrive.defense import defense_version, keeps_state, parse_defense
 from zodrive.envs import make_env, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
 from zodrive.evaluation.rollout import run_episode, run_lockstep
 from zodrive.evaluation.stats import mean_ci, rate_ci, ratio_ci
-from zodrive.policies.policy import resolve
+from zodrive.policies.policy import Policy, resolve
 from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, to_json, versions,
                              write_atomic, write_json)
 from zodrive.seeds import EVAL_SEED
@@ -43,28 +43,42 @@ log = logging.getLogger(__name__)
 DEFAULT_EVAL_SEED = EVAL_SEED
 
 
-@dataclass
+@dataclass(init=False)
 class EvalJob:
-    """Everything a worker needs to roll out episodes (picklable)."""
+    """One evaluation, its values resolved once where they came in: the `Policy`, the preset (the
+    scenario's config), the `AttackSpec` and the defense (its canonical name). It is written out only
+    as its key (`key`: a run folder's `eval_key.json`) and, pickled, for a worker process.
 
-    model: str                 # model file or `baseline:NAME`
+    `model` is a `Policy` or anything `resolve` reads, `attack` an `AttackSpec` or a record of one (read
+    by the schema): a text or a record is read here, once, and never again downstream."""
+
+    model: Policy               # what drives
     preset: dict[str, Any]
-    attack: dict[str, Any] | None = None
-    seed: int = DEFAULT_EVAL_SEED
-    record_steps: bool = True
-    defense: str | None = None  # e.g. "kinematic": a filter between the (attacked) sensor and the policy
-    trust: bool = False         # read an SB3 zip with SB3's loader (same outputs; not part of the key)
-    scenario_source: str | None = None  # where a scenario the user did not name came from (summary; not the key)
+    attack: AttackSpec | None
+    seed: int
+    record_steps: bool
+    defense: str | None         # e.g. "kinematic": a filter between the (attacked) sensor and the policy
+    trust: bool                 # read an SB3 zip with SB3's loader (same outputs; not part of the key)
+    scenario_source: str | None  # where a scenario the user did not name came from (summary; not the key)
+
+    def __init__(self, model: Any, preset: dict[str, Any], attack: AttackSpec | Mapping[str, Any] | None = None,
+                 seed: int = DEFAULT_EVAL_SEED, record_steps: bool = True, defense: str | None = None,
+                 trust: bool = False, scenario_source: str | None = None) -> None:
+        self.model = resolve(model)
+        self.preset = preset
+        self.attack = attack if attack is None or isinstance(attack, AttackSpec) else \
+            AttackSpec.from_mapping(dict(attack), "the evaluation's attack")
+        self.seed, self.record_steps, self.trust, self.scenario_source = seed, record_steps, trust, scenario_source
+        self.defense = None if defense is None else parse_defense(defense)  # one system, one key
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
         the SHA-256 of its file, so a moved checkout still matches and a swapped file does
         not), the preset, the attack (with the version of the attack engine that ran it) and
         the first seed."""
-        model = resolve(self.model).key()
-        attack = None if self.attack is None else {**self.attack, "engine": ENGINE_VERSION}
-        key = {"model": model, "preset": self.preset, "attack": attack, "seed": self.seed}
-        folder = None if self.attack is None else AttackSpec.from_mapping(self.attack).folder_digest()
+        attack = None if self.attack is None else {**self.attack.to_dict(), "engine": ENGINE_VERSION}
+        key = {"model": self.model.key(), "preset": self.preset, "attack": attack, "seed": self.seed}
+        folder = None if self.attack is None else self.attack.folder_digest()
         if folder is not None:  # a refitted trained folder is another attack
             key["adversary"] = folder
         if self.defense is not None:
@@ -86,24 +100,32 @@ def lockstep_blocker(job: EvalJob) -> str | None:
     policy that reads nothing but the observation and keeps no state between steps."""
     if job.defense is not None and keeps_state(job.defense):
         return f"the {job.defense} defense keeps its own state for one episode"
-    if job.attack is not None and AttackSpec.from_mapping(job.attack).sparse_in_time:
+    if job.attack is not None and job.attack.sparse_in_time:
         return "a frequency budget decides an episode's steps one by one"
-    if resolve(job.model).reads_simulator:
-        return f"{job.model} reads its own simulator"
+    if job.model.reads_simulator:
+        return f"{job.model.ref} reads its own simulator"
     return None
 
 
 def _setup(job: EvalJob, envs: int = 1) -> None:
     """Build the policy and its environment(s): one wrapped in the attack (`envs` 1), or
     `envs` plain ones and the attack apart, for lockstep."""
-    spec = AttackSpec.from_mapping(job.attack) if job.attack is not None else None
     if envs <= 1:
-        victim, env = make_policy_env(job.model, job.preset, spec, defense=job.defense, trust=job.trust)
+        victim, env = make_policy_env(job.model, job.preset, job.attack, defense=job.defense, trust=job.trust)
         _WORKER.update(job=job, victim=victim, env=env)
         return
     victim = load_policy(job.model, job.preset, job.defense, trust=job.trust)  # a defense here keeps no state
-    attacker = build_attacker(spec, victim, job.preset) if spec is not None else None
+    attacker = build_attacker(job.attack, victim, job.preset) if job.attack is not None else None
     _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
+
+
+def _release() -> None:
+    """Close the environments `_setup` built in this process and let go of the policy (one in memory
+    is the caller's)."""
+    for env in [_WORKER.get("env"), *_WORKER.get("envs", ())]:
+        if env is not None:
+            env.close()
+    _WORKER.clear()
 
 
 def _worker_setup(job: EvalJob, envs: int = 1) -> None:
@@ -210,7 +232,7 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int, envs: int = 1,
                     for i in indices:
                         yield _episode(i)
             finally:
-                _WORKER.pop("tick", None)
+                _release()
         return
     ctx = mp.get_context("forkserver")
     if envs <= 1:
@@ -242,12 +264,12 @@ def run_episodes(job: EvalJob, indices: list[int], workers: int, envs: int = 1,
                                 raise error
 
 
-def check_trained_folder(attack: dict[str, Any] | None, model: str, preset: dict[str, Any],
+def check_trained_folder(attack: AttackSpec | None, model: str, preset: dict[str, Any],
                          defense: str | None) -> None:
     """Refuse an attack's trained folder (`Attack.trained`: a learned adversary, a picker, a surrogate) fitted
     against another model file, preset or defense: one line saying which."""
     if attack is not None:
-        AttackSpec.from_mapping(attack).check_folder(
+        attack.check_folder(
             model_file=model, preset=preset, defense=defense,
             defense_version=defense_version(defense) if defense is not None else None)
 
@@ -282,8 +304,8 @@ def evaluate(
         raise ZodriveError(f"workers must be >= 1, not {workers}")
     if envs < 1:
         raise ZodriveError(f"envs must be >= 1, not {envs}")
-    resolve(job.model).check(job.preset, attacked=job.attack is not None)  # fail fast, in this process
-    check_trained_folder(job.attack, job.model, job.preset, job.defense)
+    job.model.check(job.preset, attacked=job.attack is not None)  # fail fast, in this process
+    check_trained_folder(job.attack, job.model.ref, job.preset, job.defense)
     if out is None:
         return _run(job, episodes, None, {}, workers, envs, progress, records, label)
     out = Path(out)
@@ -352,7 +374,7 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     def open_bar() -> Any:
         nonlocal bar
         if bar is None:
-            bar = _progress(len(todo), progress, label or ("attacked" if job.attack else "clean"))
+            bar = _progress(len(todo), progress, label or ("attacked" if job.attack is not None else "clean"))
             if bar is not None:  # its clock starts with the run, not with the first episode it shows
                 bar.start_t = bar.last_print_t = started
         return bar
@@ -379,7 +401,8 @@ def _run(job: EvalJob, episodes: int, out: Path | None, done: dict[int, dict[str
     ordered = [done[i] for i in range(episodes)]
     if records is not None:
         records.extend(ordered)
-    summary = summarize(ordered, job, _read_jsonl(out / "steps.jsonl") if out is not None and job.attack else None)
+    summary = summarize(ordered, job,
+                        _read_jsonl(out / "steps.jsonl") if out is not None and job.attack is not None else None)
     if out is not None:
         write_json(out / "summary.json", summary)
     return summary
@@ -464,7 +487,7 @@ def summarize(
     max_return = _max_return(job.preset)
     low, high = mean_ci(returns, seed=job.seed)
     summary: dict[str, Any] = {
-        "model": job.model,
+        "model": job.model.ref,
         "preset": job.preset.get("name"),
         **({"scenario_source": job.scenario_source} if job.scenario_source else {}),
         "episodes": len(records),
@@ -492,19 +515,20 @@ def summarize(
         total = np.sum(counts, axis=0)
         summary["action_share"] = (total / total.sum()).round(4).tolist()
     if job.attack is not None:
+        config = job.attack.to_dict()  # what the summary records of the attack
         steps_total = sum(r["attacked_steps"] for r in records)
         applicable = sum(r["applicable"] for r in records)
         successes = sum(r["successes"] for r in records)
-        kind = attack_class(job.attack["attack"])
+        kind = attack_class(job.attack.attack)
         learned = not kind.goal  # no per-step goal: no success rate, no base rate
         blind = not kind.queries_clean
         summary.update(
-            attack=job.attack["attack"],
+            attack=config["attack"],
             # paper mode is unconstrained: eps sets no budget (it only sizes random starting points)
-            eps=job.attack["eps"] if job.attack["mode"] == "budgeted" else None,
-            norm=job.attack["norm"],
-            mode=job.attack["mode"],
-            target=job.attack["target"],
+            eps=config["eps"] if config["mode"] == "budgeted" else None,
+            norm=config["norm"],
+            mode=config["mode"],
+            target=config["target"],
             attack_success_rate=None if learned else successes / applicable if applicable else float("nan"),
             attack_success_ci95=None if learned else list(ratio_ci([r["successes"] for r in records],
                                                                    [r["applicable"] for r in records])),
@@ -521,11 +545,11 @@ def summarize(
                          **({"referee": int(sum(r.get("referee_queries", 0) for r in records))}
                             if any(r.get("referee_queries") for r in records) else {})},
             max_linf=float(max(r["max_linf"] for r in records)),
-            attack_config=job.attack,
+            attack_config=config,
         )
         if summary["eps"] is not None:
             summary["eps_means"] = eps_means(job.preset, summary["eps"])
-        if AttackSpec.from_mapping(job.attack).sparse_in_time:  # a frequency budget: how much of it was spent
+        if job.attack.sparse_in_time:  # a frequency budget: how much of it was spent
             summary["attacked_share"] = steps_total / max(summary["victim_rows"]["decisions"], 1)
         attacked = [s for s in steps or () if s.get("attacked", True)]  # the per-step figures of attacked steps
         if attacked:

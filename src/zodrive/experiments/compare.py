@@ -60,7 +60,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         refuse_unused_shift([source for _, source in sources], "--shifted")
     for model, policy, name, (model_preset, source) in zip(models, policies, names, sources):
         policy.check(model_preset)
-        ref, gradients = policy.ref, policy.gradients
+        gradients = policy.gradients
         reads = policy.reads
         reads_obs = reads == "observation"
         usable = [a for a in attacks if gradients or _black_box(a, attack_set)] if reads_obs else []
@@ -74,7 +74,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     folder = cell_folder(out, name, defense, attack_name(attack), eps, budget)
-                    job = EvalJob(model=ref, preset=model_preset, attack=spec.to_dict() if spec else None, seed=seed,
+                    job = EvalJob(model=policy, preset=model_preset, attack=spec, seed=seed,
                                   defense=defense, trust=trust, scenario_source=source)
                     grid.append({"model": name, "defense": defense or "none", "reads": reads,
                                  "attack": _label(attack, spec.attack if spec else None), "eps": eps,
