@@ -285,18 +285,20 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_cell_names_are_exact_and_committed_cells_keep_theirs() -> None:
-    import json
     import re
 
+    from zodrive.evaluation import store
     from zodrive.experiments.cells import number_name
 
     assert number_name(0.1) == "0.1" and number_name(0.1000001) == "0.1000001" and number_name(1e-05) == "1e-05"
     checked = 0
-    for key in REPO.glob("results/**/cells/*/eval_key.json"):
-        eps = (json.loads(key.read_text()).get("attack") or {}).get("eps")
-        named = re.search(r"-eps([0-9.e+-]+?)(?:-qb\d+)?$", key.parent.name)
+    for cell in store.walk(REPO / "results"):  # every committed cell, in its folder or packed
+        if cell.parent.name != "cells":
+            continue
+        eps = ((store.read(cell).key or {}).get("attack") or {}).get("eps")
+        named = re.search(r"-eps([0-9.e+-]+?)(?:-qb\d+)?$", cell.name)
         if eps is not None and named and _number(named.group(1)) == eps:
-            assert number_name(eps) == named.group(1), key.parent
+            assert number_name(eps) == named.group(1), cell
             checked += 1
     assert checked > 100
 

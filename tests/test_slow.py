@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from zodrive.cli import main
+from zodrive.evaluation import store
 from zodrive.experiments.reproduce import BASELINE_ROWS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,7 +57,7 @@ def test_the_committed_fitted_adversary_gives_its_committed_episodes(tmp_path: P
     0.05, 0 queries per step) replays the first episodes of its committed cell, number for number."""
     adversary = ROOT / "results" / "learned-adversary" / "amortized-dqn-driver-eps0.05"
     cell = ROOT / "results" / "learned-adversary" / "cells" / "dqn-driver-amortized-eps0.05"
-    committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
+    committed = {r["seed"]: r for r in store.episodes(cell)}
     out = tmp_path / "cell"
     assert main(["evaluate", str(ROOT / "models" / "dqn-driver"), "--attack", f"learned:{adversary}", "--eps", "0.05",
                  "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
@@ -75,7 +76,7 @@ def test_the_fallback_target_s_cells_give_their_committed_episodes(tmp_path: Pat
     eps 0.05, replay the first episodes of their committed cells (results/learned-adversary), number for number."""
     monkeypatch.chdir(ROOT)
     cells = ROOT / "results" / "learned-adversary" / "cells"
-    committed = {r["seed"]: r for r in map(json.loads, (cells / cell / "episodes.jsonl").read_text().splitlines())}
+    committed = {r["seed"]: r for r in store.episodes(cells / cell)}
     out = tmp_path / "cell"
     target = ["--target", "FASTER,not:SLOWER"] if "random-search" in cell else []
     assert main(["evaluate", "models/dqn-robust", *attack, *target, "--eps", "0.05", "--episodes", "3",
@@ -89,7 +90,7 @@ def test_vertex_hold_gives_its_committed_episodes(tmp_path: Path) -> None:
     """`--attack vertex-hold` on models/dqn-close at eps 0.02 replays the first episodes of its committed
     cell (results/vertex-hold), number for number, at one query per step."""
     cell = ROOT / "results" / "vertex-hold" / "cells" / "dqn-close-eps0.02"
-    committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
+    committed = {r["seed"]: r for r in store.episodes(cell)}
     out = tmp_path / "cell"
     assert main(["evaluate", str(ROOT / "models" / "dqn-close"), "--attack", "vertex-hold", "--eps", "0.02",
                  "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
@@ -105,7 +106,7 @@ def test_a_committed_picker_gives_its_committed_episodes(tmp_path: Path, attack:
     query per step."""
     picker = ROOT / "results" / "vertex-hold" / "picker" / "dqn-close-eps0.02-seed0"
     cell = ROOT / "results" / "vertex-hold" / "picker" / "cells" / f"{prefix}dqn-close-eps0.02-seed0"
-    committed = {r["seed"]: r for r in map(json.loads, (cell / "episodes.jsonl").read_text().splitlines())}
+    committed = {r["seed"]: r for r in store.episodes(cell)}
     out = tmp_path / "cell"
     assert main(["evaluate", str(ROOT / "models" / "dqn-close"), "--attack", f"{attack}:{picker}", "--eps", "0.02",
                  "--episodes", "3", "--workers", "1", "--out", str(out), "--no-progress"]) == 0

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from zodrive.cli import main
+from zodrive.evaluation import store
 
 ROOT = Path(__file__).resolve().parents[1]
 CELLS = ROOT / "results" / "ppo-highway-fast" / "cells"
@@ -38,9 +39,9 @@ def test_the_shipped_dqn_reproduces_its_card_on_its_first_episodes(tmp_path: Pat
     assert f"**Mean return {card['mean_return']:.2f} " in (folder / "CARD.md").read_text()  # the card states it
     # the card's evaluation, episode by episode, is committed as the Table 1 cell: same key (model hash,
     # preset, seed, no attack), as many episodes, and their mean is the card's
-    cell = ROOT / "results" / "reproduction" / "cells" / "dqn-initial"
-    assert json.loads((cell / "eval_key.json").read_text()) == json.loads((folder / "eval" / "eval_key.json").read_text())
-    committed = _records(cell / "episodes.jsonl")
+    cell = store.read(ROOT / "results" / "reproduction" / "cells" / "dqn-initial")  # its folder, or its packed line
+    assert cell.key == json.loads((folder / "eval" / "eval_key.json").read_text())
+    committed = cell.episodes
     assert len(committed) == card["episodes"]
     assert sum(r["return"] for r in committed) / len(committed) == pytest.approx(card["mean_return"], abs=1e-9)
     out = tmp_path / "eval"
@@ -62,13 +63,12 @@ def test_the_shipped_ppo_reproduces_its_committed_cells(tmp_path: Path, cell: st
     assert main(["evaluate", str(ROOT / "models" / "ppo-highway-fast"), "--preset", "highway-fast", "--episodes", "5",
                  "--out", str(out), "--no-progress", *attack]) == 0
     mine = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
-    committed = {r["episode"]: r for r in map(json.loads, (CELLS / cell / "episodes.jsonl").read_text().splitlines())}
+    committed = {r["episode"]: r for r in store.episodes(CELLS / cell)}
     for record in mine:
         assert record["return"] == committed[record["episode"]]["return"]
         assert record["crashed"] == committed[record["episode"]]["crashed"]
     if attack:  # the attack hurts: every reproduced episode is at most its clean return
-        clean = {r["episode"]: r["return"] for r in map(json.loads, (CELLS / "ppo-highway-fast-none" / "episodes.jsonl")
-                                                         .read_text().splitlines())}
+        clean = {r["episode"]: r["return"] for r in store.episodes(CELLS / "ppo-highway-fast-none")}
         assert sum(r["return"] for r in mine) < sum(clean[r["episode"]] for r in mine)
 
 
@@ -84,8 +84,8 @@ def test_table1_cells_reproduce_on_their_first_episodes(tmp_path: Path, model: s
     assert main(["evaluate", str(ROOT / "models" / model), "--episodes", "2", "--out", str(out), "--no-progress",
                  *attack]) == 0
     cells = ROOT / "results" / "reproduction" / "cells"
-    committed = {r["episode"]: r for r in _records(cells / cell / "episodes.jsonl")}
-    clean = {r["episode"]: r["return"] for r in _records(cells / f"{model}-initial" / "episodes.jsonl")} if attack else {}
+    committed = {r["episode"]: r for r in store.episodes(cells / cell)}
+    clean = {r["episode"]: r["return"] for r in store.episodes(cells / f"{model}-initial")} if attack else {}
     for record in _records(out / "episodes.jsonl"):
         theirs = committed[record["episode"]]
         assert record["crashed"] == theirs["crashed"]
@@ -109,7 +109,7 @@ def test_the_rules_and_their_students_reproduce_their_first_episodes(tmp_path: P
                                                                      preset: str) -> None:
     """Issue 22's teachers, the shipped DAgger students and the TD3 fine-tuned from one drive
     their committed 100-episode evaluations' first episodes again, number for number."""
-    committed = _records(ROOT / cell / "episodes.jsonl")
+    committed = store.episodes(ROOT / cell)
     out = tmp_path / "eval"
     target = str(ROOT / model) if model.startswith("models/") else model
     assert main(["evaluate", target, "--preset", preset, "--episodes", "3", "--out", str(out),

@@ -14,6 +14,7 @@ import argparse
 import json
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import zodrive
@@ -35,11 +36,16 @@ def main() -> None:
     if (args.run / "selection.json").exists():
         print(f"{args.run} was selected before: {json.loads((args.run / 'selection.json').read_text())['chosen']}")
         return
+    checkpoints = sorted((int(re.search(r"_(\d+)_steps", p.name)[1]), p)
+                         for p in args.run.glob("checkpoints/step_*_steps.zip"))
+    if not checkpoints:  # the repository keeps a chosen run's model.zip and selection.json, not its checkpoints
+        sys.exit(f"{args.run}/checkpoints holds no checkpoint to choose from: train the run again with "
+                 f"`python zoo/train.py --scenario {args.scenario} --seed N --out {args.run}` (the seed in its "
+                 "train.json), which writes them every 2,000 steps; checkpoints once committed are in git's history "
+                 "(`git log --all -- 'models/zoo/*/checkpoints/*'`)")
     final = args.run / "final.zip"
     if not final.exists():
         shutil.move(args.run / "model.zip", final)
-    checkpoints = sorted((int(re.search(r"_(\d+)_steps", p.name)[1]), p)
-                         for p in args.run.glob("checkpoints/step_*_steps.zip"))
     candidates = [p for step, p in checkpoints if step >= args.from_step] + [final]
     results = []
     for path in candidates:

@@ -3,6 +3,8 @@
 import json
 from pathlib import Path
 
+from zodrive.evaluation import store
+
 HERE = Path(__file__).resolve().parents[2] / "results" / "close-rules"  # the data: results/close-rules
 ROWS = [("baseline:close-rules (teacher)", "tune-teacher", "eval", None)]
 ROWS += [(f"DAgger {r} rounds, seed {s}", f"tune-dagger{r}-s{s}", f"eval-dagger{r}-s{s}", f"train-dagger{r}-s{s}.json")
@@ -10,10 +12,9 @@ ROWS += [(f"DAgger {r} rounds, seed {s}", f"tune-dagger{r}-s{s}", f"eval-dagger{
 
 
 def cell(folder: str) -> str:
-    path = HERE / folder / "summary.json"
-    if not path.exists():
+    if not store.exists(HERE / folder):  # its folder, or its line in results/close-rules.jsonl.gz
         return "– | – | – | –"
-    s = json.loads(path.read_text())
+    s = store.summary(HERE / folder)
     low, high = s["ci95"]
     return (f"{s['mean_return']:.2f} ({low:.2f}–{high:.2f}) | {100 * s['collision_rate']:.0f}% | "
             f"{s['mean_speed']:.1f} | {s['lane_changes_per_episode']:.2f}")

@@ -9,20 +9,21 @@ the undefended DQN and of the brake (`results/bench/highway-fast/dqn-seed-0`, pr
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
 
 HERE = Path(__file__).parent
 ROW = Path("results/bench/highway-fast/dqn-seed-0")
 
 
-def episodes(path: Path) -> dict[int, dict]:
-    return {r["seed"]: r for r in map(json.loads, path.read_text().splitlines()) if r}
+def episodes(cell: Path) -> dict[int, dict]:
+    """Seed -> episode record of an evaluation, in its folder or packed (zodrive.evaluation.store)."""
+    return {r["seed"]: r for r in store.episodes(cell)}
 
 
 def describe(name: str, eps: dict[int, dict]) -> str:
@@ -33,12 +34,12 @@ def describe(name: str, eps: dict[int, dict]) -> str:
 
 
 def main() -> None:
-    plain = episodes(next((ROW / "clean" / "cells").glob("*-none")) / "episodes.jsonl")
-    brake = episodes(next((ROW.parent / "brake" / "cells").glob("*-none")) / "episodes.jsonl")
+    plain = episodes(store.names(ROW / "clean" / "cells", "*-none")[0])
+    brake = episodes(store.names(ROW.parent / "brake" / "cells", "*-none")[0])
     print(describe("undefended", plain))
     print(describe("brake", brake))
     for defense in sys.argv[1:]:
-        mine = episodes(HERE / "runs" / f"{defense}-clean300" / "episodes.jsonl")
+        mine = episodes(HERE / "runs" / f"{defense}-clean300")
         seeds = sorted(mine)
         assert seeds == sorted(plain) == sorted(brake), "not the same seeds"
         print(describe(defense, mine))

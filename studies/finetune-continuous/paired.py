@@ -4,15 +4,15 @@ Usage: python studies/finetune-continuous/paired.py BASE_EVAL_DIR OTHER_EVAL_DIR
 Prints, for each OTHER against BASE: the mean per-episode return difference, the crashed seeds of
 each, and on the episodes neither crashed the mean difference and how many went up / down.
 """
-import json
 import sys
 
 import numpy as np
 
+from zodrive.evaluation import store
+
 
 def load(folder: str) -> dict[int, dict]:
-    with open(f"{folder}/episodes.jsonl") as lines:
-        return {row["seed"]: row for row in map(json.loads, lines)}
+    return {row["seed"]: row for row in store.episodes(folder)}  # its folder, or its line in a pack
 
 
 base = load(sys.argv[1])

@@ -3,9 +3,10 @@ mean of (learned - per-step) return per seed with its bootstrap 95 % CI (`zodriv
 paired_difference_ci`). Both start every episode from the same traffic, so the pairs are correlated and
 the difference is measured more precisely than the two CIs side by side show. Positive: the learned
 adversary left the victim more return (it is weaker). Usage: python studies/learned-adversary/paired.py"""
-import json
+
 from pathlib import Path
 
+from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
 
 C, R = Path("results/learned-adversary/cells"), Path("results/robustness-100")
@@ -72,8 +73,7 @@ PAIRS = [  # (learned cell, per-step cell)
 
 
 def returns(cell: Path) -> dict[int, float]:
-    rows = (json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line)
-    return {row["seed"]: row["return"] for row in rows}
+    return {row["seed"]: row["return"] for row in store.episodes(cell)}  # its folder, or its line in a pack
 
 
 def label(cell: Path) -> str:

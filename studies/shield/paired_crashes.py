@@ -3,18 +3,17 @@
 test on those discordant seeds (two-sided binomial test, p = 0.5: under "the same collision rate"
 either cell is as likely to be the one that crashes). Both cells start every episode from the same
 traffic, so the pairs are what differs. Usage: python studies/shield/paired_crashes.py CELL_A CELL_B"""
-import json
 import sys
 from pathlib import Path
 
 from scipy.stats import binomtest
 
+from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci, rate_ci
 
 
 def episodes(cell: Path) -> dict[int, dict]:
-    rows = (json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line)
-    return {row["seed"]: row for row in rows}
+    return {row["seed"]: row for row in store.episodes(cell)}  # its folder, or its line in a pack
 
 
 a_cell, b_cell = map(Path, sys.argv[1:3])

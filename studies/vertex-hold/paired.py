@@ -3,9 +3,10 @@ same 100 seeds (100000-100099): mean of (vertex hold - other) return per seed wi
 (`zodrive.evaluation.stats.paired_difference_ci`); positive: vertex hold left the victim more return (it
 is weaker). The other cells are the ones studies/learned-adversary/paired.py compares (the shielded
 rows: results/shield). Usage: python studies/vertex-hold/paired.py > results/vertex-hold/paired.txt"""
-import json
+
 from pathlib import Path
 
+from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
 
 H = Path("results/vertex-hold/cells")
@@ -35,15 +36,15 @@ PAIRS = [  # (vertex-hold cell, other cell)
         ("dqn-driver-eps0.02", R / "dqn-driver-pgd-eps0.02"))],
     # with a picker (picker/run.sh; fit seeds 0, 1 and 2 where run): against random search and vertex hold blind
     *[(Path("../picker/cells") / f"dqn-close-eps0.02-seed{s}", other) for s in (0, 1, 2)
-      if (H / "../picker/cells" / f"dqn-close-eps0.02-seed{s}" / "episodes.jsonl").is_file()
+      if store.exists(H / "../picker/cells" / f"dqn-close-eps0.02-seed{s}")
       for other in (K / "random-search-eps0.02", H / "dqn-close-eps0.02")],
     *[(Path(f"../picker/cells/dqn-driver-eps0.02-seed{s}"), other) for s in (0, 1, 2)
-      if (H / f"../picker/cells/dqn-driver-eps0.02-seed{s}/episodes.jsonl").is_file()
+      if store.exists(H / f"../picker/cells/dqn-driver-eps0.02-seed{s}")
       for other in (R / "dqn-driver-pgd-eps0.02", H / "dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100")],
     # pickers fitted with --loss rank (picker/run.sh dqn-close-rank ... --loss rank): against random search, and
     # against the picker of the same fit seed fitted with the default loss (bce)
     *[(Path(f"../picker/cells/dqn-close-rank-eps0.02-seed{s}"), other) for s in (0, 1, 2)
-      if (H / f"../picker/cells/dqn-close-rank-eps0.02-seed{s}/episodes.jsonl").is_file()
+      if store.exists(H / f"../picker/cells/dqn-close-rank-eps0.02-seed{s}")
       for other in (K / "random-search-eps0.02", H / f"../picker/cells/dqn-close-eps0.02-seed{s}")],
     # vertex check (run-check.sh, picker/check.sh; cells check-*): against the strongest per-step attack and
     # against vertex hold, blind or with the same picker
@@ -51,17 +52,17 @@ PAIRS = [  # (vertex-hold cell, other cell)
         ("dqn-close-eps0.02", (K / "random-search-eps0.02", H / "dqn-close-eps0.02")),
         ("dqn-close-eps0.05", (K / "random-search-eps0.05", H / "dqn-close-eps0.05")),
         ("dqn-driver-eps0.2", (C / "dqn-driver-random-search-eps0.2-100", H / "dqn-driver-eps0.2")))
-      if (H / f"check-{cell}/episodes.jsonl").is_file() for other in others],
+      if store.exists(H / f"check-{cell}") for other in others],
     *[(Path(f"../picker/cells/check-{name}-seed{s}"), other) for name, strongest in (
         ("dqn-close-eps0.02", (K / "random-search-eps0.02",)), ("dqn-close-rank-eps0.02", (K / "random-search-eps0.02",)),
         ("dqn-driver-eps0.02", (R / "dqn-driver-pgd-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"))) for s in (0, 1, 2)
-      if (H / f"../picker/cells/check-{name}-seed{s}/episodes.jsonl").is_file()
+      if store.exists(H / f"../picker/cells/check-{name}-seed{s}")
       for other in (*strongest, H / f"../picker/cells/{name}-seed{s}")],
     # vertex check with --check-below 0.998 (at most 1 query per step on average): against random search and
     # against vertex check with the same picker at 1 query per step
     *[(Path(f"../picker/cells/check-below0.998-{name}-seed{s}"), other)
       for name in ("dqn-close-eps0.02", "dqn-close-rank-eps0.02") for s in (0, 1, 2)
-      if (H / f"../picker/cells/check-below0.998-{name}-seed{s}/episodes.jsonl").is_file()
+      if store.exists(H / f"../picker/cells/check-below0.998-{name}-seed{s}")
       for other in (K / "random-search-eps0.02", H / f"../picker/cells/check-{name}-seed{s}")],
     # against PGD with the fallback target FASTER,not:SLOWER (studies/learned-adversary/run-fallback.sh)
     ("dqn-driver-eps0.02", C / "dqn-driver-pgd-fallback-eps0.02-100"),
@@ -85,8 +86,7 @@ PAIRS = [  # (vertex-hold cell, other cell)
 
 
 def returns(cell: Path) -> dict[int, float]:
-    rows = (json.loads(line) for line in (cell / "episodes.jsonl").read_text().splitlines() if line)
-    return {row["seed"]: row["return"] for row in rows}
+    return {row["seed"]: row["return"] for row in store.episodes(cell)}  # its folder, or its line in a pack
 
 
 for hold, other in PAIRS:

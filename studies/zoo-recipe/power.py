@@ -19,15 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from zodrive.runinfo import read_jsonl
+from zodrive.evaluation import store
 
 CONSTANTS = ("baseline-slower", "baseline-idle", "baseline-faster")
 Z95, Z80 = 1.959964, 0.841621
 
 
 def clean_returns(folder: Path) -> dict[int, float]:
-    (cell,) = sorted((folder / "cells").glob("*-none"))
-    return {r["seed"]: r["return"] for r in read_jsonl(cell / "episodes.jsonl", needs=("seed", "return"))}
+    (cell,) = store.names(folder / "cells", "*-none")  # its folder, or its line in cells.jsonl.gz
+    return {r["seed"]: r["return"] for r in store.episodes(cell, needs=("seed", "return"))}
 
 
 def probability(margin: float, sd: float, n: int) -> float:

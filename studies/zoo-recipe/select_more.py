@@ -11,6 +11,7 @@ import argparse
 import json
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import zodrive
@@ -28,6 +29,8 @@ def main() -> None:
     args = parser.parse_args()
     candidates = sorted(args.run.glob("checkpoints/step_*_steps.zip"),
                         key=lambda p: int(re.search(r"_(\d+)_steps", p.name)[1])) + [args.run / "final.zip"]
+    if len(candidates) == 1:  # the repository keeps no run's checkpoints: zoo/train.py writes them
+        sys.exit(f"{args.run}/checkpoints holds no checkpoint: train the run with zoo/train.py (its train.json says how)")
     results = []
     for path in candidates:
         r = zodrive.evaluate(str(path), args.scenario, episodes=args.episodes, seed=FIRST, envs=5)

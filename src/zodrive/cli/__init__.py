@@ -2,7 +2,7 @@
 
 One module per command group: `evaluate` (evaluate, render, demo, certify), `train` (train,
 adv-train, robust-train, attack-train, picker-train, surrogate-train, select, export), `experiments` (reproduce,
-compare, curves, card), `info` (env, baselines); `attack` generates the attack flags from the
+compare, curves, card, pack), `info` (env, baselines); `attack` generates the attack flags from the
 attack schema, `common` holds what the commands share. Each group adds its parsers
 (`add_parsers`) and names its commands (`COMMANDS`); `main` parses, checks what can be checked
 before any work, and runs the command.

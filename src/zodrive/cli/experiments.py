@@ -1,4 +1,4 @@
-"""Grids, tables and reports: `reproduce`, `compare`, `curves`, `card`.
+"""Grids, tables and reports: `reproduce`, `compare`, `curves`, `card`, `pack`.
 
 The commands import the experiments (torch, highway-env) inside their functions: `zodrive --help`
 builds these parsers without loading them.
@@ -78,6 +78,14 @@ def add_parsers(sub: Any) -> None:
     card.add_argument("--force", action="store_true",
                       help="replace an existing CARD.md (hand-written sections in it are lost)")
 
+    pack = sub.add_parser("pack", help="pack finished evaluation folders into one file per folder of them "
+                                       "(P/NAME/ -> P.jsonl.gz), or give them back (--unpack)")
+    pack.add_argument("folders", nargs="+", type=Path, metavar="FOLDER",
+                      help="folders to walk: every folder of finished evaluation folders under each (a grid's cells/, "
+                           "a bench row's cells/ and clean/cells/, a study's runs) is packed beside itself")
+    pack.add_argument("--unpack", action="store_true",
+                      help="give every packed evaluation under each FOLDER its folder back, byte for byte")
+
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from zodrive.experiments.report import table_markdown
@@ -143,4 +151,26 @@ def cmd_card(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"reproduce": cmd_reproduce, "compare": cmd_compare, "curves": cmd_curves, "card": cmd_card}
+def cmd_pack(args: argparse.Namespace) -> int:
+    from zodrive.evaluation import store
+
+    for folder in args.folders:
+        if not folder.is_dir():
+            raise ZodriveError(f"{folder}: not a folder")
+    for folder in args.folders:
+        if args.unpack:
+            for pack, names in store.unpack_tree(folder).items():
+                print(f"unpacked {pack}: {len(names)} evaluation folder{'s' * (len(names) != 1)}")
+            continue
+        if store.is_evaluation(folder):
+            raise ZodriveError(f"{folder} is an evaluation folder: pack the folder that holds it ({folder.parent})")
+        for done in store.pack_tree(folder):
+            if done.packed:
+                print(f"packed {len(done.packed)} evaluation folder{'s' * (len(done.packed) != 1)} into {done.pack}")
+            for name, why in done.left.items():
+                print(f"left {done.pack.with_name(done.pack.name[:-len(store.PACKED)]) / name}: {why}")
+    return 0
+
+
+COMMANDS = {"reproduce": cmd_reproduce, "compare": cmd_compare, "curves": cmd_curves, "card": cmd_card,
+            "pack": cmd_pack}

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -30,7 +29,7 @@ from zodrive.defense import defense_version
 from zodrive.drivers.baselines import BASELINES, PREFIX, get_baseline
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import RUN_FILES
+from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import number_name
 from zodrive.experiments.compare import cell_folder, compare, strongest
@@ -38,7 +37,7 @@ from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_no
 from zodrive.experiments.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
                                         threat_fields)
 from zodrive.policies.policy import resolve
-from zodrive.runinfo import read_jsonl, write_atomic, write_json
+from zodrive.runinfo import write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
 
 VERSION = 3
@@ -229,9 +228,9 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
                     attack_budgets=capped, attack_set=list(proto.attack_set) or None)
     if earlier:  # cells of the earlier version that this one does not keep (git's history has them)
         keep = {_cell_folder(out, cell) for cell in cells}
-        for folder in sorted((out / "cells").iterdir()):
+        for folder in store.names(out / "cells"):
             if folder not in keep:
-                shutil.rmtree(folder)
+                store.remove(folder)
     clean_out = clean_folder(out, n, n_clean)
     if clean_out != out:
         _start_from_grid(out, clean_out, cells, force)
@@ -263,12 +262,9 @@ def _start_from_grid(out: Path, clean_out: Path, cells: list[dict[str, Any]], fo
     same first seeds), so its first episodes are not run twice; the evaluation resumes from them."""
     (cell,) = [c for c in cells if c["attack"] == "none"]
     grid_cell, target = _cell_folder(out, cell), _cell_folder(clean_out, cell)
-    if force or target.exists() or not (grid_cell / "eval_key.json").is_file():
+    if force or store.exists(target) or not store.exists(grid_cell) or store.read(grid_cell).key is None:
         return
-    target.mkdir(parents=True)
-    for name in RUN_FILES:
-        if name != "summary.json" and (grid_cell / name).is_file():  # the summary is the finished run's own
-            shutil.copyfile(grid_cell / name, target / name)
+    store.copy_for_resume(grid_cell, target)  # the summary is the finished run's own
 
 
 def _earlier_version(out: Path, proto: Protocol) -> bool:
@@ -391,16 +387,16 @@ def row_clean_folder(row: dict[str, Any], out: Path) -> Path:
 
 def _clean_returns(folder: Path) -> dict[int, float] | None:
     """Episode -> return of the clean cell of a comparison folder (None: no single clean cell)."""
-    cells = sorted((folder / "cells").glob("*-none"))
+    cells = store.names(folder / "cells", "*-none")
     if len(cells) != 1:
         return None
-    return {r["episode"]: r["return"] for r in read_jsonl(cells[0] / "episodes.jsonl", needs=("episode", "return"))}
+    return {r["episode"]: r["return"] for r in store.episodes(cells[0], needs=("episode", "return"), missing_ok=True)}
 
 
 def _collision_rate(folder: Path, episodes: int) -> float:
     """The collision rate of the clean cell of comparison `folder` over its first `episodes` episodes."""
-    (cell,) = sorted((folder / "cells").glob("*-none"))
-    records = [r for r in read_jsonl(cell / "episodes.jsonl", needs=("episode",)) if r["episode"] < episodes]
+    (cell,) = store.names(folder / "cells", "*-none")
+    records = [r for r in store.episodes(cell, needs=("episode",), missing_ok=True) if r["episode"] < episodes]
     if len(records) != episodes:
         raise ZodriveError(f"{cell} holds {len(records)} of the first {episodes} episodes: run the bench again")
     return sum(bool(r.get("crashed")) for r in records) / episodes
@@ -443,8 +439,8 @@ def _worst_returns(row: dict[str, Any], out: Path) -> dict[int, float] | None:
     cell = next((c for c in cells if c["attack"] == last["attack"] and c["eps"] == last["attack_eps"]), None)
     if cell is None:
         return None
-    return {r["episode"]: r["return"] for r in read_jsonl(_cell_folder(out, cell) / "episodes.jsonl",
-                                                           needs=("episode", "return"))}
+    records = store.episodes(_cell_folder(out, cell), needs=("episode", "return"), missing_ok=True)
+    return {r["episode"]: r["return"] for r in records}
 
 
 def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
@@ -481,7 +477,7 @@ def _cell_folder(out: Path, cell: dict[str, Any]) -> Path:
 def _median_queries_to_crash(out: Path, cell: dict[str, Any]) -> float | None:
     """Median over the attacked episodes that crashed of the queries spent until the crash (an
     episode ends at its crash, so that is the episode's count)."""
-    records = read_jsonl(_cell_folder(out, cell) / "episodes.jsonl", "episode record", needs=("episode",))
+    records = store.episodes(_cell_folder(out, cell), needs=("episode",), missing_ok=True)
     crashed = [r["queries"] for r in records if r.get("crashed")]
     return float(np.median(crashed)) if crashed else None
 

@@ -9,8 +9,9 @@ import yaml
 
 from zodrive.config import read_yaml
 from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
 from zodrive.evaluation.report import or_dash
-from zodrive.runinfo import read_json, read_jsonl, sha256, write_atomic
+from zodrive.runinfo import read_json, sha256, write_atomic
 
 PAPER_TARGETS = {"dqn": 310.58, "ddpg": 232.78}
 PAPER_BUDGETS = {"dqn": 20_000, "ddpg": 120_000}
@@ -32,6 +33,13 @@ def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
     return read_json(path, needs=needs)
 
 
+def _summary(evaluation: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
+    """An evaluation's summary, from its folder or from its line in a pack (`evaluation.store`)."""
+    if store.is_live(evaluation) or not store.exists(evaluation):
+        return _load(evaluation / "summary.json", needs)  # a missing one is named as the file
+    return store.summary(evaluation, needs)
+
+
 def _result_line(summary: dict[str, Any]) -> str:
     low, high = summary["ci95"]
     return (f"{summary['mean_return']:.2f} (95% CI {low:.2f}-{high:.2f}; {summary['pct_of_max']:.2f}% of the maximum), "
@@ -51,7 +59,7 @@ def seed_table(folders: list[Path]) -> list[str]:
     rows = []
     for folder in folders:
         train, summary = (_load(folder / "train.json", ("seed",)),
-                          _load(folder / "eval" / "summary.json", ("mean_return",)))
+                          _summary(folder / "eval", ("mean_return",)))
         rows.append((train["seed"], folder, summary))
     lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
              "|---|---|---|---|---|---|---|"]
@@ -76,7 +84,7 @@ def _iqm_line(folders: list[Path]) -> str:
 
     per_seed = []
     for folder in folders:
-        rows = read_jsonl(folder / "eval" / "episodes.jsonl", needs=("seed", "return"))
+        rows = store.episodes(folder / "eval", needs=("seed", "return"), missing_ok=True)
         episodes = sorted(rows, key=lambda e: e["seed"])
         per_seed.append([e["return"] for e in episodes])
     if len({len(r) for r in per_seed}) != 1:
@@ -107,7 +115,7 @@ def _attacked_lines(folders: list[Path]) -> list[str]:
     """One line per attacked evaluation: the attack, its eps and what the policy scored."""
     lines = []
     for folder in folders:
-        s = _load(folder / "summary.json", RESULT)
+        s = _summary(folder, RESULT)
         config = s.get("attack_config") or {}
         options = ", ".join(f"{k} {config[k]}" for k in ("max_change", "target") if config.get(k) not in (None, "auto"))
         lines.append(f"- under **{s.get('attack')}** (ε {s.get('eps')}"
@@ -127,7 +135,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
     run = _load(folder / "run.json", ("command", "versions"))
     train = _load(folder / "train.json", ("algo", "seed", "total_timesteps"))
     config = _load(folder / "config.yaml", ("preset",))
-    summary = _load((evaluation or folder / "eval") / "summary.json", (*RESULT, "command"))
+    summary = _summary(evaluation or folder / "eval", (*RESULT, "command"))
     algo = train["algo"]
     robust = train.get("kind") in ROBUST_KINDS
     recipe = config.get("recipe") or {k: config[k] for k in ("source_model", "attack", "method", "steps", "warmup")
@@ -188,7 +196,7 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
                   else f"{train['total_timesteps']:,} steps; the paper's budget is {PAPER_BUDGETS.get(algo, 0):,}")
         lines += ["", f"Changed from stable-baselines3's defaults ({budget}): {changed}."]
     if baseline is not None:
-        base = _load(baseline / "summary.json", RESULT)
+        base = _summary(baseline, RESULT)
         lines += ["", f"With SB3's default hyperparameters (`{algo}-paper` recipe, same budget and seeds): "
                       f"{_result_line(base)}."]
     if seeds:

@@ -4,17 +4,22 @@ Every cell is an ordinary resumable evaluation writing to its own folder, so the
 only decides where cells run; what scales is the number of cells, not the steps inside one.
 `backend="ray"` starts a local Ray instance with `workers` CPUs, or joins the cluster at
 `address`; every worker must see the same output folder (a shared file system on a cluster).
+A cell whose folder was packed (`zodrive pack`, `evaluation.store`) is finished where its line holds this
+evaluation's key and episodes: nothing runs; otherwise its folder is given back first and the evaluation
+resumes, or refuses, as it would from the folder.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from zodrive.errors import ZodriveError
-from zodrive.evaluation.evaluate import DEFAULT_ENVS, EvalJob, evaluate
+from zodrive.evaluation import store
+from zodrive.evaluation.evaluate import DEFAULT_ENVS, EvalJob, evaluate, same_evaluation
 
 BACKENDS = ("local", "ray")
 
@@ -57,18 +62,46 @@ def run_cells(cells: list[Cell], *, backend: str = "local", workers: int = 1, pr
     if backend not in BACKENDS:
         raise ZodriveError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
     results: list[dict[str, Any] | None] = [None] * len(cells)
-    stream = _local(cells, workers, progress, envs) if backend == "local" else _ray(cells, workers, address, envs)
-    for i, summary in stream:
+    todo = []
+    for i, cell in enumerate(cells):
+        summary = packed_summary(cell)
+        if summary is None:
+            todo.append(i)
+            continue
         results[i] = summary
         if on_done is not None:
             on_done(i, summary)
+    runs = [cells[i] for i in todo]
+    stream = _local(runs, workers, progress, envs, [f"cell {i + 1}/{len(cells)}" for i in todo]) \
+        if backend == "local" else _ray(runs, workers, address, envs)
+    for j, summary in stream:
+        results[todo[j]] = summary
+        if on_done is not None:
+            on_done(todo[j], summary)
     return results  # type: ignore[return-value]
 
 
-def _local(cells: list[Cell], workers: int, progress: bool, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:
-    for i, cell in enumerate(cells):  # one cell at a time, its episodes over `workers` processes
+def packed_summary(cell: Cell) -> dict[str, Any] | None:
+    """The summary of a packed cell that holds this evaluation finished (the same key, exactly the episodes
+    asked for), as `evaluate` returns a finished folder's; None otherwise, after giving a packed cell its
+    folder back, so that the evaluation resumes (or refuses) from it as from any folder."""
+    if store.is_live(cell.folder) or not store.exists(cell.folder):
+        return None
+    found = store.read(cell.folder)
+    wanted = json.loads(json.dumps(cell.job.key()))
+    if found.key is not None and found.summary is not None and same_evaluation(found.key, wanted) \
+            and found.summary.get("episodes") == cell.episodes \
+            and {r.get("episode") for r in found.episodes} >= set(range(cell.episodes)):
+        return found.summary
+    store.unpack(cell.folder)
+    return None
+
+
+def _local(cells: list[Cell], workers: int, progress: bool, envs: int,
+           numbers: list[str]) -> Iterator[tuple[int, dict[str, Any]]]:
+    for i, (cell, number) in enumerate(zip(cells, numbers)):  # one cell at a time, its episodes over `workers`
         yield i, evaluate(cell.job, cell.episodes, cell.folder, workers=workers, envs=envs, progress=progress,
-                          force=cell.force, label=f"cell {i + 1}/{len(cells)} {cell.folder.name}")
+                          force=cell.force, label=f"{number} {cell.folder.name}")
 
 
 def _ray(cells: list[Cell], workers: int, address: str | None, envs: int) -> Iterator[tuple[int, dict[str, Any]]]:

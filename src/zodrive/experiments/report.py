@@ -10,16 +10,16 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.drivers.baselines import get_baseline
+from zodrive.evaluation import store
 from zodrive.evaluation.report import or_dash
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.paper import ROWS, TABLE1, TABLE1_PCT
-from zodrive.runinfo import read_jsonl, write_atomic, write_json
+from zodrive.runinfo import write_atomic, write_json
 from zodrive.seeds import EVAL_SEED
 
 
 def _returns(out: Path, algo: str, row: str) -> list[float]:
-    path = out / "cells" / f"{algo}-{row}" / "episodes.jsonl"
-    rows = read_jsonl(path, needs=("episode", "return"))
+    rows = store.episodes(out / "cells" / f"{algo}-{row}", needs=("episode", "return"), missing_ok=True)
     return [r["return"] for r in sorted(rows, key=lambda r: r["episode"])]
 
 

@@ -26,6 +26,7 @@ from zodrive.config import models_dir
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 from zodrive.experiments.cells import Cell, run_cells
+from zodrive.evaluation import store
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob, same_evaluation
 from zodrive.experiments.paper import ADV_STEPS
 from zodrive.runinfo import read_json, write_atomic, write_json
@@ -126,12 +127,10 @@ def reproduce(out: Path, *, episodes: int = 100, workers: int = 2, quick: bool =
         folder = out / "cells" / f"{algo}-{row}"
         job = EvalJob(model=model, preset=load_preset(PRESET_OF[algo]),
                       attack=attack.to_dict() if attack else None, seed=seed)
-        summary_path = folder / "summary.json"
-        summary = read_json(summary_path, "summary", needs=("episodes",)) if summary_path.is_file() else None
-        if summary is not None and summary["episodes"] == episodes and (folder / "eval_key.json").is_file() \
-                and same_evaluation(read_json(folder / "eval_key.json", "evaluation key", needs=("model",)),
-                                    json.loads(json.dumps(job.key()))):
-            summaries[algo][row] = summary
+        found = store.read(folder) if store.exists(folder) else None  # its folder, or its line in a pack
+        if found is not None and found.summary is not None and found.summary["episodes"] == episodes \
+                and found.key is not None and same_evaluation(found.key, json.loads(json.dumps(job.key()))):
+            summaries[algo][row] = found.summary
             continue
         todo.append((algo, row, Cell(job, episodes, folder)))
         if progress:

@@ -12,7 +12,6 @@ This module imports nothing heavy: the command line reads the track names from i
 
 from __future__ import annotations
 
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -75,7 +74,9 @@ def share_clean(policy: str, preset: str, seed: int, dense: Path, out: Path, cou
     then finds its episodes done. Returns the cells copied."""
     import json
 
-    from zodrive.evaluation.evaluate import RUN_FILES, EvalJob, same_evaluation
+    from zodrive.errors import ZodriveError
+    from zodrive.evaluation import store
+    from zodrive.evaluation.evaluate import EvalJob, same_evaluation
     from zodrive.experiments.compare import cell_folder
     from zodrive.policies.policy import resolve
     from zodrive.policies.resolve import resolve_scenario
@@ -94,18 +95,14 @@ def share_clean(policy: str, preset: str, seed: int, dense: Path, out: Path, cou
     copied = []
     for sub in ("", "clean") if counts[1] > counts[0] else ("",):
         source, target = dense / sub / "cells" / name, out / sub / "cells" / name
-        if not (source / "summary.json").is_file():
-            continue
         try:
-            key = json.loads((source / "eval_key.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            found = store.read(source)
+        except ZodriveError:  # no such cell, or a damaged one: the track row runs its own
             continue
-        if target.exists() or not same_evaluation(key, json.loads(json.dumps(wanted))):
+        if found.summary is None or found.key is None or store.exists(target) \
+                or not same_evaluation(found.key, json.loads(json.dumps(wanted))):
             continue
-        target.mkdir(parents=True)
-        for file in RUN_FILES:
-            if file != "summary.json" and (source / file).is_file():  # the summary is made again from the episodes
-                shutil.copyfile(source / file, target / file)
+        store.copy_for_resume(source, target)  # the summary is made again from the episodes
         copied.append(target)
     return copied
 

@@ -63,10 +63,8 @@ if a.load:
     import json
     r = drive(env, victim, a.seed0, a.episodes, picker); show("picker", r)
     json.dump({str(a.seed0 + i): v for i, v in enumerate(r["returns"])}, open(os.devnull, "w"))
-    rs = {}
-    for line in open("results/close-rules/attacked/random-search-eps0.02/episodes.jsonl"):
-        if line.strip():
-            row = json.loads(line); rs[str(row["seed"])] = row["return"]
+    from zodrive.evaluation import store  # the cell's folder, or its line in results/close-rules/attacked.jsonl.gz
+    rs = {str(row["seed"]): row["return"] for row in store.episodes("results/close-rules/attacked/random-search-eps0.02")}
     from zodrive.evaluation.stats import paired_difference_ci
     seeds = sorted(set(rs) & {str(a.seed0 + i) for i in range(a.episodes)})
     if seeds:

@@ -60,13 +60,10 @@ def main() -> None:
     r = drive(env, victim, a.seed0, a.episodes, chooser(pickers))
     show(f"the {len(pickers)} pickers' mean rating", r)
     if a.paired:
-        import json
-        from pathlib import Path
-
+        from zodrive.evaluation import store
         from zodrive.evaluation.stats import paired_difference_ci
 
-        rows = [json.loads(line) for line in (Path(a.paired) / "episodes.jsonl").read_text().splitlines() if line]
-        other = {row["seed"]: row["return"] for row in rows}
+        other = {row["seed"]: row["return"] for row in store.episodes(a.paired)}  # its folder, or packed
         diff, low, high = paired_difference_ci(r["returns"], [other[a.seed0 + e] for e in range(a.episodes)])
         print(f"  paired, mean rating - {a.paired}: {diff:+.2f} [{low:+.2f}, {high:+.2f}] over {a.episodes} seeds")
 

@@ -1,0 +1,142 @@
+"""Packed evaluation folders (`zodrive pack`, `zodrive.evaluation.store`): byte for byte, read by the same
+readers as a folder, and a grid resumes over them without running a finished cell again."""
+
+from __future__ import annotations
+
+import gzip
+import json
+from pathlib import Path
+
+import pytest
+
+from zodrive.cli import main
+from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
+from zodrive.runinfo import to_json, write_atomic, write_json
+
+
+def _evaluation(folder: Path, episodes: int, *, finished: bool = True, steps: bool = False) -> dict[str, bytes]:
+    """An evaluation folder as `evaluate` writes one; its files' bytes."""
+    write_json(folder / "eval_key.json", {"model": "baseline:slower", "seed": 100000, "attack": None})
+    write_atomic(folder / "episodes.jsonl", "".join(to_json({"episode": i, "return": 1.5 * i, "crashed": i == 1,
+                                                                "seed": 100000 + i}) + "\n" for i in range(episodes)))
+    if finished:
+        write_json(folder / "summary.json", {"episodes": episodes, "mean_return": 0.75, "ci95": [0.0, 1.5]})
+    if steps:
+        write_atomic(folder / "steps.jsonl", '{"episode": 0, "t": 0}\n')
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.name != "steps.jsonl"}
+
+
+def test_a_pack_gives_back_every_byte_and_reads_as_the_folders(tmp_path: Path, capsys) -> None:
+    cells = tmp_path / "grid" / "cells"
+    files = {"a-none": _evaluation(cells / "a-none", 3, steps=True), "b-none": _evaluation(cells / "b-none", 2)}
+    _evaluation(cells / "c-cut", 3, finished=False)  # unfinished: left live
+    _evaluation(cells / "d-mine", 1)
+    (cells / "d-mine" / "notes.txt").write_text("mine\n")  # a file a pack does not keep: left live
+    (cells / "e-mine").mkdir()
+    (cells / "e-mine" / "notes.txt").write_text("not an evaluation\n")
+    before = {name: store.read(cells / name) for name in files}
+    assert main(["pack", str(tmp_path / "grid")]) == 0
+    out = capsys.readouterr().out
+    pack = tmp_path / "grid" / "cells.jsonl.gz"
+    assert f"packed 2 evaluation folders into {pack}" in out
+    assert "c-cut: unfinished: no summary" in out and "d-mine: holds notes.txt, which a pack does not keep" in out
+    assert not (cells / "a-none").exists() and not (cells / "b-none").exists() and (cells / "c-cut").is_dir()
+    lines = [json.loads(line) for line in gzip.decompress(pack.read_bytes()).decode().splitlines()]
+    assert [r["cell"] for r in lines] == ["a-none", "b-none"] and set(lines[0]) == {"cell", "eval_key", "summary",
+                                                                                    "episodes"}
+    for name, found in before.items():  # every reader reads the pack as it read the folder
+        packed = store.read(cells / name)
+        assert packed.packed and (packed.key, packed.summary, packed.episodes) == (found.key, found.summary,
+                                                                                    found.episodes)
+    assert [p.name for p in store.names(cells, "*-none")] == ["a-none", "b-none"]
+    assert [p.name for p in store.names(cells)] == ["a-none", "b-none", "c-cut", "d-mine", "e-mine"]
+    assert store.summary(cells / "a-none", ("mean_return",))["mean_return"] == 0.75
+    assert sorted(str(p.relative_to(tmp_path)) for p in store.walk(tmp_path)) == [
+        "grid/cells/a-none", "grid/cells/b-none", "grid/cells/c-cut"]
+    assert main(["pack", str(tmp_path / "grid")]) == 0  # again: nothing more to pack, the same bytes
+    assert pack.read_bytes() == gzip.compress(gzip.decompress(pack.read_bytes()), compresslevel=9, mtime=0)
+    assert main(["pack", "--unpack", str(tmp_path / "grid")]) == 0
+    assert not pack.exists()
+    for name, kept in files.items():  # byte for byte (steps.jsonl, git-ignored, is not kept)
+        assert {p.name: p.read_bytes() for p in (cells / name).iterdir()} == kept
+
+
+def test_a_folder_not_in_zodrive_s_layout_is_not_packed(tmp_path: Path) -> None:
+    folder = tmp_path / "cells" / "x-none"
+    _evaluation(folder, 1)
+    (folder / "summary.json").write_text('{"episodes": 1,   "mean_return": 0.0}\n')  # hand-edited spacing
+    done = store.pack(tmp_path / "cells")
+    assert done.packed == [] and "not in zodrive's own JSON layout" in done.left["x-none"]
+    assert folder.is_dir() and not (tmp_path / "cells.jsonl.gz").exists()
+
+
+def test_a_damaged_pack_is_one_line(tmp_path: Path, capsys) -> None:
+    pack = tmp_path / "cells.jsonl.gz"
+    for data, says in ((b"not gzip", "is damaged (not gzip)"),
+                       (gzip.compress(b'{"episodes": []}\n'), "line 1 is not a packed evaluation"),
+                       (gzip.compress(b'{"cell": "../x"}\n'), "line 1 is not a packed evaluation"),
+                       (gzip.compress(b'{"cell": "x", "episodes": 3}\n'), "cell 'x' is not a packed evaluation")):
+        pack.write_bytes(data)
+        store._lines.cache_clear()
+        with pytest.raises(ZodriveError, match=r"^evaluation pack .*" + says.replace("(", r"\(").replace(")", r"\)")):
+            store.read(tmp_path / "cells" / "x")
+    with pytest.raises(ZodriveError, match="no cell 'y'"):
+        store.read(tmp_path / "nowhere" / "y")
+    assert main(["pack", str(tmp_path / "missing")]) == 2
+    _evaluation(tmp_path / "cells" / "z", 1)
+    assert main(["pack", str(tmp_path / "cells" / "z")]) == 2
+    assert "is an evaluation folder: pack the folder that holds it" in capsys.readouterr().err
+
+
+def test_a_grid_resumes_over_packed_cells(tmp_path: Path, monkeypatch) -> None:
+    """A packed cell of the same key and episodes runs nothing; asked for more episodes, it gets its folder back
+    and resumes from its episodes, as a folder would."""
+    import zodrive.evaluation.evaluate as evaluation
+    from zodrive.experiments.compare import compare
+
+    out = tmp_path / "grid"
+    first = compare(["baseline:slower", "baseline:idle"], [], [], 1, out, progress=False, preset="highway-fast",
+                    envs=1)
+    table = (out / "table.json").read_text()
+    assert store.pack_tree(out)[0].packed == ["baseline-idle-none", "baseline-slower-none"]
+    assert sorted(p.name for p in out.iterdir()) == ["cells.jsonl.gz", "grid.json", "table.csv", "table.json",
+                                                     "table.md"]  # cells/ went with its last folder
+    ran: list[list[int]] = []
+    real = evaluation.run_episodes
+    monkeypatch.setattr(evaluation, "run_episodes", lambda job, todo, *a, **k: (ran.append(list(todo)),
+                                                                               real(job, todo, *a, **k))[1])
+    assert compare(["baseline:slower", "baseline:idle"], [], [], 1, out, progress=False, preset="highway-fast",
+                   envs=1) == first
+    assert ran == [] and (out / "table.json").read_text() == table and not (out / "cells").exists()
+    more = compare(["baseline:slower", "baseline:idle"], [], [], 2, out, progress=False, preset="highway-fast", envs=1)
+    assert ran == [[1], [1]] and [r["episodes"] for r in more] == [2, 2]  # only the new episode of each cell
+    assert sorted(p.name for p in (out / "cells").iterdir()) == ["baseline-idle-none", "baseline-slower-none"]
+    assert not (out / "cells.jsonl.gz").exists()  # every line went back to its folder
+
+
+def test_a_bench_row_reads_and_resumes_from_packed_cells(tmp_path: Path, monkeypatch) -> None:
+    """The row, its brake and the leaderboard read a packed board as the folders it was packed from."""
+    import zodrive.evaluation.evaluate as evaluation
+    from zodrive.experiments.bench import Protocol, bench, leaderboard_markdown, read_rows
+
+    proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2, black_box=("uniform-noise",), white_box=None)
+    board = tmp_path / "board"
+    row = bench("baseline:rules", proto, board / "highway-fast" / "rules", name="rules", progress=False, envs=1)
+    bench("baseline:slower", proto, board / "highway-fast" / "slower", name="slower", progress=False, envs=1)
+    text = leaderboard_markdown(read_rows(board))
+    packed = [p for done in store.pack_tree(board) for p in done.packed]
+    assert len(packed) == 6 and not list(board.rglob("episodes.jsonl"))  # every cell, the brake's too
+    assert sorted(str(p.relative_to(board)) for p in board.rglob("*.jsonl.gz")) == [
+        "highway-fast/brake/cells.jsonl.gz", "highway-fast/rules/cells.jsonl.gz",
+        "highway-fast/rules/clean/cells.jsonl.gz", "highway-fast/slower/cells.jsonl.gz",
+        "highway-fast/slower/clean/cells.jsonl.gz"]
+    assert leaderboard_markdown(read_rows(board)) == text
+
+    def no_episode(*args, **kwargs):
+        raise AssertionError("a finished cell ran again")
+
+    monkeypatch.setattr(evaluation, "run_episodes", no_episode)
+    assert bench("baseline:rules", proto, board / "highway-fast" / "rules", name="rules", progress=False,
+                 envs=1) == row
+    assert not list(board.rglob("episodes.jsonl"))
