@@ -16,10 +16,11 @@ from zodrive.attacks.base import ENGINE_VERSION
 from zodrive.attacks.schema import REMOVED
 from zodrive.attacks.spec import AttackSpec
 from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
 from zodrive.evaluation.evaluate import check_same_evaluation, same_evaluation
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = sorted(ROOT.glob("results/**/eval_key.json")) + sorted(ROOT.glob("models/**/eval_key.json"))
+EVALUATIONS = [*store.walk(ROOT / "results"), *store.walk(ROOT / "models")]  # in their folders or packed
 REFUSED = {
     "results/on-failure/eps0.05-clean": "on_failure",
     "results/on-failure/eps0.1-clean": "on_failure",
@@ -37,7 +38,7 @@ def _attack_key(recorded: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_every_committed_attack_key_matches_its_attack_today_or_is_refused() -> None:
-    attacked = [(p, json.loads(p.read_text())) for p in KEYS]
+    attacked = [(p, store.read(p).key or {}) for p in EVALUATIONS]
     attacked = [(p, key) for p, key in attacked if isinstance(key.get("attack"), dict)]
     assert len(attacked) > 400  # the committed attacked cells (491 when the first options were removed)
     refused = {}
@@ -48,7 +49,7 @@ def test_every_committed_attack_key_matches_its_attack_today_or_is_refused() -> 
             wanted = {**key, "attack": _attack_key(key["attack"])}
         except ZodriveError as exc:
             assert "\n" not in str(exc) and "removed from zodrive" in str(exc), exc
-            refused[str(path.parent.relative_to(ROOT))] = str(exc)
+            refused[str(path.relative_to(ROOT))] = str(exc)
             continue
         assert same_evaluation(key, wanted), path
     assert {folder: _why(message) for folder, message in refused.items()} == REFUSED
@@ -85,12 +86,12 @@ def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, mo
 
     monkeypatch.chdir(ROOT)  # the commands name repository paths
     folder = ROOT / cell
-    command = json.loads((folder / "summary.json").read_text())["command"]
+    command = store.summary(folder)["command"]
     args = build_parser().parse_args(shlex.split(command)[1:])
     spec = attack_spec_from_args(args)
     job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=spec.to_dict(),
                   seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
-    on_disk = json.loads((folder / "eval_key.json").read_text())
+    on_disk = store.read(folder).key
     assert same_evaluation(on_disk, json.loads(json.dumps(job.key())))
 
 

@@ -23,6 +23,7 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.threat import ThreatModel
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
 from zodrive.evaluation.rollout import run_episode
 from zodrive.system import AttackWrapper, Schedule, preference_gap
 
@@ -278,7 +279,7 @@ def _committed_job(monkeypatch: pytest.MonkeyPatch, *extra: str):
     from zodrive.policies.policy import resolve
 
     monkeypatch.chdir(ROOT)
-    command = json.loads((ROOT / COMMITTED / "summary.json").read_text())["command"]
+    command = store.summary(ROOT / COMMITTED)["command"]  # its folder, or its line in a pack
     args = build_parser().parse_args(shlex.split(command)[1:] + list(extra))
     return EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
                    seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
@@ -288,7 +289,7 @@ def test_a_committed_cell_keeps_its_key_and_the_new_fields_change_it(monkeypatch
     from zodrive.attacks.schema import without_removed
     from zodrive.evaluation.evaluate import check_same_evaluation, same_evaluation
 
-    on_disk = json.loads((ROOT / COMMITTED / "eval_key.json").read_text())
+    on_disk = store.read(ROOT / COMMITTED).key
     assert not {"vehicles", "attack_share", "when", "min_gap"} & set(on_disk["attack"])  # made before the fields
     today = json.loads(json.dumps(_committed_job(monkeypatch).key()))
     assert same_evaluation(on_disk, today)
