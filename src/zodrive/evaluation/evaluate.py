@@ -66,8 +66,8 @@ class EvalJob:
                  trust: bool = False, scenario_source: str | None = None) -> None:
         self.model = resolve(model)
         self.preset = preset
-        self.attack = attack if attack is None or isinstance(attack, AttackSpec) else \
-            AttackSpec.from_mapping(dict(attack), "the evaluation's attack")
+        self.attack = (attack if attack is None or isinstance(attack, AttackSpec)
+                       else AttackSpec.from_mapping(dict(attack), "the evaluation's attack"))
         self.seed, self.record_steps, self.trust, self.scenario_source = seed, record_steps, trust, scenario_source
         self.defense = None if defense is None else parse_defense(defense)  # one system, one key
 
