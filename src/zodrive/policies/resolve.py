@@ -82,6 +82,8 @@ def resolve_scenario(model: Any, preset: str | dict[str, Any] | None, env_set: l
         raise ZodriveError(f"{policy.label} holds no environment that says where it was trained: say "
                            "where it drives: scenario='discrete', 'highway-fast', ... (`zodrive env` lists them) or "
                            "env_id='CartPole-v1'")
+    if policy.kind == "factory":
+        raise ZodriveError(f"{name} is Python code: say where it drives with --preset or --env-id")
     policy.action_kind()  # a damaged or foreign file is refused for what it is first
     raise ZodriveError(f"{name} does not say where it was trained (no run folder, rl-zoo3 or Hugging Face files "
                        "beside it): say where it drives with --preset or --env-id")
