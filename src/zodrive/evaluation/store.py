@@ -64,8 +64,11 @@ def pack_path(parent: Path) -> Path:
 
 
 def is_live(folder: Path) -> bool:
-    """Whether `folder` is an evaluation folder on disk (the live form, read before any pack)."""
-    return Path(folder).is_dir()
+    """Whether `folder` is an evaluation folder on disk (the live form, read before any pack): a folder that holds
+    an evaluation's key, summary or episodes. A folder left with only its git-ignored steps.jsonl (a checkout that
+    moved to the packed cell) is not one: the pack is read."""
+    folder = Path(folder)
+    return folder.is_dir() and any((folder / name).is_file() for name in PARTS)
 
 
 def is_evaluation(folder: Path) -> bool:
@@ -128,7 +131,7 @@ def episodes(folder: Path, needs: tuple[str, ...] = (), missing_ok: bool = False
 def names(parent: Path, pattern: str = "*") -> list[Path]:
     """The evaluations in `parent` whose names match `pattern` (a glob), in either form, sorted by name."""
     parent = Path(parent)
-    live = {p.name for p in parent.glob(pattern) if p.is_dir()} if parent.is_dir() else set()
+    live = {p.name for p in parent.glob(pattern) if is_live(p)} if parent.is_dir() else set()
     packed = {name for name in _lines(pack_path(parent)) if fnmatch.fnmatchcase(name, pattern)}
     return [parent / name for name in sorted(live | packed)]
 
@@ -183,6 +186,8 @@ def remove(folder: Path) -> None:
     lines = dict(_lines(pack))
     if lines.pop(folder.name, None) is not None:
         _write_pack(pack, lines)
+        if folder.is_dir():  # its git-ignored steps.jsonl, left beside the pack
+            shutil.rmtree(folder)
 
 
 @dataclass
