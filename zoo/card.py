@@ -194,26 +194,32 @@ def _exact(row: dict, folder: Path) -> list[str]:
             + ", ".join(f"{p['ensemble']['missed']} of {p['attackable']}" for p in exact["rows"]) + ".", ""]
 
 
-def main() -> None:
+def cards() -> dict[Path, str]:
+    """Every zoo card's path and text, as `main` writes them (nothing is written here)."""
     runs = sorted((ROOT / "models" / "zoo").glob("*/seed-*"))
     members = {}  # run -> the ensembles built from its checkpoints
     for ensemble in (r for r in runs if (r / "build.json").is_file()):
         for source in json.loads((ensemble / "build.json").read_text())["runs"]:
             members.setdefault(ROOT / source, []).append(ensemble)
+    texts = {}
     for run in runs:
         if run.parent.name.endswith("-imitation") and (run / "model.zip").is_file():
-            (run / "CARD.md").write_text(imitation_card(run))
+            texts[run / "CARD.md"] = imitation_card(run)
         elif (run / "train.json").is_file() and json.loads((run / "train.json").read_text()).get("kind") in ROBUST_KINDS:
-            (run / "CARD.md").write_text(robust_card(run))
+            texts[run / "CARD.md"] = robust_card(run)
         elif (run / "build.json").is_file():
-            (run / "CARD.md").write_text(ensemble_card(run))
+            texts[run / "CARD.md"] = ensemble_card(run)
         elif (run / "selection.json").is_file():
-            (run / "CARD.md").write_text(card(run))
+            texts[run / "CARD.md"] = card(run)
         elif run in members and (run / "train.json").is_file():
-            (run / "CARD.md").write_text(member_card(run, members[run]))
-        else:
-            continue
-        print(f"wrote {run / 'CARD.md'}")
+            texts[run / "CARD.md"] = member_card(run, members[run])
+    return texts
+
+
+def main() -> None:
+    for path, text in cards().items():
+        path.write_text(text)
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":

@@ -129,9 +129,19 @@ def _attacked_lines(folders: list[Path]) -> list[str]:
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
                notes: list[str] | None = None, seeds: list[Path] | None = None,
                attacked: list[Path] | None = None) -> Path:
-    """Write `folder/CARD.md` from run.json, train.json, config.yaml and an evaluation's
+    """Write `folder/CARD.md`: `card_text` of the same arguments."""
+    path = folder / "CARD.md"
+    write_atomic(path, card_text(folder, baseline=baseline, evaluation=evaluation, notes=notes, seeds=seeds,
+                                 attacked=attacked))
+    return path
+
+
+def card_text(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
+              notes: list[str] | None = None, seeds: list[Path] | None = None,
+              attacked: list[Path] | None = None) -> str:
+    """The text of `folder/CARD.md`, from run.json, train.json, config.yaml and an evaluation's
     summary.json (default `folder/eval`); `attacked`: evaluation folders of the model under
-    attack, listed with their attack and eps."""
+    attack, listed with their attack and eps. Paths are written as given (the card names its command)."""
     run = _load(folder / "run.json", ("command", "versions"))
     train = _load(folder / "train.json", ("algo", "seed", "total_timesteps"))
     config = _load(folder / "config.yaml", ("preset",))
@@ -216,6 +226,4 @@ def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path |
         " (episode returns) and `progress.csv` (SB3 logger).",
         "",
     ]
-    path = folder / "CARD.md"
-    write_atomic(path, "\n".join(lines))
-    return path
+    return "\n".join(lines)
