@@ -85,6 +85,9 @@ def add_parsers(sub: Any) -> None:
                            "a bench row's cells/ and clean/cells/, a study's runs) is packed beside itself")
     pack.add_argument("--unpack", action="store_true",
                       help="give every packed evaluation under each FOLDER its folder back, byte for byte")
+    pack.add_argument("--logs", action="store_true",
+                      help="instead, fold the printed outputs in each FOLDER (its NAME.txt files) into one FOLDER.txt "
+                           "beside it, each under a '==> NAME.txt <==' line (with --unpack: give them back)")
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -154,6 +157,8 @@ def cmd_card(args: argparse.Namespace) -> int:
 def cmd_pack(args: argparse.Namespace) -> int:
     from zodrive.evaluation import store
 
+    if args.logs:
+        return _pack_logs(args.folders, args.unpack)
     for folder in args.folders:
         if not folder.is_dir():
             raise ZodriveError(f"{folder}: not a folder")
@@ -169,6 +174,28 @@ def cmd_pack(args: argparse.Namespace) -> int:
                 print(f"packed {len(done.packed)} evaluation folder{'s' * (len(done.packed) != 1)} into {done.pack}")
             for name, why in done.left.items():
                 print(f"left {done.pack.with_name(done.pack.name[:-len(store.PACKED)]) / name}: {why}")
+    return 0
+
+
+def _pack_logs(folders: list[Path], unpack: bool) -> int:
+    """`zodrive pack --logs [--unpack] FOLDER...`: each FOLDER's printed outputs, folded or given back."""
+    from zodrive.evaluation import store
+
+    for folder in folders:
+        if unpack and not store.logs_path(folder).is_file():
+            raise ZodriveError(f"{store.logs_path(folder)}: no such file (no logs of {folder} are folded)")
+        if not unpack and not folder.is_dir():
+            raise ZodriveError(f"{folder}: not a folder")
+    for folder in folders:
+        if unpack:
+            names = store.unpack_logs(folder)
+            print(f"unpacked {store.logs_path(folder)}: {len(names)} log{'s' * (len(names) != 1)} into {folder}")
+            continue
+        done = store.pack_logs(folder)
+        if done.packed:
+            print(f"folded {len(done.packed)} log{'s' * (len(done.packed) != 1)} into {done.pack}")
+        for name, why in done.left.items():
+            print(f"left {folder / name}: {why}")
     return 0
 
 

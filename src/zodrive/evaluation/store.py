@@ -16,7 +16,16 @@ Packing keeps every byte: each packed folder's files are what `to_json` writes o
 folder is removed; a folder in another layout is left as it is), and `unpack` gives them back. steps.jsonl is
 not kept: it is git-ignored, and a finished summary holds what it gave. Only finished evaluations are packed
 (a summary over every episode recorded), so a packed cell is resumed only to add episodes, as a committed
-folder without its steps is."""
+folder without its steps is.
+
+A study's printed outputs (`P/NAME.txt`: what a command printed, often beside the evaluation `P/NAME` it
+ran) fold the same way into one text file beside their folder, `P.txt` (`zodrive pack --logs`): each log under
+a header line, as `tail -n +1 *.txt` run in P prints them, so the file reads as the logs did,
+
+    ==> NAME.txt <==
+    ...what NAME.txt held...
+
+and `unpack_logs` gives every file back, byte for byte (a log that would not come back so is left as it is)."""
 
 from __future__ import annotations
 
@@ -25,6 +34,7 @@ import fnmatch
 import gzip
 import json
 import os
+import re
 import shutil
 import tempfile
 import zlib
@@ -41,6 +51,8 @@ PARTS = {KEY: "eval_key", SUMMARY: "summary", EPISODES: "episodes"}
 """An evaluation folder's files a pack keeps, and their fields in its line."""
 RUN_FILES = (KEY, EPISODES, STEPS, SUMMARY)
 """What an evaluation writes into its folder (`evaluate.RUN_FILES`)."""
+LOGS = ".txt"
+"""The suffix of a folder's printed outputs folded into one file beside it (`logs_path`)."""
 MAX_PACK_BYTES = 1 << 30
 """A pack's most bytes once decompressed (the largest committed one holds a few MB): a larger one is refused."""
 
@@ -277,6 +289,109 @@ def unpack_tree(root: Path) -> dict[Path, list[str]]:
     return {p: unpack_all(p.with_name(p.name[: -len(PACKED)])) for p in packs}
 
 
+# ---------------------------------------------------------------- printed outputs
+
+
+_LOG_HEADER = re.compile(r"^==> (.*) <==$", re.MULTILINE)
+
+
+def logs_path(parent: Path) -> Path:
+    """The file that holds the printed outputs of `parent` (its `*.txt`): `parent.txt`, beside it."""
+    parent = Path(parent)
+    return parent.with_name(parent.name + LOGS)
+
+
+def read_logs(path: Path) -> dict[str, str]:
+    """Name -> text of each log folded into `path` (`pack_logs`), in its order; anything else is one line."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as err:
+        raise ZodriveError(f"{path}: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise ZodriveError(f"folded logs {path} are damaged (not UTF-8 text)") from None
+    parts = _LOG_HEADER.split(text)  # ["", name, "\n" + text (+ "\n" between two logs), name, ...]
+    if parts[0] or len(parts) < 3:
+        raise ZodriveError(f"{path} holds no folded logs: it does not start with a '==> NAME.txt <==' line")
+    logs: dict[str, str] = {}
+    for i, (name, body) in enumerate(zip(parts[1::2], parts[2::2])):
+        last = i == len(parts) // 2 - 1
+        log = body[1:] if last else body[1:-1]
+        if not _log_name(name) or name in logs or not body.startswith("\n") or not log.endswith("\n") or (
+                not last and not body.endswith("\n\n")):
+            raise ZodriveError(f"folded logs {path} are damaged at the log {name!r}")
+        logs[name] = log
+    return logs
+
+
+def logs_text(logs: dict[str, str]) -> str:
+    """The folded file of `logs` (name -> text, each ending in a newline), sorted by name: what
+    `tail -n +1 *.txt` prints in their folder."""
+    return "\n".join(f"==> {name} <==\n{logs[name]}" for name in sorted(logs))
+
+
+def pack_logs(parent: Path) -> Packed:
+    """Fold the printed outputs in `parent` (its `*.txt` files) into `logs_path(parent)` (added to the logs it
+    holds; a file replaces a log of its name), and remove them once the folded file reads back as their bytes.
+    `parent` goes with its last file. Left as they are, and said: a file that is not UTF-8 text, that does not
+    end in a newline, or that holds a line like a header (unpacking would not give it back)."""
+    parent = Path(parent)
+    target = logs_path(parent)
+    if not parent.is_dir():
+        raise ZodriveError(f"{parent}: not a folder")
+    logs = read_logs(target) if target.is_file() else {}
+    left: dict[str, str] = {}
+    taken: list[Path] = []
+    for path in sorted(parent.glob("*" + LOGS)):
+        if not path.is_file() or path.is_symlink() or not _log_name(path.name):
+            continue
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError:
+            left[path.name] = "not UTF-8 text"
+            continue
+        if not text.endswith("\n"):
+            left[path.name] = "does not end in a newline (unpacking would not give it back)"
+        elif _LOG_HEADER.search(text):
+            left[path.name] = "holds a line like a header of folded logs (==> NAME <==)"
+        else:
+            logs[path.name] = text
+            taken.append(path)
+    if taken:
+        _write_bytes(target, logs_text(logs).encode("utf-8"))
+        back = read_logs(target)
+        for path in taken:  # the folded file reads back as each file before the file goes
+            if back.get(path.name, "").encode("utf-8") != path.read_bytes():
+                raise ZodriveError(f"{target}: the log {path.name} does not read back as {path}; the file is kept")
+        for path in taken:
+            path.unlink()
+        if not any(parent.iterdir()):
+            parent.rmdir()
+    return Packed(target, [p.name for p in taken], left)
+
+
+def unpack_logs(parent: Path) -> list[str]:
+    """Give every log folded into `logs_path(parent)` its file in `parent` back, byte for byte (a file of the
+    same name is kept, and the folded log dropped); the folded file is removed. Returns the names given back."""
+    parent = Path(parent)
+    target = logs_path(parent)
+    logs = read_logs(target)
+    parent.mkdir(parents=True, exist_ok=True)
+    given = []
+    for name, text in sorted(logs.items()):
+        if not (parent / name).exists():
+            _write_bytes(parent / name, text.encode("utf-8"))
+            given.append(name)
+    target.unlink()
+    return given
+
+
+def _log_name(name: str) -> bool:
+    """A name a folded log may have: a file's, ending in .txt, with no folder in it."""
+    return name.endswith(LOGS) and len(name) > len(LOGS) and "/" not in name and "\\" not in name and \
+        name not in (".", "..") and not name.startswith(".")
+
+
 # ---------------------------------------------------------------- the pack file
 
 
@@ -356,8 +471,13 @@ def _write_pack(path: Path, lines: dict[str, str]) -> None:
     if not lines:
         path.unlink(missing_ok=True)
         return
-    data = gzip.compress("".join(lines[name] + "\n" for name in sorted(lines)).encode("utf-8"),
-                         compresslevel=9, mtime=0)
+    _write_bytes(path, gzip.compress("".join(lines[name] + "\n" for name in sorted(lines)).encode("utf-8"),
+                                     compresslevel=9, mtime=0))
+    _lines.cache_clear()
+
+
+def _write_bytes(path: Path, data: bytes) -> None:
+    """Write `data` to `path` atomically (a reader never sees half a file), readable by all, as results are."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
         with os.fdopen(fd, "wb") as handle:
@@ -367,7 +487,6 @@ def _write_pack(path: Path, lines: dict[str, str]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    _lines.cache_clear()
 
 
 def _parse(line: str, pack: Path, name: str) -> dict[str, Any]:
