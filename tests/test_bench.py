@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from zodrive.cli import main
+from zodrive.experiments.cells import GridCell
 from zodrive.experiments.bench import (
     PROTOCOLS,
     leaderboard_markdown,
@@ -369,16 +370,16 @@ def test_a_bench_says_how_long_it_has_left(capsys, monkeypatch) -> None:
     now = iter([0.0, 10.0, 40.0, 70.0])  # start, clean cell (10 s), two attacked cells (30 s each)
     monkeypatch.setattr(bench_module.time, "perf_counter", lambda: next(now))
     clock = bench_module._Clock(100, 300)
-    clock.cell(1, 5, {"attack": "none"})
+    clock.cell(1, 5, GridCell("m"))
     assert capsys.readouterr().err == ""  # no attacked cell yet: no pace to go by
-    clock.cell(2, 5, {"attack": "random-search"})
-    clock.cell(3, 5, {"attack": "zo-signsgd"})
+    clock.cell(2, 5, GridCell("m", "random-search", 0.01))
+    clock.cell(3, 5, GridCell("m", "zo-signsgd", 0.01))
     # 2 attacked cells left at 30 s, then 200 more clean episodes of the policy and 300 of the brake at 10 s per 100
     assert capsys.readouterr().err.splitlines()[-1] == "bench: 3/5 cells of the grid in 70 s; about 2 min left"
     now = iter([0.0, 10.0, 40.0, 70.0])
     clock = bench_module._Clock(100, 300, brake_done=True)  # the board's brake has run: only the policy's 200
     for done, attack in ((1, "none"), (2, "random-search"), (3, "zo-signsgd")):
-        clock.cell(done, 5, {"attack": attack})
+        clock.cell(done, 5, GridCell("m", attack))
     assert capsys.readouterr().err.splitlines()[-1] == "bench: 3/5 cells of the grid in 70 s; about 80 s left"
 
 

@@ -31,8 +31,8 @@ from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
-from zodrive.experiments.cells import number_name
-from zodrive.experiments.compare import cell_folder, compare, strongest
+from zodrive.experiments.cells import GridCell, clean_cells, number_name
+from zodrive.experiments.compare import compare, strongest
 from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_notes, read_exact
 from zodrive.experiments.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
                                         threat_fields)
@@ -167,10 +167,10 @@ class _Clock:
         self.clean_s: float | None = None
         self.attacked: list[float] = []
 
-    def cell(self, done: int, total: int, cell: dict[str, Any]) -> None:
+    def cell(self, done: int, total: int, cell: GridCell) -> None:
         now = time.perf_counter()
         took, self.last = now - self.last, now
-        if cell["attack"] == "none":
+        if cell.clean:
             self.clean_s = took
         else:
             self.attacked.append(took)
@@ -227,7 +227,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
                     preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
                     attack_budgets=capped, attack_set=list(proto.attack_set) or None)
     if earlier:  # cells of the earlier version that this one does not keep (git's history has them)
-        keep = {_cell_folder(out, cell) for cell in cells}
+        keep = {GridCell.from_entry(cell).folder(out) for cell in cells}
         for folder in store.names(out / "cells"):
             if folder not in keep:
                 store.remove(folder)
@@ -260,8 +260,8 @@ def brake_folder(out: Path, track: str = DENSE) -> Path:
 def _start_from_grid(out: Path, clean_out: Path, cells: list[dict[str, Any]], force: bool) -> None:
     """Seed the clean cell of more episodes with the attacked grid's clean cell: the same evaluation (same key,
     same first seeds), so its first episodes are not run twice; the evaluation resumes from them."""
-    (cell,) = [c for c in cells if c["attack"] == "none"]
-    grid_cell, target = _cell_folder(out, cell), _cell_folder(clean_out, cell)
+    (cell,) = [c for c in map(GridCell.from_entry, cells) if c.clean]  # one cell, in both grids
+    grid_cell, target = cell.folder(out), cell.folder(clean_out)
     if force or store.exists(target) or not store.exists(grid_cell) or store.read(grid_cell).key is None:
         return
     store.copy_for_resume(grid_cell, target)  # the summary is the finished run's own
@@ -278,6 +278,11 @@ def _earlier_version(out: Path, proto: Protocol) -> bool:
         return False
     (out / "grid.json").unlink(missing_ok=True)
     return True
+
+
+def _clean(cells: list[dict[str, Any]]) -> dict[str, Any]:
+    """The clean cell's entry of a comparison's table (the first, in a grid of several policies)."""
+    return next(c for c in cells if GridCell.from_entry(c).clean)
 
 
 def _cells(out: Path) -> list[dict[str, Any]]:
@@ -306,12 +311,12 @@ def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
     cell of the same episodes (`clean_on_attacked_episodes`)."""
     n_clean = episodes if clean_episodes is None else clean_episodes
     cells = _cells(out)
-    same = next(c for c in cells if c["attack"] == "none")  # clean, on the attacked episodes
-    clean = next(c for c in _cells(clean_folder(out, episodes, n_clean)) if c["attack"] == "none")
+    same = _clean(cells)  # clean, on the attacked episodes
+    clean = _clean(_cells(clean_folder(out, episodes, n_clean)))
     brakes = brake_folder(out, proto.track)
-    brake = next(c for c in _cells(brakes) if c["attack"] == "none")
-    black_box = [c for c in cells if c["attack"] in black_box_of(proto, defense)]
-    white_box = [c for c in cells if proto.white_box is not None and _attack(c) == proto.white_box]
+    brake = _clean(_cells(brakes))
+    black_box = [c for c in cells if GridCell.from_entry(c).attack in black_box_of(proto, defense)]
+    white_box = [c for c in cells if GridCell.from_entry(c).attack == proto.white_box]
     if black_box:
         inside = _inside(black_box, same, proto.eps)
         pgd_inside = _inside(white_box, same, proto.eps) if white_box else {}
@@ -387,7 +392,7 @@ def row_clean_folder(row: dict[str, Any], out: Path) -> Path:
 
 def _clean_returns(folder: Path) -> dict[int, float] | None:
     """Episode -> return of the clean cell of a comparison folder (None: no single clean cell)."""
-    cells = store.names(folder / "cells", "*-none")
+    cells = clean_cells(folder)
     if len(cells) != 1:
         return None
     return {r["episode"]: r["return"] for r in store.episodes(cells[0], needs=("episode", "return"), missing_ok=True)}
@@ -395,7 +400,7 @@ def _clean_returns(folder: Path) -> dict[int, float] | None:
 
 def _collision_rate(folder: Path, episodes: int) -> float:
     """The collision rate of the clean cell of comparison `folder` over its first `episodes` episodes."""
-    (cell,) = store.names(folder / "cells", "*-none")
+    (cell,) = clean_cells(folder)
     records = [r for r in store.episodes(cell, needs=("episode",), missing_ok=True) if r["episode"] < episodes]
     if len(records) != episodes:
         raise ZodriveError(f"{cell} holds {len(records)} of the first {episodes} episodes: run the bench again")
@@ -436,10 +441,11 @@ def _worst_returns(row: dict[str, Any], out: Path) -> dict[int, float] | None:
         cells = _cells(out)
     except ZodriveError:
         return None
-    cell = next((c for c in cells if c["attack"] == last["attack"] and c["eps"] == last["attack_eps"]), None)
+    kept = (c for c in map(GridCell.from_entry, cells) if c.attack == last["attack"] and c.eps == last["attack_eps"])
+    cell = next(kept, None)
     if cell is None:
         return None
-    records = store.episodes(_cell_folder(out, cell), needs=("episode", "return"), missing_ok=True)
+    records = store.episodes(cell.folder(out), needs=("episode", "return"), missing_ok=True)
     return {r["episode"]: r["return"] for r in records}
 
 
@@ -465,19 +471,10 @@ def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
             "eps": row["attacked"][-1]["eps"]}
 
 
-def _attack(cell: dict[str, Any]) -> str:
-    return str(cell["attack"]).split(" ")[0]  # compare labels white-box attacks: "pgd (white-box)"
-
-
-def _cell_folder(out: Path, cell: dict[str, Any]) -> Path:
-    """The folder of a row's cell (a `table.json` entry)."""
-    return cell_folder(out, cell["model"], cell.get("defense"), _attack(cell), cell["eps"], cell.get("query_budget"))
-
-
 def _median_queries_to_crash(out: Path, cell: dict[str, Any]) -> float | None:
     """Median over the attacked episodes that crashed of the queries spent until the crash (an
     episode ends at its crash, so that is the episode's count)."""
-    records = store.episodes(_cell_folder(out, cell), needs=("episode",), missing_ok=True)
+    records = store.episodes(GridCell.from_entry(cell).folder(out), needs=("episode",), missing_ok=True)
     crashed = [r["queries"] for r in records if r.get("crashed")]
     return float(np.median(crashed)) if crashed else None
 

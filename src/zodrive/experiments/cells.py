@@ -7,6 +7,10 @@ only decides where cells run; what scales is the number of cells, not the steps 
 A cell whose folder was packed (`zodrive pack`, `evaluation.store`) is finished where its line holds this
 evaluation's key and episodes: nothing runs; otherwise its folder is given back first and the evaluation
 resumes, or refuses, as it would from the folder.
+
+A cell of a grid is named by a `GridCell` (the policy's name in the grid, the attack, eps, query budget and
+defense): its folder and its table label are made there and nowhere else, and read back from a table's entry
+there (`GridCell.from_entry`), so that a bench or a leaderboard never rebuilds a folder name or parses a label.
 """
 
 from __future__ import annotations
@@ -40,6 +44,67 @@ def policy_names(labels: list[str], keys: list[str]) -> list[str]:
         clash = any(other == label and other_key != key for other, other_key in zip(labels, keys))
         names.append(f"{label}-{hashlib.sha256(key.encode()).hexdigest()[:8]}" if clash else label)
     return names
+
+
+CLEAN = "none"
+"""The attack of a grid's clean cell (no perturbation)."""
+WHITE_BOX_MARK = " (white-box)"
+"""What a table's label adds to a white-box attack's name (`pgd (white-box)`)."""
+
+
+@dataclass(frozen=True)
+class GridCell:
+    """One cell of a grid, by what it evaluates: the one place its folder name and its table label are made."""
+
+    model: str
+    """The policy's name in the grid (`policy_names`: its label, a digest after it where two share one)."""
+    attack: str = CLEAN
+    """The attack as the grid names it (`compare.attack_name`: registry name, config stem or NAME:DIR)."""
+    eps: float | None = None
+    query_budget: int | None = None
+    defense: str | None = None
+    """What stands between the sensor and the policy (None: nothing)."""
+    white_box: bool = False
+    """Whether the attack reads gradients: its label says so."""
+
+    @property
+    def clean(self) -> bool:
+        return self.attack == CLEAN
+
+    @property
+    def name(self) -> str:
+        """The cell's folder name: MODEL[+DEFENSE]-ATTACK[-epsEPS][-qbBUDGET], ':' as '-'."""
+        return (self.model.replace(":", "-") + ("" if self.defense is None else f"+{self.defense}")
+                + f"-{self.attack.replace(':', '-')}" + ("" if self.eps is None else f"-eps{number_name(self.eps)}")
+                + ("" if self.query_budget is None else f"-qb{self.query_budget}"))
+
+    def folder(self, out: Path) -> Path:
+        """The cell's folder in the grid of folder `out`."""
+        return out / "cells" / self.name
+
+    @property
+    def label(self) -> str:
+        """The attack as a table shows it (white-box ones say so)."""
+        return self.attack + (WHITE_BOX_MARK if self.white_box else "")
+
+    def entry(self, reads: str) -> dict[str, Any]:
+        """The cell's entry in `grid.json` (and the first fields of its `table.json` row)."""
+        return {"model": self.model, "defense": self.defense or "none", "reads": reads, "attack": self.label,
+                "eps": self.eps, "query_budget": self.query_budget}
+
+    @classmethod
+    def from_entry(cls, entry: dict[str, Any]) -> GridCell:
+        """The cell of a `grid.json` or `table.json` entry (`entry` backwards)."""
+        label = str(entry["attack"])
+        defense = entry.get("defense")
+        return cls(model=entry["model"], attack=label.removesuffix(WHITE_BOX_MARK), eps=entry["eps"],
+                   query_budget=entry.get("query_budget"), defense=None if defense in (None, "none") else defense,
+                   white_box=label.endswith(WHITE_BOX_MARK))
+
+
+def clean_cells(out: Path) -> list[Path]:
+    """The folders (or packed cells) of the clean cells in the grid of folder `out`, whatever its policies."""
+    return store.names(out / "cells", f"*-{CLEAN}")
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """`zodrive compare`: every attack (and a range of eps) on every model, one table.
 
-Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/
-(eps exact: `cells.number_name`; two models of one name told apart by their content: `cells.policy_names`);
+Each cell is an ordinary resumable evaluation in OUT/cells/<model>[+defense]-<attack>-eps<eps>/, named by its
+`cells.GridCell` (eps exact: `cells.number_name`; two models of one name told apart by their content:
+`cells.policy_names`);
 the table is rebuilt from their summaries, so an interrupted comparison resumes. With several
 eps, `robustness.md` gives each model (and defense) its strongest attack inside each eps-ball (at
 that eps or a smaller one): a defense is judged by the attack that hurts it most, not by the one
@@ -16,13 +17,13 @@ import json
 from pathlib import Path
 from typing import Any, Callable
 
-from zodrive.policies.policy import resolve
+from zodrive.policies.policy import Policy, resolve
 from zodrive.policies.resolve import refuse_unused_shift, resolve_scenario
 from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import headless_pyplot, or_dash, save_figure
-from zodrive.experiments.cells import Cell, number_name, policy_names, run_cells
+from zodrive.experiments.cells import Cell, GridCell, number_name, policy_names, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
 
@@ -33,7 +34,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             env_set: list[str] | None = None, attack_set: list[str] | None = None, preset: str | None = None,
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, shifted: bool = False,
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
-            trust: bool = False, on_cell: Callable[[int, int, dict[str, Any]], None] | None = None,
+            trust: bool = False, on_cell: Callable[[int, int, GridCell], None] | None = None,
             attack_budgets: dict[str, list[int | None]] | None = None) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget (`attack_budgets`: an attack's own
     budgets instead of `query_budgets`, as a bench protocol caps its black-box attacks and not PGD); one
@@ -52,6 +53,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             for eps in eps_values:
                 load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget).check()
     grid: list[dict[str, Any]] = []
+    typed: list[GridCell] = []  # the grid's cells, as `on_cell` is told them
     cells: list[Cell] = []
     policies = [resolve(model) for model in models]
     names = policy_names([p.label for p in policies], [p.key() for p in policies])
@@ -73,13 +75,13 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                 for eps, budget in points:
                     spec = None if attack == "none" else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
-                    folder = cell_folder(out, name, defense, attack_name(attack), eps, budget)
+                    cell = GridCell(name, attack_name(attack), eps, budget, defense,
+                                    white_box=_white_box(spec.attack if spec else attack))
                     job = EvalJob(model=policy, preset=model_preset, attack=spec, seed=seed,
                                   defense=defense, trust=trust, scenario_source=source)
-                    grid.append({"model": name, "defense": defense or "none", "reads": reads,
-                                 "attack": _label(attack, spec.attack if spec else None), "eps": eps,
-                                 "query_budget": budget})
-                    cells.append(Cell(job, episodes, folder, force=force))
+                    grid.append(cell.entry(reads))
+                    typed.append(cell)
+                    cells.append(Cell(job, episodes, cell.folder(out), force=force))
     if claim:  # `zodrive compare` owns its folder; `reproduce` composes several grids in one
         _claim(out, grid, force)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
@@ -98,18 +100,16 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         }
         write_tables([r for r in rows if r is not None], out)  # in grid order, as cells finish
         if on_cell is not None:
-            on_cell(sum(r is not None for r in rows), len(rows), grid[i])
+            on_cell(sum(r is not None for r in rows), len(rows), typed[i])
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done, envs=envs)
     return rows  # type: ignore[return-value]
 
 
-def cell_folder(out: Path, model: str, defense: str | None, attack: str, eps: float | None,
-                budget: int | None) -> Path:
-    """The folder of one cell of the comparison in `out` (the one place its name is made)."""
-    return out / "cells" / (model.replace(":", "-") + ("" if defense in (None, "none") else f"+{defense}")
-                            + f"-{attack.replace(':', '-')}" + ("" if eps is None else f"-eps{number_name(eps)}")
-                            + ("" if budget is None else f"-qb{budget}"))
+def clean_cell(policy: Policy) -> GridCell:
+    """The clean cell of `policy` in a grid of its own (a bench row's): as `compare` names it."""
+    (name,) = policy_names([policy.label], [policy.key()])
+    return GridCell(name)
 
 
 def _claim(out: Path, grid: list[dict[str, Any]], force: bool) -> None:
@@ -159,14 +159,11 @@ def attack_name(attack: str) -> str:
     return Path(attack).stem if attack.endswith((".yaml", ".yml")) or "/" in attack else attack
 
 
-def _label(attack: str, runs: str | None = None) -> str:
-    """The table's name of `attack`, which runs the registry's attack `runs` (white-box ones say so)."""
+def _white_box(runs: str) -> bool:
+    """Whether the registry's attack `runs` reads gradients (a cell's label says so)."""
     from zodrive.attacks.registry import ATTACKS
 
-    name, runs = attack_name(attack), runs or attack
-    if runs in ATTACKS and not ATTACKS[runs].black_box:
-        return f"{name} (white-box)"
-    return name
+    return runs in ATTACKS and not ATTACKS[runs].black_box
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:

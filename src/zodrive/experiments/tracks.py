@@ -77,7 +77,7 @@ def share_clean(policy: str, preset: str, seed: int, dense: Path, out: Path, cou
     from zodrive.errors import ZodriveError
     from zodrive.evaluation import store
     from zodrive.evaluation.evaluate import EvalJob, same_evaluation
-    from zodrive.experiments.compare import cell_folder
+    from zodrive.experiments.compare import clean_cell
     from zodrive.policies.policy import resolve
     from zodrive.policies.resolve import resolve_scenario
 
@@ -91,10 +91,10 @@ def share_clean(policy: str, preset: str, seed: int, dense: Path, out: Path, cou
         return []
     model_preset, _ = resolve_scenario(policy, preset)
     wanted = EvalJob(model=resolved.ref, preset=model_preset, seed=seed, trust=trust).key()
-    name = cell_folder(out, resolved.label, None, "none", None, None).name  # as compare names the track row's
+    cell = clean_cell(resolved)  # the same cell in both rows' grids: each a grid of this policy alone
     copied = []
     for sub in ("", "clean") if counts[1] > counts[0] else ("",):
-        source, target = dense / sub / "cells" / name, out / sub / "cells" / name
+        source, target = cell.folder(dense / sub), cell.folder(out / sub)
         try:
             found = store.read(source)
         except ZodriveError:  # no such cell, or a damaged one: the track row runs its own
