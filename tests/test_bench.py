@@ -10,12 +10,8 @@ import pytest
 
 from zodrive.cli import main
 from zodrive.experiments.cells import GridCell
-from zodrive.experiments.bench import (
-    PROTOCOLS,
-    leaderboard_markdown,
-    physical_eps,
-    read_rows,
-)
+from zodrive.experiments.bench import PROTOCOLS, physical_eps
+from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ppo-highway-fast"
 
@@ -200,7 +196,7 @@ def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
 def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same_table() -> None:
     """Each row is paired with every constant action benched under its protocol (not with itself), and the
     leaderboard shows the constant it beats by the least: on intersection that is IDLE/FASTER, not the brake."""
-    from zodrive.experiments.bench import _closest_constant
+    from zodrive.experiments.leaderboard import _closest_constant
 
     rows = {(r["scenario"], r["policy"]): r for r in read_rows(Path(__file__).resolve().parents[1] / "results" / "bench")}
     slower = rows[("intersection", "baseline-slower")]
@@ -217,7 +213,7 @@ def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same
 def test_the_plot_gives_a_family_one_colour_and_each_seed_its_own_marker() -> None:
     """Merge has 15 rows: drawn in a 10-colour cycle, two policies shared a colour and could not be told apart;
     and colours given by sorted position changed whenever a row was added."""
-    from zodrive.experiments.bench import family_and_seed, family_colours, line_style
+    from zodrive.experiments.leaderboard_plot import family_and_seed, family_colours, line_style
 
     assert family_and_seed("dqn-g99-seed-1") == ("dqn-g99", 1)
     assert family_and_seed("baseline-slower") == ("baseline-slower", 0)
@@ -387,7 +383,8 @@ def test_a_defended_row_attacks_the_defended_system(tmp_path: Path) -> None:
     """`bench --defense`: every cell queries the defended system, the row's key and name cover the defense,
     the ensemble adds the attacks that adapt to it, and a policy that reads nothing is refused."""
     from zodrive.errors import ZodriveError
-    from zodrive.experiments.bench import Protocol, bench, black_box_of, leaderboard_markdown
+    from zodrive.experiments.bench import Protocol, bench, black_box_of
+    from zodrive.experiments.leaderboard import leaderboard_markdown
 
     proto = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",))
     row = bench("baseline:rules", proto, tmp_path / "r", progress=False, envs=1, defense="shield@0.02")
@@ -461,7 +458,7 @@ def _episodes(folder: Path, returns: list[float]) -> None:
 
 
 def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) -> None:
-    from zodrive.experiments.bench import _defended, defense_margins
+    from zodrive.experiments.leaderboard import _defended, defense_margins
 
     def row(name: str, key: str, defense: str | None, clean: list[float], attacked: list[float]) -> tuple:
         folder = tmp_path / name
@@ -486,7 +483,7 @@ def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) ->
 
 
 def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:
-    from zodrive.experiments.bench import pareto
+    from zodrive.experiments.leaderboard_plot import pareto
 
     points = [(22.0, 7.0), (20.8, 20.8), (21.5, 21.3), (21.0, 21.0), (7.0, 7.0), (22.0, 6.0)]
     assert pareto(points) == [2, 0]  # (21.5, 21.3) and (22.0, 7.0); (20.8, 20.8) and (21.0, 21.0) are beaten

@@ -26,11 +26,10 @@ from zodrive.experiments.bench import (
     WHITE_BOX,
     brake_folder,
     current_protocols,
-    leaderboard_markdown,
     protocol,
-    read_rows,
     row_folder,
 )
+from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 from zodrive.experiments.tracks import DENSE, TRACK_SCENARIOS, TRACKS
 from zodrive.system import Attacker, Schedule
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from zodrive.cli import main
-from zodrive.experiments.bench import leaderboard_markdown, read_rows
+from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = ROOT / "results" / "bench" / "highway-fast"

@@ -121,7 +121,8 @@ def test_a_grid_resumes_over_packed_cells(tmp_path: Path, monkeypatch) -> None:
 def test_a_bench_row_reads_and_resumes_from_packed_cells(tmp_path: Path, monkeypatch) -> None:
     """The row, its brake and the leaderboard read a packed board as the folders it was packed from."""
     import zodrive.evaluation.evaluate as evaluation
-    from zodrive.experiments.bench import Protocol, bench, leaderboard_markdown, read_rows
+    from zodrive.experiments.bench import Protocol, bench
+    from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 
     proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2, black_box=("uniform-noise",), white_box=None)
     board = tmp_path / "board"

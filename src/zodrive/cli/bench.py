@@ -54,7 +54,8 @@ def add_parsers(sub: Any) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
-    from zodrive.experiments.bench import ROW_NAME, bench, protocol, row_folder, write_leaderboard
+    from zodrive.experiments.bench import ROW_NAME, bench, protocol, row_folder
+    from zodrive.experiments.leaderboard import write_leaderboard
     from zodrive.policies.policy import resolve
 
     proto = protocol(args.scenario, args.track)
@@ -85,7 +86,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_leaderboard(args: argparse.Namespace) -> int:
-    from zodrive.experiments.bench import write_leaderboard
+    from zodrive.experiments.leaderboard import write_leaderboard
 
     write_leaderboard(args.board, args.out, args.plot, frontier=args.frontier, force=args.force)
     print(f"wrote {', '.join(str(p) for p in (args.out, args.plot, args.frontier) if p is not None)}")

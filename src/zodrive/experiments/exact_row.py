@@ -13,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from zodrive.errors import ZodriveError
-from zodrive.experiments.bench import BLACK_BOX, read_row
+from zodrive.experiments.bench import BLACK_BOX
 from zodrive.experiments.exact_board import EXACT_FILE
+from zodrive.experiments.leaderboard import read_row
 from zodrive.runinfo import command_line, write_json
 
 STATES = 100

@@ -1,0 +1,336 @@
+"""The leaderboard: every bench row under a board (`zodrive bench`), read, checked and paired with the rows of
+the same table (the margins over the constant actions, a defended row against its policy undefended), one
+Markdown table per protocol, generated, never typed (`zodrive leaderboard`; its plots in `leaderboard_plot`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from zodrive.drivers.baselines import BASELINES, PREFIX
+from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
+from zodrive.experiments.bench import (BRAKE, PROTOCOLS, ROW_NAME, TRACK_PROTOCOLS, Protocol, brake_folder,
+                                       brake_margin, clean_returns, current_protocols, paired, physical_eps,
+                                       read_table, row_clean_folder)
+from zodrive.experiments.cells import GridCell
+from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_notes, read_exact
+from zodrive.experiments.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
+from zodrive.experiments.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
+from zodrive.runinfo import write_atomic
+
+MAX_ROW_BYTES = 4 << 20  # a row is a few KiB: a larger file is not one
+
+
+class _Point(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    eps: float
+    collision_rate: float = Field(ge=0, le=1)
+    pgd_return: float | None = None
+    queries_to_crash: float | None = None
+    return_: float = Field(alias="return")
+
+
+class _Clean(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    return_: float = Field(alias="return")
+    collision_rate: float = Field(ge=0, le=1)
+
+
+class _Row(BaseModel):
+    """What the leaderboard reads of a row, checked before it reads it (rows come from strangers too)."""
+
+    model_config = ConfigDict(extra="allow")
+    protocol: str
+    official: bool
+    policy: str = Field(pattern=f"^{ROW_NAME.pattern}$")  # anchored: pydantic searches
+    scenario: str
+    episodes: int = Field(ge=1)
+    clean_episodes: int | None = Field(default=None, ge=1)
+    clean: _Clean
+    clean_on_attacked_episodes: _Clean | None = None
+    attacked: list[_Point] = Field(min_length=1)
+    robustness_area: float | None
+    eps_collisions_pass_brake: float | None
+    track: str | None = Field(default=None, pattern=r"^[a-z][a-z0-9-]{0,39}$")  # a table's heading shows it
+
+
+def read_row(path: Path) -> dict[str, Any]:
+    """One `row.json`, read only if it is a regular file of a row's size, and checked for the fields the
+    leaderboard reads: anything else is one line naming the file."""
+    if not path.is_file() or path.stat().st_size > MAX_ROW_BYTES:
+        raise ZodriveError(f"{path} is not a bench row (not a regular file of at most {MAX_ROW_BYTES >> 20} MiB)")
+    try:
+        row = json.loads(path.read_text(encoding="utf-8"))
+        _Row.model_validate(row)
+        if len([float(v) for v in row["clean"]["ci95"]]) != 2:  # numbers, or a ValueError / TypeError
+            raise ValueError("ci95 is not two numbers")
+        float(row["clean"]["speed"])
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ZodriveError(f"{path} is not a bench row (damaged JSON): run its bench again") from None
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise ZodriveError(f"{path} is not a bench row: {'.'.join(map(str, first['loc']))}: {first['msg']}") from None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ZodriveError(f"{path} is not a bench row: its clean ci95 and speed must be numbers ({exc})") from None
+    return row
+
+
+def read_rows(board: Path) -> list[dict[str, Any]]:
+    """Every `row.json` under `board` (one folder per scenario, one per policy; a track's rows in
+    SCENARIO/tracks/TRACK, `row_folder`)."""
+    rows = []
+    for path in sorted([*board.glob("*/*/row.json"), *board.glob(f"*/{TRACKS_FOLDER}/*/*/row.json")]):
+        row = read_row(path)
+        if "vs_brake" not in row:  # a row written before the column: from its own cells
+            row["vs_brake"] = brake_margin(row_clean_folder(row, path.parent),
+                                           brake_folder(path.parent, row.get("track") or DENSE))
+        row["exact"] = read_exact(path.parent)
+        rows.append((row, path.parent))
+    constant_margins(rows)
+    defense_margins(rows)
+    return [row for row, _ in rows]
+
+
+def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
+    """One table per scenario, ranked by the return under the strongest attack at the largest ε (as
+    RobustBench ranks by robust accuracy), then by clean return; unofficial rows (fewer episodes) in a
+    table of their own below it, never ranked or bold. Generated from the rows, never typed."""
+    lines = ["# Leaderboard", "",
+             f"Generated by `{WRITER}` from the bench rows in `results/bench/` (never typed).",
+             "Each row: `zodrive bench POLICY --scenario S` under the protocol named in its table's title",
+             "([docs/bench.md](bench.md)). Return under attack at ε is the worst black-box attack of the ensemble",
+             "at that ε or any smaller one (no perturbation included: every such point is inside the ε-ball);",
+             "PGD (white-box, needs gradients) is a separate column. Ranked by the return at the largest ε.",
+             "ε past brake: the smallest ε at which the policy collides more often than the constant brake does",
+             "clean (0: already clean). Δ closest constant: clean return minus that of the constant action (a",
+             "`baseline:` row of the same table) it beats by the least, paired on the same seeds (95% CI); a policy",
+             "beats every constant action by a margin its CI shows where the low end is above 0 (its margin in",
+             "bold). Queries to crash: the median, over the attacked episodes that crashed, of the victim queries",
+             "the attack spent in the episode. Rows marked † load their network with SB3's own loader",
+             "(`--trust-model`: code of the model's author, which zodrive does not rebuild). Rows benched with",
+             "fewer episodes than the protocol's (`--episodes`) are unofficial: they stand in a table of their own",
+             "under each ranked table, never ranked, never bold. Defense: what stands between the sensor and the",
+             "policy in a defended row (`zodrive bench MODEL --defense NAME`); its attacks query the defended",
+             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md). Exact attackable:",
+             "of a sample of the row's clean states (said under the table), those where some perturbation inside the",
+             "ε-ball changes the action, decided by a complete check of the network (`zodrive certify MODEL --row",
+             "FOLDER`; ReLU MLPs); ensemble miss: of those, the ones no black-box attack of the ensemble changed (PGD",
+             "not counted); – where a row has no such check (docs/bench.md, \"The exact check\").", ""]
+    def table(r: dict[str, Any]) -> tuple[str, str, str]:
+        return r["scenario"], r.get("track") or DENSE, r["protocol"]
+
+    # rows of two versions or two tracks never share a table; a scenario's tracks follow its dense table
+    for place, track, proto in sorted({table(r) for r in rows}, key=lambda t: (t[0], not is_dense(t[1]), t[1], t[2])):
+        group = sorted((r for r in rows if table(r) == (place, track, proto)),
+                       key=lambda r: (-r["attacked"][-1]["return"], -r["clean"]["return"]))
+        where = place if is_dense(track) else f"{place}, track {track}"
+        title = f"## {where} (protocol {proto})"
+        current = PROTOCOLS.get(place) if is_dense(track) else TRACK_PROTOCOLS.get((place, track))
+        if current is not None and proto != current.name():
+            title += (f" — an earlier version: `zodrive bench` with each row's own command runs it under "
+                      f"{current.name()}, reusing its finished cells")
+        lines += [title, ""]
+        if not is_dense(track):
+            lines += _threat_model(track, current_protocols().get(proto))
+        official = [r for r in group if r["official"]]
+        unofficial = [r for r in group if not r["official"]]
+        if official:
+            lines += _table(official, ranked=True)
+            lines += exact_notes(official)
+            lines += _identical(official)
+            lines += _defended(official)
+        if unofficial:
+            lines += [f"Unofficial rows of {where} (fewer episodes than the protocol's: not ranked, no margin in "
+                      "bold; their CIs are wide):", ""]
+            lines += _table(unofficial, ranked=False)
+            lines += exact_notes(unofficial)
+    return "\n".join(lines)
+
+
+def _threat_model(track: str, proto: Protocol | None) -> list[str]:
+    """A track's threat model under its table's heading, with each ε in metres and m/s (`physical_eps`), for a
+    protocol this zodrive knows (an unknown one: its name alone, in the heading)."""
+    if proto is None or track not in TRACKS:
+        return []
+    units = "; ".join(f"ε {eps}: " + ", ".join(f"{f} {v:g} {'m/s' if f.startswith('v') else 'm'}"
+                                               for f, v in moved.items())
+                      for eps, moved in physical_eps(proto).items())
+    cap = f"; at most {proto.query_budget} queries a step for a black-box attack" if proto.query_budget else ""
+    return [f"Threat model: {TRACKS[track].threat}. Per ε, how far a feature may move: {units}{cap} "
+            f"(`zodrive bench MODEL --scenario {proto.scenario} --track {track}`; docs/bench.md, \"Tracks\").", ""]
+
+
+def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
+    """The Markdown table of `group`; the attacked columns beside the clean return of the same episodes
+    where the clean figures come from more episodes (so no attacked column is read against another set)."""
+    eps = [p["eps"] for p in group[0]["attacked"]]
+    n, n_clean = group[0]["episodes"], group[0].get("clean_episodes", group[0]["episodes"])
+    split = n_clean > n
+    lines: list[str] = []
+    if split:
+        lines += [(f"Clean columns and Δ: {n_clean} episodes; \"Clean, first {n}\", the attacked columns, area and ε "
+                   f"past brake: the first {n} (`clean_on_attacked_episodes`)."), ""]
+    lines += ["| " + ("# | " if ranked else "")
+              + "Policy | Defense | Clean return (95% CI) | Δ closest constant (paired 95% CI) | "
+              "Collisions | Speed (m/s) | " + (f"Clean, first {n} | " if split else "")
+              + " | ".join(f"ε {e:g}: return / collisions" for e in eps)
+              + f" | PGD ε {eps[-1]:g} | Area | ε past brake | Queries to crash (median) | "
+              + " | ".join(exact_headers(eps)) + " |",
+              "|---" * (12 + len(eps) + int(ranked) + int(split)) + "|"]
+    for rank, r in enumerate(group, 1):
+        c = r["clean"]
+        cells = [f"{p['return']:.2f} / {100 * p['collision_rate']:.0f}%" for p in r["attacked"]]
+        last = r["attacked"][-1]
+        pgd = "–" if last["pgd_return"] is None else f"{last['pgd_return']:.2f}"
+        q = next((p["queries_to_crash"] for p in r["attacked"] if p["queries_to_crash"] is not None), None)
+        delta = _closest_constant(r, bold=ranked)
+        marks = "†" if r.get("trust_model") else ""
+        same = r.get("clean_on_attacked_episodes") or c
+        past = ("the brake" if r.get("key") == BRAKE else "–"
+                if r["eps_collisions_pass_brake"] is None else format(r["eps_collisions_pass_brake"], "g"))
+        lines.append("| " + (f"{rank} | " if ranked else "") + f"{r['policy']}{marks} | {r.get('defense') or '–'} | "
+                     f"{c['return']:.2f} "
+                     f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
+                     f"{c['speed']:.1f} | " + (f"{same['return']:.2f} / {100 * same['collision_rate']:.0f}% | "
+                                               if split else "")
+                     + " | ".join(cells) + f" | {pgd} | "
+                     f"{'–' if r['robustness_area'] is None else format(r['robustness_area'], '.2f')} | {past} | "
+                     f"{'–' if q is None else format(q, ',.0f')} | " + " | ".join(exact_cells(r)) + " |")
+    lines.append("")
+    return lines
+
+
+def _defended(group: list[dict[str, Any]]) -> list[str]:
+    """The defended rows of a table against their policy undefended: what the defense costs clean and what
+    it changes under the strongest attack at the largest ε, paired on the same episodes."""
+    pairs = [r for r in group if r.get("vs_undefended")]
+    if not pairs:
+        return []
+
+    def diff(m: list[float] | None) -> str:
+        return "–" if m is None else f"{m[0]:+.2f} ({m[1]:+.2f} to {m[2]:+.2f})"
+
+    eps = pairs[0]["vs_undefended"]["eps"]
+    lines = ["Defended rows against their policy undefended (defended minus undefended, paired on the same episodes, "
+             "95% CI): clean over the clean episodes, and under the strongest attack each row kept at the largest ε.",
+             "", f"| Row | Defense | Undefended row | Clean Δ | ε {eps:g} Δ |", "|---|---|---|---|---|"]
+    for r in pairs:
+        m = r["vs_undefended"]
+        lines.append(f"| {r['policy']} | {r['defense']} | {m['policy']} | {diff(m['clean'])} | {diff(m['attacked'])} |")
+    return lines + [""]
+
+
+def _identical(group: list[dict[str, Any]]) -> list[str]:
+    """A sentence for rows whose clean and attacked figures are all equal: two policies that drove the same
+    episodes (on intersection and merge, always-FASTER and always-IDLE do), said, not left to be noticed."""
+    def figures(r: dict[str, Any]) -> str:
+        return json.dumps([r["clean"], r["attacked"]], sort_keys=True, default=str)
+
+    seen: dict[str, list[str]] = {}
+    for r in group:
+        seen.setdefault(figures(r), []).append(r["policy"])
+    same = [names for names in seen.values() if len(names) > 1]
+    return [f"{' and '.join(names)} score alike in every column here (the same return, collisions and speed on every "
+            "episode set): on these seeds they drove the same." for names in same] + ([""] if same else [])
+
+
+def _closest_constant(row: dict[str, Any], *, bold: bool = True) -> str:
+    """The paired margin over the constant action with the lowest CI end (the brake's, from the row's
+    own cells, where no constant is on the board), in bold where that end is above 0; "–" where none
+    is on the same seeds."""
+    margins = {name: m for name, m in row.get("vs_constants", {}).items() if m is not None}
+    if not margins and row.get("vs_brake") is not None:
+        margins = {BRAKE.removeprefix(PREFIX): row["vs_brake"]}
+    if not margins:
+        return "–"
+    name, (mean, low, high) = min(margins.items(), key=lambda item: item[1][1])
+    shown = f"**{mean:+.2f}**" if low > 0 and bold else f"{mean:+.2f}"  # bold: beats every constant by its CI
+    return f"{shown} ({low:+.2f} to {high:+.2f}) vs {name}"
+
+
+def constant_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
+    """Give each row `vs_constants`: its clean return minus each constant action's (the rows of
+    `baseline:NAME` constants of the same protocol on the board), paired on the same seeds. A policy
+    beats every constant by a margin its CI shows when every low end is above 0."""
+    returns = [clean_returns(row_clean_folder(row, folder)) for row, folder in rows]  # each row's episodes, read once
+    constants: dict[str, dict[str, dict[int, float] | None]] = {}
+    for (row, _), theirs in zip(rows, returns):
+        name = row["key"].removeprefix(PREFIX) if row["key"].startswith(PREFIX) else None
+        if name in BASELINES and BASELINES[name].action is not None:
+            constants.setdefault(row["protocol"], {})[name] = theirs
+    for (row, _), mine in zip(rows, returns):
+        row["vs_constants"] = {name: paired(mine, theirs)
+                               for name, theirs in constants.get(row["protocol"], {}).items()
+                               if row["key"] != PREFIX + name}
+
+
+def _worst_returns(row: dict[str, Any], out: Path) -> dict[int, float] | None:
+    """Episode -> return of the cell a row keeps at its largest ε (the worst black-box attack inside the
+    ball, or the clean cell of the attacked episodes where no attack hurt more); None if it is not there."""
+    last = row["attacked"][-1]
+    if last.get("attack") is None:
+        return clean_returns(out)
+    try:
+        cells = read_table(out)
+    except ZodriveError:
+        return None
+    kept = (c for c in map(GridCell.from_entry, cells) if c.attack == last["attack"] and c.eps == last["attack_eps"])
+    cell = next(kept, None)
+    if cell is None:
+        return None
+    records = store.episodes(cell.folder(out), needs=("episode", "return"), missing_ok=True)
+    return {r["episode"]: r["return"] for r in records}
+
+
+def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
+    """Give each defended row `vs_undefended`: the row of the same policy without the defense (same protocol,
+    the key before `+defense:`), the clean return's difference (defended minus undefended, over the clean
+    episodes) and the difference at the largest ε (the worst attack each row kept, over the attacked
+    episodes), each paired on the same seeds with its bootstrap 95% CI. What a defense costs clean and what
+    it buys under attack, read on one board."""
+    plain = {(row["protocol"], row["key"]): (row, folder) for row, folder in rows if not row.get("defense")}
+    for row, folder in rows:
+        if not row.get("defense"):
+            continue
+        match = plain.get((row["protocol"], row["key"].split("+defense:")[0]))
+        if match is None:
+            continue
+        other, other_folder = match
+        row["vs_undefended"] = {
+            "policy": other["policy"],
+            "clean": paired(clean_returns(row_clean_folder(row, folder)),
+                             clean_returns(row_clean_folder(other, other_folder))),
+            "attacked": paired(_worst_returns(row, folder), _worst_returns(other, other_folder)),
+            "eps": row["attacked"][-1]["eps"]}
+
+
+def write_leaderboard(board: Path, out: Path, plot: Path | None = None, *, frontier: Path | None = None,
+                      force: bool = False) -> str:
+    rows = read_rows(board)
+    if not rows:
+        raise ZodriveError(f"no bench rows under {board} (expected {board}/SCENARIO/POLICY/row.json)")
+    for path in (out, plot, frontier):
+        if path is not None and path.exists() and not force and not written_by_zodrive(path):
+            raise ZodriveError(f"{path} exists and was not written by `{WRITER}`: pass --force to replace it")
+    text = leaderboard_markdown(rows)
+    write_atomic(out, text)
+    if plot is not None:
+        plot_leaderboard(rows, plot)
+    if frontier is not None:
+        plot_frontier(rows, frontier)
+    return text
+
+
+def written_by_zodrive(path: Path) -> bool:
+    """Whether `path` is a leaderboard file zodrive wrote (read only its first 64 KiB: nothing is trusted)."""
+    if not path.is_file():
+        return False
+    with path.open("rb") as f:
+        head = f.read(65536)
+    return head.startswith(b"# Leaderboard\n") and f"Generated by `{WRITER}`".encode() in head[:400] \
+        or head.startswith(b"\x89PNG") and WRITER.encode() in head
