@@ -487,3 +487,23 @@ def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:
 
     points = [(22.0, 7.0), (20.8, 20.8), (21.5, 21.3), (21.0, 21.0), (7.0, 7.0), (22.0, 6.0)]
     assert pareto(points) == [2, 0]  # (21.5, 21.3) and (22.0, 7.0); (20.8, 20.8) and (21.0, 21.0) are beaten
+
+
+def test_every_committed_cell_is_found_through_its_typed_cell() -> None:
+    """A bench reads its grid only through `GridCell`: each entry of every committed table under results/bench
+    (rows, their clean/, the brakes, the tracks) gives back its cell's folder (a folder or packed) and its own
+    grid entry, label and all; so a row resumes from the cells it has, under the names it has."""
+    from zodrive.evaluation import store
+
+    board = Path(__file__).resolve().parents[1] / "results" / "bench"
+    tables = sorted(board.rglob("table.json"))
+    assert len(tables) > 100
+    for table in tables:
+        for entry in json.loads(table.read_text()):
+            cell = GridCell.from_entry(entry)
+            assert store.exists(cell.folder(table.parent)), (table, entry)
+            assert cell.entry(entry["reads"]) == {k: entry[k] for k in cell.entry(entry["reads"])}, (table, entry)
+    assert GridCell("baseline:rules", "pgd", 0.05, None, "shield@0.02", white_box=True).name == \
+        "baseline-rules+shield@0.02-pgd-eps0.05"
+    assert GridCell.from_entry({"model": "m", "attack": "pgd (white-box)", "eps": 0.1000001, "defense": "none"}) \
+        == GridCell("m", "pgd", 0.1000001, white_box=True)
