@@ -1,7 +1,8 @@
 """Every committed CARD.md under models/ is what the command that writes it prints: a shipped model's card
 is the text of the `zodrive card ...` line written inside it (run here in-process, through the CLI's own
-parser, into a string), a zoo card is what `python zoo/card.py` writes. A card left behind by a change to
-the card code or to the records it reads fails here, with the command that brings it up to date.
+parser, into a string), a zoo card is what `python zoo/card.py` writes (the package's zoo_card, given the zoo's
+recipe by the script). A card left behind by a change to the card code or to the records it reads fails here,
+with the command that brings it up to date.
 
 One allowance: a zoo card whose bench row (results/bench/SCENARIO/NAME/row.json) is not in this checkout
 (a bench still running, rows that land with a later commit) is written by zoo/card.py with "No bench row
@@ -22,6 +23,7 @@ import pytest
 from zodrive.cli import build_parser
 from zodrive.experiments import card as card_module
 from zodrive.experiments.card import card_text
+from zodrive.experiments.zoo_card import NO_ROW  # a zoo card's words for a row not in the checkout
 
 ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT / "models" / "zoo"
@@ -29,7 +31,6 @@ ALL_CARDS = sorted(ROOT.glob("models/**/CARD.md"))
 ZOO_CARDS = [card for card in ALL_CARDS if card.is_relative_to(ZOO)]
 HAND_WRITTEN = {ROOT / "models" / "ppo-highway-fast" / "CARD.md"}
 """Cards no command writes (the plain-SB3 PPO of the "bring your own model" example): not checked here."""
-NO_ROW = "No bench row yet: `bash zoo/bench_all.sh`."  # zoo/card.py's words for a row not in the checkout
 CARD_FLAGS = {"command", "verbose", "models_dir", "folder", "baseline", "eval", "note", "seeds", "attacked", "force"}
 """What `zodrive card` parses: a new flag fails `test_the_card_command_is_read_whole` till `_shipped_text` passes it."""
 

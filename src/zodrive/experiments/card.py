@@ -1,4 +1,6 @@
-"""Model cards: how a shipped model was made and how it scores, from its run folder."""
+"""Model cards: how a model was made and how it scores, from its own records. This module writes every card
+(`save_card`): a shipped model's from its run folder (`card_text`, `zodrive card FOLDER ...`), a zoo model's from
+its run and its bench row (`zoo_card.zoo_cards`, `python zoo/card.py`)."""
 
 from __future__ import annotations
 
@@ -20,8 +22,9 @@ PAPER_BUDGETS = {"dqn": 20_000, "ddpg": 120_000}
 RESULT = ("mean_return", "ci95", "episodes", "seed")  # what `_result_line` reads first
 
 
-def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
-    """A record of the folder; a missing or damaged one, or one without a key of `needs`, is one line naming it."""
+def load_record(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A record of a model's folder (JSON, or YAML by its suffix); a missing or damaged one, or one without a key
+    of `needs`, is one line naming it."""
     if not path.is_file():
         raise ZodriveError(f"{path} is missing (train and evaluate into the folder first)")
     if path.suffix == ".yaml":
@@ -36,7 +39,7 @@ def _load(path: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
 def _summary(evaluation: Path, needs: tuple[str, ...] = ()) -> dict[str, Any]:
     """An evaluation's summary, from its folder or from its line in a pack (`evaluation.store`)."""
     if store.is_live(evaluation) or not store.exists(evaluation):
-        return _load(evaluation / "summary.json", needs)  # a missing one is named as the file
+        return load_record(evaluation / "summary.json", needs)  # a missing one is named as the file
     return store.summary(evaluation, needs)
 
 
@@ -58,7 +61,7 @@ def seed_table(folders: list[Path]) -> list[str]:
 
     rows = []
     for folder in folders:
-        train, summary = (_load(folder / "train.json", ("seed",)),
+        train, summary = (load_record(folder / "train.json", ("seed",)),
                           _summary(folder / "eval", ("mean_return",)))
         rows.append((train["seed"], folder, summary))
     lines = ["| Training seed | Run | Mean return (95% CI) | Collisions | Off-road | Speed (m/s) | Lane changes/ep |",
@@ -102,7 +105,7 @@ def _selection_lines(folder: Path) -> list[str]:
         return []
     from zodrive.experiments.select import selection_markdown
 
-    choice = _load(folder / "selected.json", ("selected", "criterion"))
+    choice = load_record(folder / "selected.json", ("selected", "criterion"))
     return ["", f"`model.zip` is the checkpoint at step {choice['selected']['steps']:,}, picked by `zodrive select` "
             f"({choice['criterion']}; never the evaluation seeds):", "", selection_markdown(choice)]
 
@@ -126,14 +129,18 @@ def _attacked_lines(folders: list[Path]) -> list[str]:
     return lines
 
 
+def save_card(path: Path, text: str) -> Path:
+    """Write a card's text to `path` (a model folder's CARD.md): the one writer of shipped and zoo cards."""
+    write_atomic(path, text)
+    return path
+
+
 def write_card(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
                notes: list[str] | None = None, seeds: list[Path] | None = None,
                attacked: list[Path] | None = None) -> Path:
     """Write `folder/CARD.md`: `card_text` of the same arguments."""
-    path = folder / "CARD.md"
-    write_atomic(path, card_text(folder, baseline=baseline, evaluation=evaluation, notes=notes, seeds=seeds,
-                                 attacked=attacked))
-    return path
+    return save_card(folder / "CARD.md", card_text(folder, baseline=baseline, evaluation=evaluation, notes=notes,
+                                                   seeds=seeds, attacked=attacked))
 
 
 def card_text(folder: Path, *, baseline: Path | None = None, evaluation: Path | None = None,
@@ -142,9 +149,9 @@ def card_text(folder: Path, *, baseline: Path | None = None, evaluation: Path | 
     """The text of `folder/CARD.md`, from run.json, train.json, config.yaml and an evaluation's
     summary.json (default `folder/eval`); `attacked`: evaluation folders of the model under
     attack, listed with their attack and eps. Paths are written as given (the card names its command)."""
-    run = _load(folder / "run.json", ("command", "versions"))
-    train = _load(folder / "train.json", ("algo", "seed", "total_timesteps"))
-    config = _load(folder / "config.yaml", ("preset",))
+    run = load_record(folder / "run.json", ("command", "versions"))
+    train = load_record(folder / "train.json", ("algo", "seed", "total_timesteps"))
+    config = load_record(folder / "config.yaml", ("preset",))
     summary = _summary(evaluation or folder / "eval", (*RESULT, "command"))
     algo = train["algo"]
     robust = train.get("kind") in ROBUST_KINDS
@@ -161,7 +168,8 @@ def card_text(folder: Path, *, baseline: Path | None = None, evaluation: Path | 
         "```",
         run["command"],
         *run.get("continued_by", []),
-        *([_load(folder / "selected.json", ("command",))["command"]] if (folder / "selected.json").is_file() else []),
+        *([load_record(folder / "selected.json", ("command",))["command"]]
+          if (folder / "selected.json").is_file() else []),
         summary["command"],
         f"zodrive card {folder}" + (f" --baseline {baseline}" if baseline else "")
         + (f" --eval {evaluation}" if evaluation else "")
