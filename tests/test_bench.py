@@ -92,14 +92,14 @@ def _bench_folder(folder: Path, cells: list[dict], brake_collisions: float = 0.2
     (folder / "table.json").write_text(json.dumps(cells))
     (folder / "brake" / "table.json").write_text(json.dumps([{**_cell("none", 0.0, 5.0, brake_collisions),
                                                                "model": "baseline:slower"}]))
-    brake = folder / "brake" / "cells" / "baseline-slower-none"  # the same rate on every first 5k episodes
+    brake = GridCell("baseline:slower").folder(folder / "brake")  # the same rate on every first 5k episodes
     brake.mkdir(parents=True)
     brake.joinpath("episodes.jsonl").write_text("".join(
         json.dumps({"episode": i, "return": 5.0, "crashed": int((i + 1) * brake_collisions) > int(i * brake_collisions)})
         + "\n" for i in range(300)))
     for c in cells:
         if c["attack"] != "none":
-            cell = folder / "cells" / f"m-{c['attack'].split(' ')[0]}-eps{c['eps']:g}"
+            cell = GridCell.from_entry(c).folder(folder)  # the folder compare gives the entry's cell
             cell.mkdir(parents=True)
             (cell / "episodes.jsonl").write_text(json.dumps({"episode": 0, "crashed": True, "queries": 7}) + "\n")
     return folder
@@ -410,7 +410,7 @@ def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: P
     (folder / "clean").mkdir()
     (folder / "clean" / "table.json").write_text(json.dumps([_cell("none", 0.0, 10.0, 0.1)]))
     crashes = [i >= 100 and i % 2 == 0 for i in range(300)]  # none in the first 100, 33 % over 300
-    (folder / "brake" / "cells" / "baseline-slower-none" / "episodes.jsonl").write_text("".join(
+    (GridCell("baseline:slower").folder(folder / "brake") / "episodes.jsonl").write_text("".join(
         json.dumps({"episode": i, "return": 5.0, "crashed": c}) + "\n" for i, c in enumerate(crashes)))
     assert bench_row("m", "k", proto, folder, 100, 300)["eps_collisions_pass_brake"] == 0.0  # 10 % > 0 % there
 
@@ -462,8 +462,8 @@ def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) ->
 
     def row(name: str, key: str, defense: str | None, clean: list[float], attacked: list[float]) -> tuple:
         folder = tmp_path / name
-        _episodes(folder / "cells" / f"{name}-none", clean)
-        _episodes(folder / "cells" / f"{name}-random-search-eps0.05", attacked)
+        _episodes(GridCell(name).folder(folder), clean)
+        _episodes(GridCell(name, "random-search", 0.05).folder(folder), attacked)
         (folder / "table.json").write_text(json.dumps([{**_cell("random-search", 0.05, 1.0), "model": name}]))
         r = {"protocol": "p-v1", "key": key, "policy": name, "episodes": 4, "clean_episodes": 4,
              "attacked": [{"eps": 0.05, "attack": "random-search", "attack_eps": 0.05}],
