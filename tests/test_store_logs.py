@@ -86,3 +86,16 @@ def test_the_cli_refuses_what_it_cannot_fold_or_give_back(tmp_path: Path, capsys
     assert "not a folder" in capsys.readouterr().err
     assert main(["pack", "--logs", "--unpack", str(tmp_path / "nowhere")]) == 2
     assert "no logs of" in capsys.readouterr().err
+
+
+def test_match_folds_only_the_logs_it_names(tmp_path: Path, capsys) -> None:
+    study = tmp_path / "study"
+    _logs(study, {"adv-a.txt": "a\n", "adv-b.txt": "b\n", "paired.txt": "the study's table\n"})
+    (study / "README.md").write_text("# notes\n")
+    assert main(["pack", "--logs", str(study), "--match", "adv-*.txt", "--match", "none-*.txt"]) == 0
+    assert "folded 2 logs into" in capsys.readouterr().out
+    assert store.read_logs(tmp_path / "study.txt") == {"adv-a.txt": "a\n", "adv-b.txt": "b\n"}
+    assert sorted(p.name for p in study.iterdir()) == ["README.md", "paired.txt"]  # the folder stays with them
+    assert store.unpack_logs(study) == ["adv-a.txt", "adv-b.txt"]
+    assert main(["pack", "--match", "adv-*.txt", str(study)]) == 2
+    assert "--match chooses the logs that --logs folds" in capsys.readouterr().err

@@ -88,6 +88,9 @@ def add_parsers(sub: Any) -> None:
     pack.add_argument("--logs", action="store_true",
                       help="instead, fold the printed outputs in each FOLDER (its NAME.txt files) into one FOLDER.txt "
                            "beside it, each under a '==> NAME.txt <==' line (with --unpack: give them back)")
+    pack.add_argument("--match", action="append", metavar="GLOB",
+                      help="with --logs: fold only the logs whose names match GLOB (repeatable; default: every "
+                           "NAME.txt), say a study's training printouts and not the tables its scripts print")
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -157,8 +160,10 @@ def cmd_card(args: argparse.Namespace) -> int:
 def cmd_pack(args: argparse.Namespace) -> int:
     from zodrive.evaluation import store
 
+    if args.match and (not args.logs or args.unpack):
+        raise ZodriveError("--match chooses the logs that --logs folds: give it with --logs, without --unpack")
     if args.logs:
-        return _pack_logs(args.folders, args.unpack)
+        return _pack_logs(args.folders, args.unpack, tuple(args.match or ("*.txt",)))
     for folder in args.folders:
         if not folder.is_dir():
             raise ZodriveError(f"{folder}: not a folder")
@@ -177,7 +182,7 @@ def cmd_pack(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pack_logs(folders: list[Path], unpack: bool) -> int:
+def _pack_logs(folders: list[Path], unpack: bool, patterns: tuple[str, ...]) -> int:
     """`zodrive pack --logs [--unpack] FOLDER...`: each FOLDER's printed outputs, folded or given back."""
     from zodrive.evaluation import store
 
@@ -191,7 +196,7 @@ def _pack_logs(folders: list[Path], unpack: bool) -> int:
             names = store.unpack_logs(folder)
             print(f"unpacked {store.logs_path(folder)}: {len(names)} log{'s' * (len(names) != 1)} into {folder}")
             continue
-        done = store.pack_logs(folder)
+        done = store.pack_logs(folder, patterns)
         if done.packed:
             print(f"folded {len(done.packed)} log{'s' * (len(done.packed) != 1)} into {done.pack}")
         for name, why in done.left.items():

@@ -330,11 +330,12 @@ def logs_text(logs: dict[str, str]) -> str:
     return "\n".join(f"==> {name} <==\n{logs[name]}" for name in sorted(logs))
 
 
-def pack_logs(parent: Path) -> Packed:
-    """Fold the printed outputs in `parent` (its `*.txt` files) into `logs_path(parent)` (added to the logs it
-    holds; a file replaces a log of its name), and remove them once the folded file reads back as their bytes.
-    `parent` goes with its last file. Left as they are, and said: a file that is not UTF-8 text, that does not
-    end in a newline, or that holds a line like a header (unpacking would not give it back)."""
+def pack_logs(parent: Path, patterns: tuple[str, ...] = ("*" + LOGS,)) -> Packed:
+    """Fold the printed outputs in `parent` (its `*.txt` files; those whose names match one of `patterns`, globs)
+    into `logs_path(parent)` (added to the logs it holds; a file replaces a log of its name), and remove them once
+    the folded file reads back as their bytes. `parent` goes with its last file. Left as they are, and said: a
+    file that is not UTF-8 text, that does not end in a newline, or that holds a line like a header (unpacking
+    would not give it back)."""
     parent = Path(parent)
     target = logs_path(parent)
     if not parent.is_dir():
@@ -343,7 +344,8 @@ def pack_logs(parent: Path) -> Packed:
     left: dict[str, str] = {}
     taken: list[Path] = []
     for path in sorted(parent.glob("*" + LOGS)):
-        if not path.is_file() or path.is_symlink() or not _log_name(path.name):
+        if not path.is_file() or path.is_symlink() or not _log_name(path.name) or not any(
+                fnmatch.fnmatchcase(path.name, pattern) for pattern in patterns):
             continue
         try:
             text = path.read_bytes().decode("utf-8")
