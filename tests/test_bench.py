@@ -26,6 +26,9 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
     assert row["protocol"] == PROTOCOLS["highway-fast"].name() and row["official"] is False
     assert row["key"].startswith("sha256:") and row["clean_episodes"] == row["episodes"] == 2  # a quick look: 2 of each
     assert not (board / "highway-fast" / "ppo" / "clean").exists()
+    for folder in (board / "highway-fast" / "ppo", board / "highway-fast" / "brake"):  # the data, no renderings
+        assert (folder / "table.json").is_file()
+        assert not any((folder / name).exists() for name in ("grid.json", "table.csv", "table.md", "robustness.md"))
     table = json.loads((board / "highway-fast" / "ppo" / "table.json").read_text())
     clean = next(c["mean_return"] for c in table if c["attack"] == "none")
     for cell in row["attacked"]:  # the row keeps the cell that hurts most inside each eps-ball

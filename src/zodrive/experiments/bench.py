@@ -228,7 +228,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     clock = _Clock(n, n_clean, brake_done=(brake / "table.json").is_file())
     cells = compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
                     preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
-                    attack_budgets=capped, attack_set=list(proto.attack_set) or None)
+                    attack_budgets=capped, attack_set=list(proto.attack_set) or None, claim=False, readable=False)
     if earlier:  # cells of the earlier version that this one does not keep (git's history has them)
         keep = {GridCell.from_entry(cell).folder(out) for cell in cells}
         for folder in store.names(out / "cells"):
@@ -238,11 +238,12 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     if clean_out != out:
         _start_from_grid(out, clean_out, cells, force)
         compare([policy], [], [], n_clean, clean_out, workers=workers, progress=progress, seed=proto.seed,
-                preset=proto.scenario, force=force, envs=envs, trust=trust, defenses=defenses)
+                preset=proto.scenario, force=force, envs=envs, trust=trust, defenses=defenses, claim=False,
+                readable=False)
     # the board's brake, run once for every row of the scenario and every track (never forced: its cell's key
     # decides): it reads nothing, so no threat model changes what it does
     compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
-            preset=proto.scenario, envs=envs)
+            preset=proto.scenario, envs=envs, claim=False, readable=False)
     key = resolved.key() if defense is None else f"{resolved.key()}+defense:{defense}" + (
         f":v{defense_version(defense)}" if defense_version(defense) is not None else "")
     row = bench_row(name or resolved.label, key, proto, out, n, n_clean, defense=defense)

@@ -35,13 +35,16 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             env_id: str | None = None, obs_bounds: tuple[float, float] | None = None, shifted: bool = False,
             force: bool = False, claim: bool = True, envs: int = DEFAULT_ENVS,
             trust: bool = False, on_cell: Callable[[int, int, GridCell], None] | None = None,
-            attack_budgets: dict[str, list[int | None]] | None = None) -> list[dict[str, Any]]:
+            attack_budgets: dict[str, list[int | None]] | None = None,
+            readable: bool = True) -> list[dict[str, Any]]:
     """Every model (x defense) x attack x eps x per-step query budget (`attack_budgets`: an attack's own
     budgets instead of `query_budgets`, as a bench protocol caps its black-box attacks and not PGD); one
     resumable evaluation per cell (`trust`: read SB3 zips with SB3's own loader, which unpickles). Policies
     that do not read the observation (constant and
     simulator-reading baselines) get their clean row only: no observation attack or filter
-    can change what they do; white-box attacks skip policies that offer no gradients."""
+    can change what they do; white-box attacks skip policies that offer no gradients. `readable=False`
+    writes the data alone (`table.json`), not its renderings for a reader (`table.csv`, `table.md`,
+    `robustness.md`): a bench row's reader is the leaderboard."""
     from zodrive.defense import make_defense
 
     budgets = query_budgets or [None]
@@ -98,7 +101,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
             "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
             "episodes": s["episodes"],
         }
-        write_tables([r for r in rows if r is not None], out)  # in grid order, as cells finish
+        write_tables([r for r in rows if r is not None], out, readable)  # in grid order, as cells finish
         if on_cell is not None:
             on_cell(sum(r is not None for r in rows), len(rows), typed[i])
 
@@ -185,8 +188,11 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_tables(rows: list[dict[str, Any]], out: Path) -> None:
+def write_tables(rows: list[dict[str, Any]], out: Path, readable: bool = True) -> None:
+    """`table.json` (what the bench and the leaderboard read) and, if `readable`, its renderings."""
     write_json(out / "table.json", rows)
+    if not readable:
+        return
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0].keys()))
     writer.writeheader()
