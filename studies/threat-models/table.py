@@ -13,9 +13,10 @@ no summary.json, or fewer episodes than run.py asks, is printed as missing / par
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
+
+from zodrive.evaluation import store
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -41,10 +42,9 @@ def pct(x: float | None, digits: int = 0) -> str:
 
 
 def row(label: str, eps: str, folder: Path, episodes: int) -> str:
-    path = folder / "summary.json"
-    if not path.exists():
+    if not store.exists(folder):  # a folder or a cell of runs.jsonl.gz (zodrive pack)
         return f"| {label} | {eps} | missing (`{folder.name}`) | | | | | | | |"
-    s = json.loads(path.read_text())
+    s = store.summary(folder)
     partial = "" if s["episodes"] == episodes and s["seed"] == run.SEED else \
         f" (partial: {s['episodes']} episodes from seed {s['seed']})"
     ret = f"{s['mean_return']:.2f} ({s['ci95'][0]:.2f}–{s['ci95'][1]:.2f}){partial}"
