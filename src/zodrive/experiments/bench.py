@@ -280,7 +280,6 @@ def _earlier_version(out: Path, proto: Protocol) -> bool:
         return False
     if not isinstance(row, dict) or row.get("scenario") != proto.scenario or row.get("protocol") == proto.name():
         return False
-    (out / "grid.json").unlink(missing_ok=True)
     return True
 
 

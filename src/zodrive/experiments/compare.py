@@ -23,7 +23,7 @@ from zodrive.attacks.spec import load_attack
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.evaluate import DEFAULT_ENVS, DEFAULT_EVAL_SEED, EvalJob
 from zodrive.evaluation.report import headless_pyplot, or_dash, save_figure
-from zodrive.experiments.cells import Cell, GridCell, number_name, policy_names, run_cells
+from zodrive.experiments.cells import CLEAN, Cell, GridCell, number_name, policy_names, run_cells
 from zodrive.runinfo import write_atomic, write_json
 
 
@@ -72,11 +72,11 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
         for defense in defenses if reads_obs else [None]:
             if defense is not None:
                 make_defense(defense, model_preset)  # the preset must be one the defense understands
-            for attack in ["none", *usable]:
-                points: list[tuple[float | None, int | None]] = ([(None, None)] if attack == "none"
+            for attack in [CLEAN, *usable]:
+                points: list[tuple[float | None, int | None]] = ([(None, None)] if attack == CLEAN
                           else [(e, b) for e in eps_values for b in budgets_of[attack]])
                 for eps, budget in points:
-                    spec = None if attack == "none" else \
+                    spec = None if attack == CLEAN else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     cell = GridCell(name, attack_name(attack), eps, budget, defense,
                                     white_box=_white_box(spec.attack if spec else attack))
@@ -317,7 +317,7 @@ def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
         ax_r.plot(q, [r["mean_return"] for r in group], marker="o", label=label)
         ax_s.plot(q, [100 * r["attack_success_rate"] for r in group], marker="o", label=label)
     for r in rows:
-        if r["attack"] == "none":
+        if r["attack"] == CLEAN:
             ax_r.axhline(r["mean_return"], ls="--", lw=1, color="grey")
     ax_r.set(xscale="log", xlabel="queries per step (mean)", ylabel="mean return", title="return (dashed: clean)")
     ax_s.set(xscale="log", xlabel="queries per step (mean)", ylabel="steps won (%)", title="attack success")
@@ -333,6 +333,6 @@ def plot_budget_curves(rows: list[dict[str, Any]], path: Path) -> None:
 def _groups(rows: list[dict[str, Any]]) -> dict[tuple[str, str], list[dict[str, Any]]]:
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in rows:
-        if r["attack"] != "none" and r.get("queries_per_step"):
+        if r["attack"] != CLEAN and r.get("queries_per_step"):
             groups.setdefault((r["model"], r["attack"]), []).append(r)
     return groups
