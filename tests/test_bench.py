@@ -494,18 +494,20 @@ def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:
 
 def test_every_committed_cell_is_found_through_its_typed_cell() -> None:
     """A bench reads its grid only through `GridCell`: each entry of every committed table under results/bench
-    (rows, their clean/, the brakes, the tracks) gives back its cell's folder (a folder or packed) and its own
-    grid entry, label and all; so a row resumes from the cells it has, under the names it has."""
+    (rows, their clean/, the brakes, the tracks; a packed row's made from its cells, `read_table`) gives back its
+    cell's folder (a folder or packed) and its own grid entry, label and all; so a row resumes from the cells it
+    has, under the names it has."""
     from zodrive.evaluation import store
+    from zodrive.experiments.bench import read_table
 
     board = Path(__file__).resolve().parents[1] / "results" / "bench"
-    tables = sorted(board.rglob("table.json"))
-    assert len(tables) > 100
-    for table in tables:
-        for entry in json.loads(table.read_text()):
+    grids = sorted({p.parent for p in (*board.rglob("cells.jsonl.gz"), *board.rglob("table.json"))})
+    assert len(grids) > 100
+    for grid in grids:
+        for entry in read_table(grid):
             cell = GridCell.from_entry(entry)
-            assert store.exists(cell.folder(table.parent)), (table, entry)
-            assert cell.entry(entry["reads"]) == {k: entry[k] for k in cell.entry(entry["reads"])}, (table, entry)
+            assert store.exists(cell.folder(grid)), (grid, entry)
+            assert cell.entry(entry["reads"]) == {k: entry[k] for k in cell.entry(entry["reads"])}, (grid, entry)
     assert GridCell("baseline:rules", "pgd", 0.05, None, "shield@0.02", white_box=True).name == \
         "baseline-rules+shield@0.02-pgd-eps0.05"
     assert GridCell.from_entry({"model": "m", "attack": "pgd (white-box)", "eps": 0.1000001, "defense": "none"}) \

@@ -144,3 +144,130 @@ def test_a_bench_row_reads_and_resumes_from_packed_cells(tmp_path: Path, monkeyp
     assert bench("baseline:rules", proto, board / "highway-fast" / "rules", name="rules", progress=False,
                  envs=1) == row
     assert not list(board.rglob("episodes.jsonl"))
+
+
+def _bench_grid(board: Path) -> dict[Path, str]:
+    """A finished bench row of protocol highway-fast-v4 (`baseline:rules`, no gradients, would be too simple: a
+    model `m` with PGD), its `clean/` and the board's brake, each cell's folder written as `evaluate` writes one and
+    each `table.json` as `compare` writes it (the grid's order: clean, the ensemble, PGD last); the tables' text."""
+    from zodrive.experiments.bench import BLACK_BOX, QUERY_CAP, WHITE_BOX
+    from zodrive.experiments.cells import GridCell
+    from zodrive.experiments.compare import table_row, write_tables
+
+    eps = (0.01, 0.02, 0.05)
+    row = board / "highway-fast" / "m"
+    grids = {row: ("models/m/model.zip", "observation", [GridCell("m")]
+                   + [GridCell("m", a, e, QUERY_CAP) for a in BLACK_BOX for e in eps]
+                   + [GridCell("m", WHITE_BOX, e, white_box=True) for e in eps]),
+             row / "clean": ("models/m/model.zip", "observation", [GridCell("m")]),
+             board / "highway-fast" / "brake": ("baseline:slower", "nothing", [GridCell("baseline:slower")])}
+    for out, (model, reads, cells) in grids.items():
+        episodes = 3 if out == row else 5
+        rows = []
+        for k, cell in enumerate(cells):
+            folder = cell.folder(out)
+            write_json(folder / "eval_key.json", {"model": model, "attack": None if cell.clean else cell.attack})
+            write_atomic(folder / "episodes.jsonl", "".join(to_json({"episode": i, "return": 0.1 * i + k}) + "\n"
+                                                            for i in range(episodes)))
+            summary = {"model": model, "episodes": episodes, "mean_return": 21.3 - 0.1 * k,
+                       "ci95": [20.0 - k / 3, 22.5],
+                       "collision_rate": 0.0 if cell.clean else 0.02 * k, "offroad_rate": 0.0, "mean_speed": 21.9,
+                       "right_lane_share": 0.6, "lane_changes_per_episode": 7.37,
+                       "attack": None if cell.clean else cell.attack, "defense": None,
+                       **({} if cell.clean else {"eps": cell.eps, "attack_success_rate": 0.05 * k,
+                                                 "target_base_rate": 0.03, "queries_per_step": 443.4 + k,
+                                                 "max_linf": cell.eps})}
+            write_json(folder / "summary.json", summary)
+            rows.append(table_row(cell.entry(reads), summary))
+        write_tables(rows, out, readable=False)
+    write_json(row / "row.json", {"protocol": "highway-fast-v4", "episodes": 3, "clean_episodes": 5,
+                                  "query_budget": QUERY_CAP, "attacked": [{"eps": e, "pgd_return": 1.0} for e in eps]})
+    assert len(store.pack_tree(board)) == 3
+    return {out / "table.json": (out / "table.json").read_text() for out in grids}
+
+
+def test_a_packed_bench_grid_gives_its_table_and_pack_removes_it(tmp_path: Path, capsys) -> None:
+    """A bench row's table is its packed cells: they give the file's rows exactly (the grid's order, the labels, a
+    baseline's ':'), so `zodrive pack` removes the file, and every reader reads the same rows without it."""
+    from zodrive.experiments.bench import cells_table, read_table
+
+    tables = _bench_grid(tmp_path / "board")
+    for path, text in tables.items():
+        assert to_json(cells_table(path.parent), indent=2) + "\n" == text
+    assert [r["attack"] for r in json.loads(next(iter(tables.values())))][::3] == [
+        "none", "random-search", "zo-signsgd", "pgd (white-box)"]  # not the packs' order (by name: pgd second)
+    assert main(["pack", str(tmp_path / "board")]) == 0
+    out = capsys.readouterr().out
+    for path, text in tables.items():
+        assert f"removed {path}: its packed cells give it" in out and not path.exists()
+        assert read_table(path.parent) == json.loads(text)
+    assert main(["pack", str(tmp_path / "board")]) == 0 and "removed" not in capsys.readouterr().out
+
+
+def test_an_unfinished_bench_grid_keeps_its_table_and_never_reads_as_finished(tmp_path: Path) -> None:
+    """A grid that lacks a cell of its row (interrupted between two cells), holds one its row never read (an
+    earlier version's, being replaced), or a cell still running keeps its table.json; without the file it is one
+    line, never a shorter table."""
+    from zodrive.experiments.bench import pack_table, read_table
+
+    tables = _bench_grid(tmp_path / "board")
+    row = next(iter(tables)).parent
+    last = row / "cells" / "m-zo-signsgd-eps0.05-qb500"
+    store.remove(last)
+    rows = [r for r in json.loads(tables[row / "table.json"]) if not (r["attack"] == "zo-signsgd" and r["eps"] == 0.05)]
+    write_json(row / "table.json", rows)  # what compare wrote before it was stopped
+    assert "cell m-zo-signsgd-eps0.05-qb500 is missing" in pack_table(row)
+    assert json.loads((row / "table.json").read_text()) == rows
+    (row / "table.json").unlink()
+    with pytest.raises(ZodriveError, match="is not a finished bench grid: cell m-zo-signsgd-eps0.05-qb500 is missing"):
+        read_table(row)
+    _evaluation(last, 2, finished=False)  # now running again: live, no summary
+    write_json(row / "table.json", rows)
+    assert "cells not packed" in pack_table(row) and (row / "table.json").is_file()
+    (row / "row.json").unlink()  # a forced bench removes its row first: no row.json, no table made of cells
+    store.remove(last)
+    assert "no row.json" in pack_table(row) and (row / "table.json").is_file()
+    other = next(iter(_bench_grid(tmp_path / "other"))).parent
+    _evaluation(other / "cells" / "m-random-search-eps0.05", 3)  # a cell of an earlier version, still there
+    store.pack(other / "cells")
+    assert "cell m-random-search-eps0.05 is not one of its row's" in pack_table(other)
+    assert (other / "table.json").is_file()
+    fewer = next(iter(_bench_grid(tmp_path / "fewer"))).parent
+    row_json = json.loads((fewer / "row.json").read_text())
+    write_json(fewer / "row.json", {**row_json, "episodes": 4})  # cells of another episode count than the row's
+    assert "m-none holds 3 episodes, its row 4" in pack_table(fewer) and (fewer / "table.json").is_file()
+
+
+def test_pack_keeps_a_table_its_cells_do_not_give_to_the_bit(tmp_path: Path, capsys) -> None:
+    import math
+
+    tables = _bench_grid(tmp_path / "board")
+    path = next(iter(tables))
+    rows = json.loads(tables[path])
+    rows[4]["mean_return"] = math.nextafter(rows[4]["mean_return"], 0.0)  # one ulp
+    write_json(path, rows)
+    brake = tmp_path / "board" / "highway-fast" / "brake" / "table.json"
+    brake_rows = json.loads(tables[brake])
+    brake_rows[0]["collision_rate"] = 0  # the same number, an int: not the file the cells give
+    write_json(brake, brake_rows)
+    assert main(["pack", str(tmp_path / "board")]) == 0
+    out = capsys.readouterr().out
+    assert f"left {path}: its cells do not give its rows exactly (row 5, mean_return); the file is kept" in out
+    assert f"left {brake}: its cells do not give its rows exactly (row 1, collision_rate)" in out
+    assert json.loads(path.read_text()) == rows and brake.is_file()
+    assert "removed" in out and not (path.parent / "clean" / "table.json").exists()
+
+
+def test_a_packed_bench_grid_with_a_damaged_pack_is_one_line(tmp_path: Path) -> None:
+    from zodrive.experiments.bench import read_table
+
+    tables = _bench_grid(tmp_path / "board")
+    out = next(iter(tables)).parent
+    (out / "table.json").unlink()
+    (out / "cells.jsonl.gz").write_bytes(b"not gzip")
+    store._lines.cache_clear()
+    with pytest.raises(ZodriveError, match=r"^evaluation pack .*cells.jsonl.gz is damaged \(not gzip\)$"):
+        read_table(out)
+    (out / "cells.jsonl.gz").unlink()
+    with pytest.raises(ZodriveError, match="holds no finished comparison"):
+        read_table(out)

@@ -82,7 +82,8 @@ def add_parsers(sub: Any) -> None:
                                        "(P/NAME/ -> P.jsonl.gz), or give them back (--unpack)")
     pack.add_argument("folders", nargs="+", type=Path, metavar="FOLDER",
                       help="folders to walk: every folder of finished evaluation folders under each (a grid's cells/, "
-                           "a bench row's cells/ and clean/cells/, a study's runs) is packed beside itself")
+                           "a bench row's cells/ and clean/cells/, a study's runs) is packed beside itself, and a "
+                           "bench grid's table.json removed once its packed cells give it to the bit")
     pack.add_argument("--unpack", action="store_true",
                       help="give every packed evaluation under each FOLDER its folder back, byte for byte")
     pack.add_argument("--logs", action="store_true",
@@ -159,6 +160,7 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 def cmd_pack(args: argparse.Namespace) -> int:
     from zodrive.evaluation import store
+    from zodrive.experiments.bench import pack_tables
 
     if args.match and (not args.logs or args.unpack):
         raise ZodriveError("--match chooses the logs that --logs folds: give it with --logs, without --unpack")
@@ -179,6 +181,8 @@ def cmd_pack(args: argparse.Namespace) -> int:
                 print(f"packed {len(done.packed)} evaluation folder{'s' * (len(done.packed) != 1)} into {done.pack}")
             for name, why in done.left.items():
                 print(f"left {done.pack.with_name(done.pack.name[:-len(store.PACKED)]) / name}: {why}")
+        for table, why in pack_tables(folder).items():  # a bench grid's table, once its packed cells give it
+            print(f"left {table}: {why}" if why else f"removed {table}: its packed cells give it")
     return 0
 
 

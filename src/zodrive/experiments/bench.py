@@ -7,6 +7,11 @@ runs at every ε; the row keeps, per ε, the cell that hurts the policy most amo
 the ε-ball, smaller ε and clean included) and white-box PGD as a
 separate, labelled column where the policy has gradients. Every cell is an ordinary resumable
 evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt from the cells.
+A row's folder holds `row.json`, its grid's cells (`cells/`, packed into `cells.jsonl.gz` once finished), `clean/`
+(the clean cell of more episodes, its own cells) where the protocol has one, `exact.json` where the row's exact
+check ran, and while it is live each grid's `table.json` (one row per cell, `compare.table_row`); a packed row's
+tables are made from its cells (`read_table`), and `zodrive pack` removes each file once they give it to the bit
+(`pack_table`). The scenario's brake (`SCENARIO/brake`, `brake_folder`) is a grid of one clean cell, kept alike.
 A track (`zodrive.experiments.tracks`: decision access, one object, 10 % of steps) is a protocol of its
 own on the same grid with another threat model; its rows live in SCENARIO/tracks/TRACK and get tables of
 their own. The bench asks the grid for its cells' folders through their `cells.GridCell` (never a folder
@@ -19,24 +24,24 @@ import json
 import re
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from zodrive.defense import defense_version
-from zodrive.drivers.baselines import PREFIX, get_baseline
+from zodrive.drivers.baselines import PREFIX, get_baseline, is_baseline
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
-from zodrive.experiments.cells import GridCell, clean_cells, number_name
-from zodrive.experiments.compare import compare, strongest
+from zodrive.experiments.cells import CLEAN, GridCell, clean_cells, number_name
+from zodrive.experiments.compare import TABLE_NEEDS, compare, is_white_box, strongest, table_row
 from zodrive.experiments.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
                                         threat_fields)
 from zodrive.policies.policy import resolve
-from zodrive.runinfo import write_json
+from zodrive.runinfo import to_json, write_json
 from zodrive.seeds import EVAL_SEED
 
 VERSION = 3
@@ -138,6 +143,12 @@ def current_protocols() -> dict[str, Protocol]:
     return {p.name(): p for p in (*PROTOCOLS.values(), *TRACK_PROTOCOLS.values())}
 
 
+TABLE = "table.json"
+"""A grid's table of its finished cells (`compare.write_tables`), kept while the row is live; a packed row's is
+made from its cells (`read_table`, `pack_table`)."""
+CLEAN_FOLDER, BRAKE_FOLDER = "clean", "brake"
+"""A row's grid of more clean episodes (`clean_folder`) and the brake's grid (`brake_folder`): one clean cell each."""
+
 ROW_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+@=-]{0,99}")
 """A row's name: one folder name that a Markdown table and a plot legend show as it is (no `|`, no newline)."""
 
@@ -225,7 +236,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     if not is_dense(proto.track) and not force:  # the clean cells are the dense row's own evaluation: not run twice
         share_clean(policy, proto.scenario, proto.seed, scenario_folder(out, proto.track) / out.name, out,
                     (n, n_clean), trust)
-    clock = _Clock(n, n_clean, brake_done=(brake / "table.json").is_file())
+    clock = _Clock(n, n_clean, brake_done=(brake / TABLE).is_file() or bool(clean_cells(brake)))
     cells = compare([policy], attacks, list(proto.eps), n, out, workers=workers, progress=progress, seed=proto.seed,
                     preset=proto.scenario, force=force, envs=envs, trust=trust, on_cell=clock.cell, defenses=defenses,
                     attack_budgets=capped, attack_set=list(proto.attack_set) or None, claim=False, readable=False)
@@ -257,8 +268,8 @@ def brake_folder(out: Path, track: str = DENSE) -> Path:
     """The constant brake's comparison a bench row in `out` (of `track`) is read against: the board's, one per
     scenario and for every track (`BOARD/SCENARIO/brake`), or the row's own `brake/` where it has one (rows
     benched before the brake was shared: the same seeds, the same episodes)."""
-    own = out / "brake"
-    return own if own.is_dir() else scenario_folder(out, track) / "brake"
+    own = out / BRAKE_FOLDER
+    return own if own.is_dir() else scenario_folder(out, track) / BRAKE_FOLDER
 
 
 def _start_from_grid(out: Path, clean_out: Path, cells: list[dict[str, Any]], force: bool) -> None:
@@ -289,14 +300,140 @@ def _clean(cells: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def read_table(out: Path) -> list[dict[str, Any]]:
-    """The finished comparison in `out` (its `table.json`)."""
-    path = out / "table.json"
-    if not path.is_file():
-        raise ZodriveError(f"{out} holds no finished comparison (table.json): run the bench again to resume it")
+    """The finished comparison in `out`: its `table.json` where it has one (a grid writes it as each cell
+    finishes: a live row), else the rows its cells give (`cells_table`: a packed row, whose file `zodrive pack`
+    removed once they were the same, `pack_table`). A damaged or missing record is one line."""
+    path = out / TABLE
+    if path.is_file():
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise ZodriveError(f"{path} is damaged (not JSON): run the bench again with --force") from None
+    if not store.names(out / "cells"):
+        raise ZodriveError(f"{out} holds no finished comparison (table.json, or its cells): run the bench again to "
+                           "resume it")
+    return cells_table(out)
+
+
+def cells_table(out: Path) -> list[dict[str, Any]]:
+    """The rows of `table.json` of the finished bench grid in `out` (a row's, its `clean/`, a brake's), made
+    from its cells as the grid made them (`compare.table_row`), in the grid's order (`bench_row` keeps the first
+    of two equal cells): a row's grid is the cells its `row.json` was read from (`_row_cells`), a clean or brake
+    grid its one clean cell. A cell missing or one more, or a cell without its summary, is one line: a grid that
+    is not finished never reads as one."""
+    cleans = clean_cells(out)
+    if len(cleans) != 1:
+        raise ZodriveError(f"{out} holds {len(cleans)} clean cells, not the one of a bench grid: run the bench again")
+    clean = store.summary(cleans[0], needs=TABLE_NEEDS)
+    defense = clean.get("defense")
+    policy, reads = _grid_policy(cleans[0].name, clean.get("model"), defense)
+    row: dict[str, Any] | None = None
+    if (out / "row.json").is_file():
+        row = _read_json_row(out / "row.json")
+        cells = _row_cells(row, policy, defense, reads)
+    elif out.name in (CLEAN_FOLDER, BRAKE_FOLDER):
+        cells = [GridCell(policy, defense=defense)]
+    else:
+        raise ZodriveError(f"{out} is not a bench row's grid (no row.json; not a clean/ or brake/ grid): only its "
+                           "table.json says which cells it has")
+    stored, wanted = {p.name for p in store.names(out / "cells")}, {c.name for c in cells}
+    if stored != wanted:
+        missing, more = sorted(wanted - stored), sorted(stored - wanted)
+        odd = f"cell {missing[0]} is missing" if missing else f"cell {more[0]} is not one of its row's"
+        raise ZodriveError(f"{out} is not a finished bench grid: {odd}; run the bench again to resume it")
+    rows = []
+    for cell in cells:
+        summary = store.summary(cell.folder(out), needs=TABLE_NEEDS)
+        if row is not None and summary["episodes"] != row["episodes"]:
+            raise ZodriveError(f"{cell.folder(out)} holds {summary['episodes']} episodes, its row "
+                               f"{row['episodes']}: run the bench again to resume it")
+        typed = replace(cell, white_box=is_white_box(summary.get("attack") or CLEAN))  # as `compare` labels it
+        rows.append(table_row(typed.entry(reads), summary))
+    return rows
+
+
+def _grid_policy(clean: str, ref: Any, defense: str | None) -> tuple[str, str]:
+    """The policy's name in a one-policy grid and what it reads (`Policy.reads`), from its clean cell's folder
+    name (`GridCell.name`, ':' as '-') and the policy its summary names (`ref`): a baseline's own label where it
+    names that folder (`baseline:slower`), else the folder's (a model folder's name, which has no ':')."""
+    if isinstance(ref, str) and is_baseline(ref):
+        policy = resolve(ref)
+        if GridCell(policy.label, defense=defense).name == clean:
+            return policy.label, policy.reads
+    name = clean.removesuffix(f"-{CLEAN}").removesuffix("" if defense is None else f"+{defense}")
+    if GridCell(name, defense=defense).name != clean:
+        raise ZodriveError(f"clean cell {clean} is not a bench grid's: its defense is {defense!r}")
+    return name, "observation"
+
+
+def _row_cells(row: dict[str, Any], policy: str, defense: str | None, reads: str) -> list[GridCell]:
+    """The cells of the grid a written row was read from, in the order `bench` asks `compare` for them: the clean
+    cell, then where the policy reads the observation each attack of the row's ensemble at each ε of the row (at
+    its query budget), then the white-box attack at each ε where the row has that column (a policy with
+    gradients). An earlier version's row names no ensemble: its protocol's, the same in every version."""
+    cells = [GridCell(policy, defense=defense)]
+    if reads != "observation":
+        return cells
+    eps = [float(p["eps"]) for p in row["attacked"]]
+    proto = current_protocols().get(row["protocol"])
+    ensemble = row.get("black_box") or (proto.black_box if proto is not None else BLACK_BOX)
+    cells += [GridCell(policy, attack, e, row.get("query_budget"), defense) for attack in ensemble for e in eps]
+    if any(p.get("pgd_return") is not None for p in row["attacked"]):
+        cells += [GridCell(policy, row.get("white_box") or WHITE_BOX, e, None, defense) for e in eps]
+    return cells
+
+
+def _read_json_row(path: Path) -> dict[str, Any]:
+    """A `row.json`, with the fields `_row_cells` reads (the leaderboard checks the rest: `leaderboard.read_row`)."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        row = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(row, dict) or not isinstance(row["protocol"], str) or not isinstance(row["episodes"], int) \
+                or not all(isinstance(p["eps"], (int, float)) for p in row["attacked"]):
+            raise TypeError
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError):
+        raise ZodriveError(f"{path} is not a bench row (damaged): run its bench again") from None
+    return row
+
+
+def pack_table(out: Path) -> str:
+    """Remove the `table.json` of the bench grid in `out` (a row's, its `clean/`, a brake's) where every cell is
+    packed and its cells give the file's rows exactly (`cells_table`: the same JSON, each number to the bit); the
+    table is then read from them (`read_table`). Otherwise the file is kept: returns why ('' once removed)."""
+    path = out / TABLE
+    if any(store.is_live(p) for p in store.names(out / "cells")):
+        return "its grid has cells not packed (a live row keeps its table)"
+    try:
+        written = json.loads(path.read_text(encoding="utf-8"))
+        rebuilt = cells_table(out)
     except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ZodriveError(f"{path} is damaged (not JSON): run the bench again with --force") from None
+        return "not JSON"
+    except ZodriveError as err:
+        return str(err)
+    if to_json(rebuilt) != to_json(written):
+        return f"its cells do not give its rows exactly ({_first_difference(written, rebuilt)}); the file is kept"
+    path.unlink()
+    return ""
+
+
+def pack_tables(root: Path) -> dict[Path, str]:
+    """`pack_table` in every folder under `root` (`root` included) that holds a `table.json` beside packed cells;
+    each file and why it was kept ('' if removed)."""
+    root = Path(root)
+    tables = sorted({*root.rglob(TABLE), *([root / TABLE] if (root / TABLE).is_file() else [])})
+    return {path: pack_table(path.parent) for path in tables if store.pack_path(path.parent / "cells").is_file()}
+
+
+def _first_difference(written: Any, rebuilt: list[dict[str, Any]]) -> str:
+    """Where a table file first differs from the rows its cells give, in words."""
+    if not isinstance(written, list) or len(written) != len(rebuilt):
+        return f"{len(rebuilt)} cells, {len(written) if isinstance(written, list) else 'no list of'} rows in the file"
+    for i, (mine, theirs) in enumerate(zip(rebuilt, written), start=1):
+        if to_json(mine) != to_json(theirs):
+            if not isinstance(theirs, dict):
+                return f"row {i} of the file is not a JSON object"
+            keys = [k for k in (*mine, *theirs) if to_json(mine.get(k)) != to_json(theirs.get(k))]
+            return f"row {i}, {keys[0] if keys else 'the order of its fields'}"
+    return "the same rows"
 
 
 def bench_row(label: str, key: str, proto: Protocol, out: Path, episodes: int,
@@ -385,7 +522,7 @@ def brake_margin(clean: Path, brake: Path) -> list[float] | None:
 def clean_folder(out: Path, episodes: int, clean_episodes: int) -> Path:
     """The comparison folder of bench folder `out` that holds the clean cell: `clean/` where there are
     more clean episodes than attacked ones (version 3), else `out` itself."""
-    return out / "clean" if clean_episodes > episodes else out
+    return out / CLEAN_FOLDER if clean_episodes > episodes else out
 
 
 def row_clean_folder(row: dict[str, Any], out: Path) -> Path:

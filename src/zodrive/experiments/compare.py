@@ -79,7 +79,7 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
                     spec = None if attack == CLEAN else \
                         load_attack(attack, attack_set).with_overrides(eps=eps, query_budget=budget)
                     cell = GridCell(name, attack_name(attack), eps, budget, defense,
-                                    white_box=_white_box(spec.attack if spec else attack))
+                                    white_box=is_white_box(spec.attack if spec else attack))
                     job = EvalJob(model=policy, preset=model_preset, attack=spec, seed=seed,
                                   defense=defense, trust=trust, scenario_source=source)
                     grid.append(cell.entry(reads))
@@ -90,23 +90,34 @@ def compare(models: list[str], attacks: list[str], eps_values: list[float], epis
     rows: list[dict[str, Any] | None] = [None] * len(cells)
 
     def done(i: int, s: dict[str, Any]) -> None:
-        low, high = s["ci95"]
-        rows[i] = {
-            **grid[i], "mean_return": s["mean_return"], "ci95_low": low,
-            "ci95_high": high, "collision_rate": s["collision_rate"],
-            "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
-            "lane_changes_per_episode": s.get("lane_changes_per_episode"),
-            "right_lane_share": s["right_lane_share"], "attack_success_rate": s.get("attack_success_rate"),
-            "target_base_rate": s.get("target_base_rate"),
-            "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
-            "episodes": s["episodes"],
-        }
+        rows[i] = table_row(grid[i], s)
         write_tables([r for r in rows if r is not None], out, readable)  # in grid order, as cells finish
         if on_cell is not None:
             on_cell(sum(r is not None for r in rows), len(rows), typed[i])
 
     run_cells(cells, backend=backend, workers=workers, progress=progress, address=address, on_done=done, envs=envs)
     return rows  # type: ignore[return-value]
+
+
+TABLE_NEEDS = ("mean_return", "ci95", "collision_rate", "mean_speed", "right_lane_share", "episodes")
+"""The fields of a cell's summary its table row cannot do without (`table_row`)."""
+
+
+def table_row(entry: dict[str, Any], s: dict[str, Any]) -> dict[str, Any]:
+    """A cell's row of `table.json`: its grid entry (`GridCell.entry`) and the figures of its summary `s`. The one
+    place a row is made, by the grid as each cell finishes and by a bench row read back from its cells
+    (`bench.cells_table`), so the two never differ."""
+    low, high = s["ci95"]
+    return {
+        **entry, "mean_return": s["mean_return"], "ci95_low": low,
+        "ci95_high": high, "collision_rate": s["collision_rate"],
+        "offroad_rate": s.get("offroad_rate"), "mean_speed": s["mean_speed"],
+        "lane_changes_per_episode": s.get("lane_changes_per_episode"),
+        "right_lane_share": s["right_lane_share"], "attack_success_rate": s.get("attack_success_rate"),
+        "target_base_rate": s.get("target_base_rate"),
+        "queries_per_step": s.get("queries_per_step"), "max_linf": s.get("max_linf"),
+        "episodes": s["episodes"],
+    }
 
 
 def clean_cell(policy: Policy) -> GridCell:
@@ -162,7 +173,7 @@ def attack_name(attack: str) -> str:
     return Path(attack).stem if attack.endswith((".yaml", ".yml")) or "/" in attack else attack
 
 
-def _white_box(runs: str) -> bool:
+def is_white_box(runs: str) -> bool:
     """Whether the registry's attack `runs` reads gradients (a cell's label says so)."""
     from zodrive.attacks.registry import ATTACKS
 
