@@ -15,6 +15,13 @@
 
 Ends with one line: speedup_vs_naive=<x> attacked_over_clean_per_step=<y> from_scratch_over_clean_per_step=<z>
 lockstep_speedup=<w> (the default attack's time per step, one episode at a time over 8 side by side)
+
+What committed runs printed: logs attack_speed*.txt in results/benchmarks.txt (docs/speed.md says which run each
+is; `zodrive pack --logs --unpack results/benchmarks` gives them back as results/benchmarks/NAME.txt). To keep a
+new run's:
+
+    python benchmarks/attack_speed.py [options] > results/benchmarks/NAME.txt
+    zodrive pack --logs results/benchmarks   # folds it in (a log of the same name is replaced)
 """
 
 from __future__ import annotations

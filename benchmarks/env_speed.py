@@ -4,6 +4,13 @@ Measures environment steps/s on both presets, DQN and DDPG training steps/s, and
 time of an N-episode evaluation of the shipped DQN: stock with 2 workers, fast with 1 and
 2 workers (the --workers speed-up), checking that stock and fast give identical returns.
 Ends with one line: env_speedup=<x> train_speedup_dqn=<y> train_speedup_ddpg=<z>
+
+What committed runs printed: log env_speed.txt in results/benchmarks.txt (docs/speed.md says which run each is;
+`zodrive pack --logs --unpack results/benchmarks` gives them back as results/benchmarks/NAME.txt). To keep a new
+run's:
+
+    python benchmarks/env_speed.py > results/benchmarks/NAME.txt
+    zodrive pack --logs results/benchmarks   # folds it in (a log of the same name is replaced)
 """
 
 from __future__ import annotations

@@ -5,6 +5,13 @@ Per scenario, the same episodes (same seeds, same actions) are stepped with each
 interleaved episode by episode so that load on the machine hits both alike; the trajectories must be
 identical. Prints the environment steps/s of each and ends with one line per scenario:
 <scenario> stock=<steps/s> fast=<steps/s> speedup=<x>
+
+What committed runs printed: logs lane_search.txt and (--search neighbours) neighbour_search.txt in
+results/benchmarks.txt (docs/speed.md says which run each is; `zodrive pack --logs --unpack results/benchmarks`
+gives them back as results/benchmarks/NAME.txt). To keep a new run's:
+
+    python benchmarks/lane_search.py [options] > results/benchmarks/NAME.txt
+    zodrive pack --logs results/benchmarks   # folds it in (a log of the same name is replaced)
 """
 
 from __future__ import annotations

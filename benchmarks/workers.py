@@ -9,6 +9,13 @@ second worker needs (issue 63 saw --workers 2 slower than 1 on a shared machine:
     . .venv/bin/activate && python benchmarks/workers.py --episodes 10 --repeats 1
 
 Ends with one line: workers_1_s=<median> workers_2_s=<median> speedup=<1 over 2> same_rows=<True|False>
+
+What committed runs printed: log workers.txt in results/benchmarks.txt (docs/bench.md says which run each is;
+`zodrive pack --logs --unpack results/benchmarks` gives them back as results/benchmarks/NAME.txt). To keep a new
+run's:
+
+    python benchmarks/workers.py [options] > results/benchmarks/NAME.txt
+    zodrive pack --logs results/benchmarks   # folds it in (a log of the same name is replaced)
 """
 
 from __future__ import annotations

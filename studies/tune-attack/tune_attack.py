@@ -5,6 +5,13 @@ evaluation seeds 100,000+), then attacks them all at once (batched across states
 setting, and prints success rate on applicable states, mean iterations, queries and L-inf.
 
     python studies/tune-attack/tune_attack.py models/dqn --grid loss=margin,paper step_size=0.01,0.02,0.05
+
+What committed runs printed: log tune_attack.txt in results/benchmarks.txt (docs/design.md says which run each
+is; `zodrive pack --logs --unpack results/benchmarks` gives them back as results/benchmarks/NAME.txt). To keep a
+new run's:
+
+    python studies/tune-attack/tune_attack.py MODEL --grid ... > results/benchmarks/NAME.txt
+    zodrive pack --logs results/benchmarks   # folds it in (a log of the same name is replaced)
 """
 
 from __future__ import annotations
