@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from zodrive.bench.bench import PROTOCOLS, physical_eps
+from zodrive.bench.leaderboard import leaderboard_markdown, read_rows
 from zodrive.cli import main
 from zodrive.experiments.cells import GridCell
-from zodrive.experiments.bench import PROTOCOLS, physical_eps
-from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ppo-highway-fast"
 
@@ -65,7 +65,7 @@ def test_a_bench_row_and_its_leaderboard(tmp_path: Path, capsys, monkeypatch) ->
 def test_a_forced_bench_drops_the_old_row_before_it_runs(tmp_path: Path, monkeypatch) -> None:
     """While a forced bench replaces another policy's cells, the leaderboard must not pair the old row
     with the new cells: the old row goes first, and the folder has no row until the new one is done."""
-    import zodrive.experiments.bench as bench_module
+    import zodrive.bench.bench as bench_module
 
     args = ["bench", "baseline:slower", "--scenario", "highway-fast", "--name", "x", "--episodes", "1",
             "--board", str(tmp_path), "--no-progress"]
@@ -111,7 +111,7 @@ def _bench_folder(folder: Path, cells: list[dict], brake_collisions: float = 0.2
 def test_the_return_at_eps_is_the_worst_inside_the_eps_ball(tmp_path: Path) -> None:
     """Version 2: an attack at a smaller eps (or none at all) is inside the ball, so a weaker search at a
     larger eps never raises the row's return there; collisions past the brake's count at any cell."""
-    from zodrive.experiments.bench import bench_row
+    from zodrive.bench.bench import bench_row
 
     proto = PROTOCOLS["highway-fast"]  # eps 0.01, 0.02, 0.05
     cells = [_cell("none", 0.0, 10.0, 0.1),
@@ -182,7 +182,7 @@ def test_the_committed_leaderboard_is_generated_from_the_committed_rows() -> Non
 def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
     """Δ brake is computed from the row folder's clean episodes and the board's brake, seed by seed: the brake's
     own row is exactly 0, and the committed highway-fast DQN (seed 0) beats the brake by a margin its CI shows."""
-    from zodrive.experiments.bench import brake_folder, brake_margin, row_clean_folder
+    from zodrive.bench.bench import brake_folder, brake_margin, row_clean_folder
 
     board = Path(__file__).resolve().parents[1] / "results" / "bench" / "highway-fast"
     brake = board / "brake"  # one per scenario, no row keeps a copy
@@ -199,7 +199,7 @@ def test_the_margin_over_the_brake_is_paired_on_the_rows_own_episodes() -> None:
 def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same_table() -> None:
     """Each row is paired with every constant action benched under its protocol (not with itself), and the
     leaderboard shows the constant it beats by the least: on intersection that is IDLE/FASTER, not the brake."""
-    from zodrive.experiments.leaderboard import _closest_constant
+    from zodrive.bench.leaderboard import _closest_constant
 
     rows = {(r["scenario"], r["policy"]): r for r in read_rows(Path(__file__).resolve().parents[1] / "results" / "bench")}
     slower = rows[("intersection", "baseline-slower")]
@@ -216,7 +216,7 @@ def test_the_margin_over_every_constant_comes_from_the_constant_rows_of_the_same
 def test_the_plot_gives_a_family_one_colour_and_each_seed_its_own_marker() -> None:
     """Merge has 15 rows: drawn in a 10-colour cycle, two policies shared a colour and could not be told apart;
     and colours given by sorted position changed whenever a row was added."""
-    from zodrive.experiments.leaderboard_plot import family_and_seed, family_colours, line_style
+    from zodrive.bench.leaderboard_plot import family_and_seed, family_colours, line_style
 
     assert family_and_seed("dqn-g99-seed-1") == ("dqn-g99", 1)
     assert family_and_seed("baseline-slower") == ("baseline-slower", 0)
@@ -283,7 +283,7 @@ def test_a_network_of_the_users_own_is_benched_only_with_trust_and_its_row_says_
 def test_more_clean_episodes_than_attacked_ones(tmp_path: Path) -> None:
     """Version 3: the clean figures come from `clean/`, while the envelope and the area compare the
     attacks with the clean cell of the same (first) episodes; a row with other counts is unofficial."""
-    from zodrive.experiments.bench import Protocol, bench_row
+    from zodrive.bench.bench import Protocol, bench_row
 
     proto = Protocol("highway-fast", 100, (0.01, 0.05), clean_episodes=300)
     cells = [_cell("none", 0.0, 10.0, 0.1), _cell("random-search", 0.01, 11.0), _cell("random-search", 0.05, 6.0, 0.3)]
@@ -304,7 +304,7 @@ def test_a_bench_runs_the_extra_clean_episodes_on_the_same_seeds(tmp_path: Path,
     """The clean cell of more episodes begins with the attacked grid's own clean episodes (copied, not run
     again), and the board's brake, run once for the scenario, is paired with it episode by episode."""
     import zodrive.evaluation.evaluate as evaluation
-    from zodrive.experiments.bench import Protocol, bench
+    from zodrive.bench.bench import Protocol, bench
 
     proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2)
     board = tmp_path / "highway-fast"
@@ -364,7 +364,7 @@ def test_the_leaderboard_refuses_rows_it_cannot_read_in_one_line(tmp_path: Path,
 
 def test_a_bench_says_how_long_it_has_left(capsys, monkeypatch) -> None:
     """After its clean cell and first attacked cell, a bench says what is left (a 20-minute row said nothing)."""
-    import zodrive.experiments.bench as bench_module
+    import zodrive.bench.bench as bench_module
 
     now = iter([0.0, 10.0, 40.0, 70.0])  # start, clean cell (10 s), two attacked cells (30 s each)
     monkeypatch.setattr(bench_module.time, "perf_counter", lambda: next(now))
@@ -385,9 +385,9 @@ def test_a_bench_says_how_long_it_has_left(capsys, monkeypatch) -> None:
 def test_a_defended_row_attacks_the_defended_system(tmp_path: Path) -> None:
     """`bench --defense`: every cell queries the defended system, the row's key and name cover the defense,
     the ensemble adds the attacks that adapt to it, and a policy that reads nothing is refused."""
+    from zodrive.bench.bench import Protocol, bench, black_box_of
+    from zodrive.bench.leaderboard import leaderboard_markdown
     from zodrive.errors import ZodriveError
-    from zodrive.experiments.bench import Protocol, bench, black_box_of
-    from zodrive.experiments.leaderboard import leaderboard_markdown
 
     proto = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",))
     row = bench("baseline:rules", proto, tmp_path / "r", progress=False, envs=1, defense="shield@0.02")
@@ -406,7 +406,7 @@ def test_a_defended_row_attacks_the_defended_system(tmp_path: Path) -> None:
 def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: Path) -> None:
     """Version 3 compared a policy's first 100 episodes with the brake's 300 (another set of seeds): the
     shielded DQN's 4 % of 100 read as past the brake's 3.7 % of 300, where the brake had 4 % on the same 100."""
-    from zodrive.experiments.bench import Protocol, bench_row
+    from zodrive.bench.bench import Protocol, bench_row
 
     proto = Protocol("highway-fast", 100, (0.05,), clean_episodes=300)
     folder = _bench_folder(tmp_path / "a", [_cell("none", 0.0, 10.0, 0.1), _cell("random-search", 0.05, 9.0, 0.1)])
@@ -422,7 +422,7 @@ def test_eps_past_brake_compares_with_the_brake_on_the_same_episodes(tmp_path: P
 def test_a_capped_protocol_caps_its_black_box_attacks_and_not_pgd(tmp_path: Path) -> None:
     """Version 4: a black-box attack of the row spends at most the protocol's queries on a step; PGD, white-box,
     runs as before (its cells are those of the earlier version, reused)."""
-    from zodrive.experiments.bench import Protocol, bench
+    from zodrive.bench.bench import Protocol, bench
 
     proto = Protocol("highway-fast", 1, (0.05,), black_box=("random-search",), query_budget=42, version=4)
     row = bench(str(MODEL), proto, tmp_path / "r", progress=False, envs=1)
@@ -437,7 +437,7 @@ def test_a_capped_protocol_caps_its_black_box_attacks_and_not_pgd(tmp_path: Path
 
 @pytest.mark.integration
 def test_a_row_of_an_earlier_version_gives_way_and_keeps_the_cells_both_share(tmp_path: Path, monkeypatch) -> None:
-    from zodrive.experiments.bench import Protocol, bench
+    from zodrive.bench.bench import Protocol, bench
 
     old = Protocol("highway-fast", 1, (0.05,), black_box=("uniform-noise",), version=3)
     bench("baseline:rules", old, tmp_path / "r", progress=False, envs=1)
@@ -461,7 +461,7 @@ def _episodes(folder: Path, returns: list[float]) -> None:
 
 
 def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) -> None:
-    from zodrive.experiments.leaderboard import _defended, defense_margins
+    from zodrive.bench.leaderboard import _defended, defense_margins
 
     def row(name: str, key: str, defense: str | None, clean: list[float], attacked: list[float]) -> tuple:
         folder = tmp_path / name
@@ -486,7 +486,7 @@ def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) ->
 
 
 def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:
-    from zodrive.experiments.leaderboard_plot import pareto
+    from zodrive.bench.leaderboard_plot import pareto
 
     points = [(22.0, 7.0), (20.8, 20.8), (21.5, 21.3), (21.0, 21.0), (7.0, 7.0), (22.0, 6.0)]
     assert pareto(points) == [2, 0]  # (21.5, 21.3) and (22.0, 7.0); (20.8, 20.8) and (21.0, 21.0) are beaten
@@ -497,8 +497,8 @@ def test_every_committed_cell_is_found_through_its_typed_cell() -> None:
     (rows, their clean/, the brakes, the tracks; a packed row's made from its cells, `read_table`) gives back its
     cell's folder (a folder or packed) and its own grid entry, label and all; so a row resumes from the cells it
     has, under the names it has."""
+    from zodrive.bench.bench import read_table
     from zodrive.evaluation import store
-    from zodrive.experiments.bench import read_table
 
     board = Path(__file__).resolve().parents[1] / "results" / "bench"
     grids = sorted({p.parent for p in (*board.rglob("cells.jsonl.gz"), *board.rglob("table.json"))})

@@ -15,10 +15,7 @@ from zodrive.attacks import AttackSpec
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.registry import ATTACKS
 from zodrive.attacks.victim import Victim
-from zodrive.cli import main
-from zodrive.errors import ZodriveError
-from zodrive.evaluation import store
-from zodrive.experiments.bench import (
+from zodrive.bench.bench import (
     BLACK_BOX,
     PROTOCOLS,
     QUERY_CAP,
@@ -29,8 +26,11 @@ from zodrive.experiments.bench import (
     protocol,
     row_folder,
 )
-from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
-from zodrive.experiments.tracks import DENSE, TRACK_SCENARIOS, TRACKS
+from zodrive.bench.leaderboard import leaderboard_markdown, read_rows
+from zodrive.bench.tracks import DENSE, TRACK_SCENARIOS, TRACKS
+from zodrive.cli import main
+from zodrive.errors import ZodriveError
+from zodrive.evaluation import store
 from zodrive.system import Attacker, Schedule
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,7 +78,7 @@ def test_a_tracks_rows_have_a_folder_of_their_own_and_read_the_scenarios_brake(t
 def test_a_track_row_starts_from_its_dense_rows_clean_cells(tmp_path: Path) -> None:
     """The clean cells of a track row are the dense row's evaluation (no attack): copied, never run twice; but
     only from the same policy's finished row of the same episode counts (nothing is run here)."""
-    from zodrive.experiments.tracks import share_clean
+    from zodrive.bench.tracks import share_clean
 
     dense = ROOT / "results" / "bench" / "highway-fast" / "baseline-slower"
     out = row_folder(tmp_path, "highway-fast", "baseline-slower", "sparse")
@@ -98,7 +98,7 @@ def test_a_track_row_starts_from_its_dense_rows_clean_cells(tmp_path: Path) -> N
 def track_cells(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Any]]:
     """Per track, the cells `bench` would run for a policy with gradients (nothing is run)."""
     import zodrive.experiments.compare as compare_module
-    from zodrive.experiments.bench import bench
+    from zodrive.bench.bench import bench
 
     class Planned(Exception):
         pass
@@ -251,7 +251,7 @@ def test_a_track_row_of_an_earlier_version_is_said_so() -> None:
 
 
 def test_the_exact_check_refuses_a_track_row(tmp_path: Path) -> None:
-    from zodrive.experiments.exact_row import certify_row
+    from zodrive.bench.exact_row import certify_row
 
     template = json.loads((ROOT / "results" / "bench" / "highway-fast" / "dqn-seed-0" / "row.json").read_text())
     (tmp_path / "row.json").write_text(json.dumps(_row(template, "dqn", "highway-fast-one-object-v1", "one-object")))
@@ -270,7 +270,7 @@ def test_the_exact_check_refuses_a_track_row(tmp_path: Path) -> None:
 ])
 def test_a_bench_on_a_track_refuses_bad_input_in_one_line(args: list[str], message: str, tmp_path: Path, capsys,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    import zodrive.experiments.bench as bench_module
+    import zodrive.bench.bench as bench_module
 
     monkeypatch.setattr(bench_module, "compare", lambda *a, **k: pytest.fail("a refused bench ran a cell"))
     assert main(["bench", "baseline:rules", *args, "--board", str(tmp_path)]) == 2

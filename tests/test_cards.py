@@ -20,10 +20,10 @@ from types import ModuleType
 
 import pytest
 
+from zodrive.bench.zoo_card import NO_ROW  # a zoo card's words for a row not in the checkout
 from zodrive.cli import build_parser
 from zodrive.experiments import card as card_module
 from zodrive.experiments.card import card_text
-from zodrive.experiments.zoo_card import NO_ROW  # a zoo card's words for a row not in the checkout
 
 ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT / "models" / "zoo"

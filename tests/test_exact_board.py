@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from zodrive.bench.leaderboard import leaderboard_markdown, read_rows
 from zodrive.cli import main
-from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = ROOT / "results" / "bench" / "highway-fast"

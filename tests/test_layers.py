@@ -18,6 +18,7 @@ FLOORS: list[tuple[str, ...]] = [
     ("evaluation",),
     ("training",),
     ("experiments",),
+    ("bench",),  # the bench and the leaderboard, on the grid engine and card writer of experiments/
     ("api",),
     ("cli",),
     ("__main__", ""),  # "" is the package's own __init__ (its public names, read lazily)

@@ -121,8 +121,8 @@ def test_a_grid_resumes_over_packed_cells(tmp_path: Path, monkeypatch) -> None:
 def test_a_bench_row_reads_and_resumes_from_packed_cells(tmp_path: Path, monkeypatch) -> None:
     """The row, its brake and the leaderboard read a packed board as the folders it was packed from."""
     import zodrive.evaluation.evaluate as evaluation
-    from zodrive.experiments.bench import Protocol, bench
-    from zodrive.experiments.leaderboard import leaderboard_markdown, read_rows
+    from zodrive.bench.bench import Protocol, bench
+    from zodrive.bench.leaderboard import leaderboard_markdown, read_rows
 
     proto = Protocol("highway-fast", 1, (0.05,), clean_episodes=2, black_box=("uniform-noise",), white_box=None)
     board = tmp_path / "board"
@@ -150,7 +150,7 @@ def _bench_grid(board: Path) -> dict[Path, str]:
     """A finished bench row of protocol highway-fast-v4 (`baseline:rules`, no gradients, would be too simple: a
     model `m` with PGD), its `clean/` and the board's brake, each cell's folder written as `evaluate` writes one and
     each `table.json` as `compare` writes it (the grid's order: clean, the ensemble, PGD last); the tables' text."""
-    from zodrive.experiments.bench import BLACK_BOX, QUERY_CAP, WHITE_BOX
+    from zodrive.bench.bench import BLACK_BOX, QUERY_CAP, WHITE_BOX
     from zodrive.experiments.cells import GridCell
     from zodrive.experiments.compare import table_row, write_tables
 
@@ -189,7 +189,7 @@ def _bench_grid(board: Path) -> dict[Path, str]:
 def test_a_packed_bench_grid_gives_its_table_and_pack_removes_it(tmp_path: Path, capsys) -> None:
     """A bench row's table is its packed cells: they give the file's rows exactly (the grid's order, the labels, a
     baseline's ':'), so `zodrive pack` removes the file, and every reader reads the same rows without it."""
-    from zodrive.experiments.bench import cells_table, read_table
+    from zodrive.bench.bench import cells_table, read_table
 
     tables = _bench_grid(tmp_path / "board")
     for path, text in tables.items():
@@ -208,7 +208,7 @@ def test_an_unfinished_bench_grid_keeps_its_table_and_never_reads_as_finished(tm
     """A grid that lacks a cell of its row (interrupted between two cells), holds one its row never read (an
     earlier version's, being replaced), or a cell still running keeps its table.json; without the file it is one
     line, never a shorter table."""
-    from zodrive.experiments.bench import pack_table, read_table
+    from zodrive.bench.bench import pack_table, read_table
 
     tables = _bench_grid(tmp_path / "board")
     row = next(iter(tables)).parent
@@ -259,7 +259,7 @@ def test_pack_keeps_a_table_its_cells_do_not_give_to_the_bit(tmp_path: Path, cap
 
 
 def test_a_packed_bench_grid_with_a_damaged_pack_is_one_line(tmp_path: Path) -> None:
-    from zodrive.experiments.bench import read_table
+    from zodrive.bench.bench import read_table
 
     tables = _bench_grid(tmp_path / "board")
     out = next(iter(tables)).parent

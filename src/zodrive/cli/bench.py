@@ -7,9 +7,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from zodrive.bench.tracks import DENSE, RESERVED, TRACKS
 from zodrive.cli.common import check_trust, defense_name, episode_count, progress_flag, trust_flag, workers_flag
 from zodrive.errors import ZodriveError
-from zodrive.experiments.tracks import DENSE, RESERVED, TRACKS
 
 BOARD = Path("results/bench")
 SCENARIOS = ("highway-fast", "merge", "roundabout", "intersection", "discrete")
@@ -54,8 +54,8 @@ def add_parsers(sub: Any) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
-    from zodrive.experiments.bench import ROW_NAME, bench, protocol, row_folder
-    from zodrive.experiments.leaderboard import write_leaderboard
+    from zodrive.bench.bench import ROW_NAME, bench, protocol, row_folder
+    from zodrive.bench.leaderboard import write_leaderboard
     from zodrive.policies.policy import resolve
 
     proto = protocol(args.scenario, args.track)
@@ -86,7 +86,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_leaderboard(args: argparse.Namespace) -> int:
-    from zodrive.experiments.leaderboard import write_leaderboard
+    from zodrive.bench.leaderboard import write_leaderboard
 
     write_leaderboard(args.board, args.out, args.plot, frontier=args.frontier, force=args.force)
     print(f"wrote {', '.join(str(p) for p in (args.out, args.plot, args.frontier) if p is not None)}")

@@ -289,8 +289,8 @@ ROW_FIXES = ("eps", "episodes", "seed", "tol", "out", "preset", "env_id", "obs_b
 
 
 def _certify_row(args: argparse.Namespace) -> int:
-    """certify --row: the row's exact check, `exact.json` beside its `row.json` (`experiments.exact_row`)."""
-    from zodrive.experiments.exact_row import STATES, TIME_LIMIT, certify_row
+    """certify --row: the row's exact check, `exact.json` beside its `row.json` (`zodrive.bench.exact_row`)."""
+    from zodrive.bench.exact_row import STATES, TIME_LIMIT, certify_row
 
     given = [name for name in ROW_FIXES if getattr(args, name, None) not in (None, False)]
     given += ["attack"] * bool(args.attack) + ["env_set"] * bool(args.env_set) + ["min_eps"] * bool(args.min_eps)

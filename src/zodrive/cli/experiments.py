@@ -159,8 +159,8 @@ def cmd_card(args: argparse.Namespace) -> int:
 
 
 def cmd_pack(args: argparse.Namespace) -> int:
+    from zodrive.bench.bench import pack_tables
     from zodrive.evaluation import store
-    from zodrive.experiments.bench import pack_tables
 
     if args.match and (not args.logs or args.unpack):
         raise ZodriveError("--match chooses the logs that --logs folds: give it with --logs, without --unpack")

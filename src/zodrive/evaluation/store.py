@@ -19,7 +19,7 @@ not kept: it is git-ignored, and a finished summary holds what it gave. Only fin
 folder without its steps is. A bench grid's `table.json` (a row's, its `clean/`'s, a brake's: one row per cell,
 its grid entry and its summary's figures) goes too once every cell is packed: `zodrive pack` removes it where the
 rows its cells give are the file's to the bit, and its readers then make it from them
-(`zodrive.experiments.bench.pack_table`, `read_table`); a grid that is not finished keeps its file.
+(`zodrive.bench.bench.pack_table`, `read_table`); a grid that is not finished keeps its file.
 
 A study's printed outputs (`P/NAME.txt`: what a command printed, often beside the evaluation `P/NAME` it
 ran) fold the same way into one text file beside their folder, `P.txt` (`zodrive pack --logs`): each log under

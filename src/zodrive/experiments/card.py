@@ -1,6 +1,6 @@
 """Model cards: how a model was made and how it scores, from its own records. This module writes every card
 (`save_card`): a shipped model's from its run folder (`card_text`, `zodrive card FOLDER ...`), a zoo model's from
-its run and its bench row (`zoo_card.zoo_cards`, `python zoo/card.py`)."""
+its run and its bench row (`zodrive.bench.zoo_card.zoo_cards`, `python zoo/card.py`)."""
 
 from __future__ import annotations
 

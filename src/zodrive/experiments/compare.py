@@ -106,7 +106,7 @@ TABLE_NEEDS = ("mean_return", "ci95", "collision_rate", "mean_speed", "right_lan
 def table_row(entry: dict[str, Any], s: dict[str, Any]) -> dict[str, Any]:
     """A cell's row of `table.json`: its grid entry (`GridCell.entry`) and the figures of its summary `s`. The one
     place a row is made, by the grid as each cell finishes and by a bench row read back from its cells
-    (`bench.cells_table`), so the two never differ."""
+    (`zodrive.bench.bench.cells_table`), so the two never differ."""
     low, high = s["ci95"]
     return {
         **entry, "mean_return": s["mean_return"], "ci95_low": low,

@@ -1,7 +1,7 @@
 """The zoo's model cards (models/zoo/FAMILY/seed-N/CARD.md), from each run's own records: the command and seed
 that trained it (`train.json`), the checkpoint chosen on tuning seeds (`selection.json`), its SHA-256, its bench
 row (`results/bench/SCENARIO/NAME/row.json`, `bench.row_folder`) and the row's exact check (`exact.json`
-beside it). Nothing in a card is typed by hand; `card.save_card` writes them, as it writes a shipped card.
+beside it). Nothing in a card is typed by hand; `experiments.card.save_card` writes them, as it writes a shipped card.
 
 The zoo's recipe (zoo/train.py's defaults, zoo/choose_checkpoint.py's tuning episodes, zoo/q_ensemble.py's
 checkpoints) is the zoo scripts' own: `python zoo/card.py` passes it in as a `ZooRecipe`.
@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from zodrive.bench.bench import row_folder
+from zodrive.bench.exact_board import read_exact, why_not_shown
+from zodrive.bench.leaderboard import read_row
 from zodrive.drivers.baselines import get_baseline
-from zodrive.experiments.bench import row_folder
 from zodrive.experiments.card import load_record
-from zodrive.experiments.exact_board import read_exact, why_not_shown
-from zodrive.experiments.leaderboard import read_row
 from zodrive.runinfo import sha256
 
 NO_ROW = "No bench row yet: `bash zoo/bench_all.sh`."

@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from zodrive.bench.bench import current_protocols
 from zodrive.drivers.baselines import BASELINES, PREFIX
 from zodrive.errors import ZodriveError
-from zodrive.experiments.bench import current_protocols
 
 WRITER = "zodrive leaderboard"
 """What the leaderboard's files carry (the Markdown's first lines, the PNG's Software field): a file that

@@ -9,13 +9,13 @@ separate, labelled column where the policy has gradients. Every cell is an ordin
 evaluation (`compare`), so a bench resumes where it stopped; the row is rebuilt from the cells.
 A row's folder holds `row.json`, its grid's cells (`cells/`, packed into `cells.jsonl.gz` once finished), `clean/`
 (the clean cell of more episodes, its own cells) where the protocol has one, `exact.json` where the row's exact
-check ran, and while it is live each grid's `table.json` (one row per cell, `compare.table_row`); a packed row's
-tables are made from its cells (`read_table`), and `zodrive pack` removes each file once they give it to the bit
-(`pack_table`). The scenario's brake (`SCENARIO/brake`, `brake_folder`) is a grid of one clean cell, kept alike.
-A track (`zodrive.experiments.tracks`: decision access, one object, 10 % of steps) is a protocol of its
+check ran, and while it is live each grid's `table.json` (one row per cell, `experiments.compare.table_row`); a
+packed row's tables are made from its cells (`read_table`), and `zodrive pack` removes each file once they give it
+to the bit (`pack_table`). The scenario's brake (`SCENARIO/brake`, `brake_folder`) is a grid of one clean cell,
+kept alike. A track (`zodrive.bench.tracks`: decision access, one object, 10 % of steps) is a protocol of its
 own on the same grid with another threat model; its rows live in SCENARIO/tracks/TRACK and get tables of
-their own. The bench asks the grid for its cells' folders through their `cells.GridCell` (never a folder
-name or a label of its own making); the leaderboard reads the rows (`zodrive.experiments.leaderboard`).
+their own. The bench asks the grid for its cells' folders through their `experiments.cells.GridCell` (never a
+folder name or a label of its own making); the leaderboard reads the rows (`zodrive.bench.leaderboard`).
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from zodrive.bench.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
+                                  threat_fields)
 from zodrive.defense import defense_version
 from zodrive.drivers.baselines import PREFIX, get_baseline, is_baseline
 from zodrive.envs import load_preset, scenario
@@ -38,8 +40,6 @@ from zodrive.evaluation import store
 from zodrive.evaluation.stats import paired_difference_ci
 from zodrive.experiments.cells import CLEAN, GridCell, clean_cells, number_name
 from zodrive.experiments.compare import TABLE_NEEDS, compare, is_white_box, strongest, table_row
-from zodrive.experiments.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
-                                        threat_fields)
 from zodrive.policies.policy import resolve
 from zodrive.runinfo import to_json, write_json
 from zodrive.seeds import EVAL_SEED
@@ -87,7 +87,7 @@ class Protocol:
     """The most victim queries a black-box attack of the row may spend on one step (None: its own
     settings' bound, 2,002 for random search); PGD, white-box, is not capped."""
     track: str = DENSE
-    """The threat model's track (`zodrive.experiments.tracks`): its protocol has an id and versions of its own."""
+    """The threat model's track (`zodrive.bench.tracks`): its protocol has an id and versions of its own."""
     attack_set: tuple[str, ...] = ()
     """The threat-model fields every attack of the row runs with (`KEY=VALUE`; the track's)."""
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from zodrive.bench.bench import BLACK_BOX
+from zodrive.bench.exact_board import EXACT_FILE
+from zodrive.bench.leaderboard import read_row
 from zodrive.errors import ZodriveError
-from zodrive.experiments.bench import BLACK_BOX
-from zodrive.experiments.exact_board import EXACT_FILE
-from zodrive.experiments.leaderboard import read_row
 from zodrive.runinfo import command_line, write_json
 
 STATES = 100

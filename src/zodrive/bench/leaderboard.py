@@ -11,16 +11,15 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from zodrive.bench.bench import (BRAKE, PROTOCOLS, ROW_NAME, TRACK_PROTOCOLS, Protocol, brake_folder, brake_margin,
+                                 clean_returns, current_protocols, paired, physical_eps, read_table, row_clean_folder)
+from zodrive.bench.exact_board import exact_cells, exact_headers, exact_notes, read_exact
+from zodrive.bench.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
+from zodrive.bench.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
 from zodrive.drivers.baselines import BASELINES, PREFIX
 from zodrive.errors import ZodriveError
 from zodrive.evaluation import store
-from zodrive.experiments.bench import (BRAKE, PROTOCOLS, ROW_NAME, TRACK_PROTOCOLS, Protocol, brake_folder,
-                                       brake_margin, clean_returns, current_protocols, paired, physical_eps,
-                                       read_table, row_clean_folder)
 from zodrive.experiments.cells import GridCell
-from zodrive.experiments.exact_board import exact_cells, exact_headers, exact_notes, read_exact
-from zodrive.experiments.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
-from zodrive.experiments.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
 from zodrive.runinfo import write_atomic
 
 MAX_ROW_BYTES = 4 << 20  # a row is a few KiB: a larger file is not one
