@@ -24,7 +24,7 @@ import json
 import re
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -347,8 +347,7 @@ def cells_table(out: Path) -> list[dict[str, Any]]:
         if row is not None and summary["episodes"] != row["episodes"]:
             raise ZodriveError(f"{cell.folder(out)} holds {summary['episodes']} episodes, its row "
                                f"{row['episodes']}: run the bench again to resume it")
-        typed = replace(cell, white_box=is_white_box(summary.get("attack") or CLEAN))  # as `compare` labels it
-        rows.append(table_row(typed.entry(reads), summary))
+        rows.append(table_row(cell.entry(reads), summary))
     return rows
 
 
@@ -370,16 +369,19 @@ def _row_cells(row: dict[str, Any], policy: str, defense: str | None, reads: str
     """The cells of the grid a written row was read from, in the order `bench` asks `compare` for them: the clean
     cell, then where the policy reads the observation each attack of the row's ensemble at each ε of the row (at
     its query budget), then the white-box attack at each ε where the row has that column (a policy with
-    gradients). An earlier version's row names no ensemble: its protocol's, the same in every version."""
+    gradients); each labelled as `compare` labels it (`is_white_box`). An earlier version's row names no
+    ensemble: its protocol's, the same in every version."""
     cells = [GridCell(policy, defense=defense)]
     if reads != "observation":
         return cells
     eps = [float(p["eps"]) for p in row["attacked"]]
     proto = current_protocols().get(row["protocol"])
     ensemble = row.get("black_box") or (proto.black_box if proto is not None else BLACK_BOX)
-    cells += [GridCell(policy, attack, e, row.get("query_budget"), defense) for attack in ensemble for e in eps]
+    cells += [GridCell(policy, attack, e, row.get("query_budget"), defense, is_white_box(attack))
+              for attack in ensemble for e in eps]
     if any(p.get("pgd_return") is not None for p in row["attacked"]):
-        cells += [GridCell(policy, row.get("white_box") or WHITE_BOX, e, None, defense) for e in eps]
+        white = row.get("white_box") or WHITE_BOX
+        cells += [GridCell(policy, white, e, None, defense, is_white_box(white)) for e in eps]
     return cells
 
 
@@ -418,8 +420,7 @@ def pack_table(out: Path) -> str:
 def pack_tables(root: Path) -> dict[Path, str]:
     """`pack_table` in every folder under `root` (`root` included) that holds a `table.json` beside packed cells;
     each file and why it was kept ('' if removed)."""
-    root = Path(root)
-    tables = sorted({*root.rglob(TABLE), *([root / TABLE] if (root / TABLE).is_file() else [])})
+    tables = sorted(Path(root).rglob(TABLE))  # `root`'s own file too
     return {path: pack_table(path.parent) for path in tables if store.pack_path(path.parent / "cells").is_file()}
 
 
