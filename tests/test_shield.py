@@ -89,6 +89,8 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) ->
             right = final == LANE_RIGHT
             target = np.where(right, true_rooms["right"], true_rooms["left"])
             beside = np.where(right, true_rooms["right_blocked"], true_rooms["left_blocked"])
+            faster = final == FASTER  # v6: only where the safe gap holds at the speed FASTER reaches
+            assert (true_rooms["own_top"][faster] >= -1e-3).all() and faster.any()
             assert (own_worst[escape] < 0).all()
             assert (target[escape] >= -1e-3).all() and not beside[escape].any()   # float32 seen
             escaped += int(escape.sum())
@@ -103,6 +105,29 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) ->
     seen[:, 1:, 1:] += rng.choice([-0.05, 0.05], size=(len(truth), 4, 4)).astype(np.float32)
     final = plain.decide(seen, np.full(len(truth), FASTER))
     assert not safe_truth[np.arange(len(truth)), final].all()
+
+
+def test_faster_is_tested_at_the_speed_it_reaches() -> None:
+    """Seed 100072 of highway-fast, step 0 (v5's extra crash under random search at eps 0.05): the ego at
+    25 m/s, a car 66 m ahead in its lane 3.3 m/s slower. IDM's safe gap at 25 m/s leaves 15.7 m, more
+    than the rules' 15 m margin, so v5 let the attacker's FASTER through; at 30 m/s, where FASTER takes
+    the ego, the gap is 11 m short. The traffic ahead then slowed below 20 m/s, which no meta-action
+    goes below, and the ego crashed at step 13. The same scene with the car 100 m ahead passes the
+    plain (eps 0) test, not the one at eps 0.05 (10 m nearer, 4 m/s more closing, the ego 4 m/s slower)."""
+    preset = load_preset("highway-fast")
+    obs = np.zeros((2, 5, 5), np.float32)
+    obs[:, 0] = [1, 155.1 / 200, 0, 25.0 / 80, 0]
+    obs[0, 1] = [1, 66.4 / 200, 0, -3.3 / 80, 0]
+    obs[1, 1] = [1, 100.0 / 200, 0, -3.3 / 80, 0]
+    assert ObservationRules(preset).safe_actions(obs)[:, FASTER].all()     # the rules' own test accepts both
+    for eps in (0.0, 0.05):
+        shield = Shield(preset, eps) if eps else Shield.__new__(Shield)
+        if not eps:
+            shield.rules, shield.eps = ObservationRules(preset, 0.0), 0.0
+        assert shield.safe(obs)[:, FASTER].tolist() == [False, not eps]      # at eps 0.05 the 100 m gap is 10 m less
+        final = shield.decide(obs[:1], np.array([FASTER]))[0]              # the rules' choice instead
+        assert final != FASTER and shield.safe(obs[:1])[0, final]
+    assert ObservationRules(preset).rooms(obs)["own_top"][0] == pytest.approx(-10.7, abs=0.1)
 
 
 def test_the_fallback_is_always_safe_and_plain_rules_decisions_are_unchanged() -> None:

@@ -6,7 +6,8 @@ room test at budget EPS (`ObservationRules.safe_actions`, the code `baseline:rob
 decides with, plus: a lane change only towards a lane that exists wherever the ego may truly
 be, and, while the ego may be mid-change, only if the lane beyond is free too, since a second
 change aims there) does not accept that action on the observation, the shield takes the robust
-rules' own choice instead (IDLE, FASTER or a lane change they find room for); where that is
+rules' own choice instead (IDLE, FASTER or a lane change they find room for; IDLE where their FASTER
+fails the shield's FASTER test, which also asks for the safe gap at the speed FASTER reaches); where that is
 SLOWER and the own lane is too close even to keep speed, a lane change into a lane free enough
 to keep speed in for every true state (`ObservationRules.escapes`); else SLOWER.
 
@@ -24,9 +25,9 @@ action is accepted by the plain test on the true observation, an escape by the s
 keeping speed (room >= 0) rather than that of changing lanes (room > the margin). The attacker
 can make the car careful, and keep it braking behind a car shown half a lane aside (the constant
 brake's failure: the meta-actions never slow it below 20 m/s), but not steer it towards a car.
-What it cannot cover: the ego row beyond the lane-existence and mid-change tests (an attacker
-may shift the ego's perceived lateral position and speed; the test assumes an own speed of
-25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
+What it cannot cover: the ego row beyond the lane-existence, mid-change and FASTER tests (an
+attacker may shift the ego's perceived lateral position and speed; the tests other than FASTER's
+assume an own speed of 25 m/s, and the ego can drive faster), vehicles the observation does not list (behind the ego,
 or beyond the nearest four), attacks larger than EPS, and crashes the rules' test does not
 foresee (e.g. a vehicle cutting in, or the safe gap at the assumed 25 m/s being too short).
 
@@ -40,17 +41,20 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.drivers.rules import SLOWER, ObservationRules
+from zodrive.drivers.rules import FASTER, IDLE, SLOWER, ObservationRules
 from zodrive.attacks.victim import Victim
 from zodrive.errors import ZodriveError
 
-VERSION = 5
+VERSION = 6
 """The shield's behaviour, part of every result key that names it: v1 the robust rules' room
 test, v2 + a lane change only towards a lane that exists for every ego position, v3 + the lane
 beyond checked while the ego may be mid-change, and the escape from an own lane too close to
 stay in (the fallback), v4 + an escape minds the lane beyond its target (cut-ins) and leaves out
 only a shared vehicle seen nearer the own lane, v5 the sound escape: every vehicle that may be in
-its target lane counts. Folders made by an earlier version are not resumed with this one."""
+its target lane counts, v6 FASTER only where the own lane's safe gap holds at the speed it reaches
+(the top target speed; v5 asked for it at 25 m/s, and an attacker's FASTER at 25 m/s behind traffic
+slowing below 20 m/s left the ego nowhere to go, seeds 100072 and 100095). Folders made by an
+earlier version are not resumed with this one."""
 
 DEFAULT_EPS = 0.02
 """`--defense shield` = `shield@0.02`: a defense is one fixed system (its clean and attacked cells
@@ -107,8 +111,13 @@ class Shield:
         return shielded_victim(victim, self)
 
     def safe(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
-        """(B, 5) booleans: the actions safe for every true state within eps of each observation."""
-        return self.rules.safe_actions(np.asarray(batch), rooms)
+        """(B, 5) booleans: the actions safe for every true state within eps of each observation: the
+        rules' room test, and for FASTER the own lane's safe gap kept at the speed FASTER reaches
+        (the top target speed, from the ego's lowest possible speed; v6)."""
+        r = self.rules.rooms(np.asarray(batch)) if rooms is None else rooms
+        safe = self.rules.safe_actions(np.asarray(batch), r)
+        safe[:, FASTER] &= r["own_top"] >= 0
+        return safe
 
     def decide(self, batch: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """Final actions (B,): `proposed` where safe, the robust rules' choice where not."""
@@ -123,13 +132,17 @@ class Shield:
         return out
 
     def fallback(self, batch: np.ndarray, rooms: dict[str, np.ndarray] | None = None) -> np.ndarray:
-        """The robust rules' choice where the test accepts it and it is not SLOWER; else a lane
+        """The robust rules' choice where the test accepts it and it is not SLOWER (IDLE for a FASTER
+        that fails only the FASTER test); else a lane
         change out of an own lane the test rejects even for IDLE, into a lane it accepts IDLE in
         for every true state (`ObservationRules.escapes`: SLOWER never slows the ego below
         20 m/s, so braking behind a slower car is no refuge); else SLOWER."""
         r = self.rules.rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
+        safe = self.safe(batch, r)
+        rows = np.arange(len(batch))
         act = self.rules.actions(batch, r)
-        ok = self.safe(batch, r)[np.arange(len(batch)), act] & (act != SLOWER)
+        act = np.where((act == FASTER) & ~safe[:, FASTER] & safe[:, IDLE], IDLE, act)  # keep speed, not faster
+        ok = safe[rows, act] & (act != SLOWER)
         escape = self.rules.escapes(batch, r)
         return np.where(ok, act, np.where(escape >= 0, escape, SLOWER))
 

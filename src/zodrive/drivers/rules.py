@@ -62,6 +62,17 @@ target lane (tests/test_slow_shield.py measures it on the real env); a second LA
 aims one lane beyond the target, i.e. two lanes from where the ego is."""
 
 
+def top_speed(preset: dict[str, Any]) -> float:
+    """[m/s] The fastest speed the meta-actions track: the preset's `target_speeds`, else highway-env's
+    (`MDPVehicle.DEFAULT_TARGET_SPEEDS`, 20-30 m/s): where FASTER takes the ego."""
+    speeds = (preset.get("highway") or {}).get("action", {}).get("target_speeds")
+    if speeds is None:
+        from highway_env.vehicle.controller import MDPVehicle
+
+        speeds = MDPVehicle.DEFAULT_TARGET_SPEEDS
+    return float(np.max(speeds))
+
+
 def desired_gap(speed: Any, closing: Any, headway: float = HEADWAY) -> Any:
     """IDM's desired gap s* = s0 + v T + v dv / (2 sqrt(a b)) [m] at own speed `speed`, closing
     speed `closing` [m/s] and time headway T = `headway` [s]: the rules' safe gap and the
@@ -93,12 +104,14 @@ class ObservationRules:
         self.still_vy = float(still_vy)
         self.headway, self.margin = float(headway), float(margin)
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
+        self.top_speed = top_speed(preset)
 
     def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
         right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
         may be beside the ego there, whether the ego is centred and whether it may be
-        mid-change; pessimistic within eps."""
+        mid-change; and `own_top`, the own lane's room at the top target speed, which FASTER
+        reaches (the shield's FASTER test); pessimistic within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5
@@ -123,11 +136,21 @@ class ObservationRules:
             nearest = np.where(ahead, dx[:, None, :], np.inf).argmin(axis=2)
             value = np.take_along_axis(gaps, nearest[:, :, None], axis=2)[:, :, 0]
         beside = (within & (np.abs(dx) < BESIDE + sx)[:, None, :]).any(axis=2)  # (see the module docstring)
+        # the own lane's room at the speed FASTER reaches (the top target speed) from the ego's lowest
+        # possible speed: its closing speed on each vehicle grows by the difference
+        reach = np.maximum(self.top_speed - np.maximum(ego[:, 3] - svx, 0.0), 0.0)
+        safe_top = desired_gap(max(self.top_speed, ASSUMED_SPEED), closing + reach[:, None], self.headway)
+        gaps_top = np.where(ahead[:, 0], dx - sx - CAR_LENGTH - safe_top, np.inf)
+        if self.eps > 0:
+            top = gaps_top.min(axis=1)
+        else:
+            top = np.take_along_axis(gaps_top, nearest[:, :1], axis=1)[:, 0]
 
         def exists(offset: int) -> np.ndarray:
             return (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
 
-        out: dict[str, np.ndarray] = {"own": np.where(exists(0), value[:, 0], -np.inf)}
+        out: dict[str, np.ndarray] = {"own": np.where(exists(0), value[:, 0], -np.inf),
+                                      "own_top": np.where(exists(0), top, -np.inf)}
         for side, sign, near, beyond in (("left", -1, 1, 3), ("right", +1, 2, 4)):
             out[side] = np.where(exists(sign), value[:, near], -np.inf)
             out[f"{side}_blocked"] = beside[:, near] | ~exists(sign)
