@@ -159,3 +159,31 @@ def test_a_written_student_zip_is_the_same_bytes_whenever_it_is_written(tmp_path
         assert {info.date_time for info in archive.infolist()} == {ZIP_DATE}
     _write_zip(Path("models/dqn/model.zip"), net, tmp_path / "b.zip")
     assert sha256(tmp_path / "a.zip") == sha256(tmp_path / "b.zip")
+
+
+def test_stable_baselines3_reads_a_written_student_and_acts_with_its_weights(tmp_path: Path) -> None:
+    """`DQN.load` needs the optimizer's member (its keys must match exactly): a written student keeps it,
+    without the teacher's moments, and SB3's Q-network is the student's (students written before 2026-12-07
+    dropped the member, and SB3 refused them: `KeyError: 'policy.optimizer'`)."""
+    import copy
+
+    import numpy as np
+    import torch
+    from stable_baselines3 import DQN
+
+    from zodrive.envs import load_preset
+    from zodrive.policies.loading import load_network
+    from zodrive.training.distill import _write_zip
+
+    student = copy.deepcopy(load_network("models/dqn", load_preset("discrete")).net)
+    for layer in student:
+        if isinstance(layer, torch.nn.Linear):
+            torch.nn.init.normal_(layer.weight, std=0.1)  # not the teacher's weights
+    _write_zip(Path("models/dqn/model.zip"), student, tmp_path / "s.zip")
+    model = DQN.load(tmp_path / "s.zip", device="cpu")
+    assert model.policy.optimizer.state_dict()["state"] == {}
+    obs = np.random.default_rng(0).uniform(-1, 1, (16, 25)).astype(np.float32)
+    with torch.no_grad():
+        theirs = model.q_net(torch.as_tensor(obs)).numpy()
+        ours = student(torch.as_tensor(obs)).numpy()
+    np.testing.assert_allclose(theirs, ours, rtol=1e-5, atol=1e-6)

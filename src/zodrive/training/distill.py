@@ -158,7 +158,8 @@ ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # every member of a written zip: the earliest 
 def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: str = "dqn") -> None:
     """The source's SB3 zip with its acting network's (and target network's) weights replaced:
     the Q-network of a DQN, the actor of a DDPG/TD3 (whose critic and optimizer states stay
-    as they were: SB3's loader needs them, and nothing acts on them)."""
+    as they were: SB3's loader needs them, and nothing acts on them). A DQN's optimizer keeps its
+    settings and loses its moments (they were the teacher's), so `DQN.load` reads the student."""
     with zipfile.ZipFile(source) as archive:
         members = {name: archive.read(name) for name in archive.namelist()}
     weights = torch.load(io.BytesIO(members["policy.pth"]), map_location="cpu", weights_only=True)
@@ -174,8 +175,14 @@ def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: s
     buf = io.BytesIO()
     torch.save(weights, buf)
     members["policy.pth"] = buf.getvalue()
-    if algo == "dqn":
-        members.pop("policy.optimizer.pth", None)  # the teacher's optimizer state no longer fits
+    if algo == "dqn" and "policy.optimizer.pth" in members:
+        # the teacher's Adam moments belong to its weights, not the student's: keep the optimizer's settings
+        # (SB3's loader needs the member) with no moments, as a freshly built optimizer has
+        optimizer = torch.load(io.BytesIO(members["policy.optimizer.pth"]), map_location="cpu", weights_only=True)
+        optimizer["state"] = {}
+        buf = io.BytesIO()
+        torch.save(optimizer, buf)
+        members["policy.optimizer.pth"] = buf.getvalue()
     tmp = target.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for name, data in members.items():  # a fixed date: the same seed gives the same SHA-256
