@@ -512,3 +512,17 @@ def test_every_committed_cell_is_found_through_its_typed_cell() -> None:
         "baseline-rules+shield@0.02-pgd-eps0.05"
     assert GridCell.from_entry({"model": "m", "attack": "pgd (white-box)", "eps": 0.1000001, "defense": "none"}) \
         == GridCell("m", "pgd", 0.1000001, white_box=True)
+
+
+def test_a_row_of_an_earlier_defense_version_says_so_on_the_board() -> None:
+    """A defended row keeps the version it ran in its key; where the defense has changed since, the board
+    says which version the row measured and which its command runs now (never the current name alone)."""
+    from zodrive.bench.leaderboard import defense_cell
+    from zodrive.defense import defense_version
+
+    now = defense_version("shield@0.05")
+    assert now is not None and now >= 2
+    row = {"defense": "shield@0.05", "key": f"sha256:abc+defense:shield@0.05:v{now - 1}"}
+    assert defense_cell(row) == f"shield@0.05 v{now - 1} (now v{now})"
+    assert defense_cell({**row, "key": f"sha256:abc+defense:shield@0.05:v{now}"}) == "shield@0.05"
+    assert defense_cell({"key": "sha256:abc"}) == "–"

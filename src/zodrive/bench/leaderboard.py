@@ -16,6 +16,7 @@ from zodrive.bench.bench import (BRAKE, PROTOCOLS, ROW_NAME, TRACK_PROTOCOLS, Pr
 from zodrive.bench.exact_board import exact_cells, exact_headers, exact_notes, read_exact
 from zodrive.bench.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
 from zodrive.bench.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
+from zodrive.defense import defense_version
 from zodrive.drivers.baselines import BASELINES, PREFIX
 from zodrive.errors import ZodriveError
 from zodrive.evaluation import store
@@ -115,7 +116,9 @@ def leaderboard_markdown(rows: list[dict[str, Any]]) -> str:
              "fewer episodes than the protocol's (`--episodes`) are unofficial: they stand in a table of their own",
              "under each ranked table, never ranked, never bold. Defense: what stands between the sensor and the",
              "policy in a defended row (`zodrive bench MODEL --defense NAME`); its attacks query the defended",
-             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md). Exact attackable:",
+             "system, and its ensemble adds the attacks that adapt to that defense (docs/bench.md); a defense shown",
+             "as `vN (now vM)` ran an earlier version of that defense: its row stands as measured, and its bench",
+             "command now runs version M. Exact attackable:",
              "of a sample of the row's clean states (said under the table), those where some perturbation inside the",
              "ε-ball changes the action, decided by a complete check of the network (`zodrive certify MODEL --row",
              "FOLDER`; ReLU MLPs); ensemble miss: of those, the ones no black-box attack of the ensemble changed (PGD",
@@ -192,7 +195,7 @@ def _table(group: list[dict[str, Any]], *, ranked: bool) -> list[str]:
         same = r.get("clean_on_attacked_episodes") or c
         past = ("the brake" if r.get("key") == BRAKE else "–"
                 if r["eps_collisions_pass_brake"] is None else format(r["eps_collisions_pass_brake"], "g"))
-        lines.append("| " + (f"{rank} | " if ranked else "") + f"{r['policy']}{marks} | {r.get('defense') or '–'} | "
+        lines.append("| " + (f"{rank} | " if ranked else "") + f"{r['policy']}{marks} | {defense_cell(r)} | "
                      f"{c['return']:.2f} "
                      f"({c['ci95'][0]:.2f}–{c['ci95'][1]:.2f}) | {delta} | {100 * c['collision_rate']:.0f}% | "
                      f"{c['speed']:.1f} | " + (f"{same['return']:.2f} / {100 * same['collision_rate']:.0f}% | "
@@ -284,6 +287,19 @@ def _worst_returns(row: dict[str, Any], out: Path) -> dict[int, float] | None:
         return None
     records = store.episodes(cell.folder(out), needs=("episode", "return"), missing_ok=True)
     return {r["episode"]: r["return"] for r in records}
+
+
+def defense_cell(row: dict[str, Any]) -> str:
+    """A row's Defense column: its defense, and the version it ran where that is not the current one
+    (`shield@0.05 v5 (now v6)`): the row stands as measured, but its command now runs another system."""
+    defense = row.get("defense")
+    if not defense:
+        return "–"
+    ran = row["key"].rpartition("+defense:")[2].rpartition(":v")
+    current = defense_version(defense)
+    if ran[1] and current is not None and ran[2] != str(current):
+        return f"{defense} v{ran[2]} (now v{current})"
+    return str(defense)
 
 
 def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
