@@ -3,7 +3,8 @@
     python studies/defended-highway-fast/crashes.py
 
 Reads the committed cells: the brake's clean cell (`results/bench/highway-fast/brake`), the official
-row `dqn-seed-0+shield@0.05`, and the four cells of `imitation-seed-0+shield@0.05` run here
+row `dqn-seed-0+shield@0.05` (the shield version its key names: v5 until 2026-12-07, v6 since), and
+the four cells of `imitation-seed-0+shield@0.05` run here under shield v5
 (`imitation-shield.jsonl.gz`, the bench stopped after its random-search cells: see the README).
 For each cell of the 100 attacked episodes (seeds 100000-100099): return, collisions, the crashed
 seeds beyond the brake's, speed and lane changes per episode.
@@ -11,6 +12,7 @@ seeds beyond the brake's, speed and lane changes per episode.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +39,9 @@ def show(label: str, folder: Path, brake: set[int]) -> set[int]:
 
 def main() -> None:
     brake = show("brake (always SLOWER), clean", BENCH / "brake/cells/baseline-slower-none", set())
-    rows = [("dqn-seed-0+shield@0.05", BENCH / "dqn-seed-0+shield@0.05/cells", "seed-0+shield@0.05"),
-            ("imitation-seed-0+shield@0.05", HERE / "imitation-shield", "seed-0+shield@0.05")]
+    version = json.loads((BENCH / "dqn-seed-0+shield@0.05/row.json").read_text())["key"].rpartition(":")[2]
+    rows = [(f"dqn-seed-0+shield@0.05 {version}", BENCH / "dqn-seed-0+shield@0.05/cells", "seed-0+shield@0.05"),
+            ("imitation-seed-0+shield@0.05 v5", HERE / "imitation-shield", "seed-0+shield@0.05")]  # section 3's
     for row, parent, prefix in rows:
         for name in [p.name for p in store.names(parent)]:
             if name.endswith("-none") or "eps0.05" in name:
