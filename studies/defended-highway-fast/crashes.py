@@ -1,6 +1,7 @@
 """Crash by crash at eps 0.05: the brake, and two learned drivers behind the shield (issue 64's goal).
 
-    python studies/defended-highway-fast/crashes.py
+    python studies/defended-highway-fast/crashes.py            # the bench's seeds
+    python studies/defended-highway-fast/crashes.py unseen     # unseen.sh's seeds (section 5)
 
 Reads the committed cells: the brake's clean cell (`results/bench/highway-fast/brake`), the official
 row `dqn-seed-0+shield@0.05` (the shield version its key names: v5 until 2026-12-07, v6 since), and
@@ -13,6 +14,7 @@ seeds beyond the brake's, speed and lane changes per episode.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +26,8 @@ BENCH = Path("results/bench/highway-fast")
 FIRST = 100  # the protocol's attacked episodes: the first 100 seeds
 
 
-def show(label: str, folder: Path, brake: set[int]) -> set[int]:
-    episodes = [e for e in store.episodes(folder) if e["seed"] < 100000 + FIRST]
+def show(label: str, folder: Path, brake: set[int], first: int = 100000) -> set[int]:
+    episodes = [e for e in store.episodes(folder) if e["seed"] < first + FIRST]
     crashed = {e["seed"] for e in episodes if e["crashed"]}
     summary = store.summary(folder)
     ret = np.mean([e["return"] for e in episodes])
@@ -37,7 +39,19 @@ def show(label: str, folder: Path, brake: set[int]) -> set[int]:
     return crashed
 
 
+def unseen() -> None:
+    """`unseen.sh`'s cells: seeds 200000-200099, which no run had seen before shield v6 was written."""
+    folder = HERE / "unseen"
+    brake = show("brake (always SLOWER), clean", folder / "brake", set(), first=200000)
+    for name in ("v6-none", "v6-random-search", "v6-zo-signsgd", "v5-random-search"):
+        if store.names(folder, name):
+            show(f"dqn-seed-0+shield@0.05 {name}", folder / name, brake, first=200000)
+
+
 def main() -> None:
+    if sys.argv[1:] == ["unseen"]:
+        unseen()
+        return
     brake = show("brake (always SLOWER), clean", BENCH / "brake/cells/baseline-slower-none", set())
     version = json.loads((BENCH / "dqn-seed-0+shield@0.05/row.json").read_text())["key"].rpartition(":")[2]
     rows = [(f"dqn-seed-0+shield@0.05 {version}", BENCH / "dqn-seed-0+shield@0.05/cells", "seed-0+shield@0.05"),
