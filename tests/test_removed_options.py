@@ -66,7 +66,7 @@ CELLS = [  # (folder, its summary's `zodrive evaluate` command rebuilt with toda
     "results/close-rules/attacked/random-search-eps0.02",
     "results/close-rules/attacked/pgd-eps0.02",
     "results/close-rules/attacked/amortized-eps0.02",  # learned:DIR
-    "results/close-rules/attacked/v5-shield@0.02-pgd-eps0.02",  # behind a defense
+    "studies/defended-highway-fast/unseen/v6-random-search",  # behind a defense (the shield's current version)
     "results/robustness-100/dqn-driver-random-search-smooth-eps0.05",  # patience, warm start, max_change
     "results/default-vs-saving/ddpg-driver-warm-patience",  # a continuous victim
     "results/learned-adversary/cells/dqn-driver-uniform-noise-eps0.02",
@@ -93,6 +93,28 @@ def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, mo
                   seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
     on_disk = store.read(folder).key
     assert same_evaluation(on_disk, json.loads(json.dumps(job.key())))
+
+
+def test_a_cell_of_an_earlier_defense_version_differs_from_todays_key_in_that_version_alone(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A cell made behind shield v5: its command today builds the same key but for the defense's version, so
+    `zodrive evaluate` refuses to resume it with the current shield (never mixes two systems' episodes)."""
+    from zodrive.cli import build_parser
+    from zodrive.cli.attack import attack_spec_from_args
+    from zodrive.cli.common import preset_of
+    from zodrive.defense import defense_version
+    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
+    from zodrive.policies.policy import resolve
+
+    monkeypatch.chdir(ROOT)
+    folder = ROOT / "results/close-rules/attacked/v5-shield@0.02-pgd-eps0.02"
+    args = build_parser().parse_args(shlex.split(store.summary(folder)["command"])[1:])
+    job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
+                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
+    on_disk, today = store.read(folder).key, json.loads(json.dumps(job.key()))
+    assert on_disk["defense_version"] == 5 and today["defense_version"] == defense_version("shield") != 5
+    assert not same_evaluation(on_disk, today)
+    assert same_evaluation({**on_disk, "defense_version": today["defense_version"]}, today)
 
 
 def test_a_removed_option_at_the_behaviour_left_resumes_and_at_another_value_is_refused(
