@@ -75,43 +75,39 @@ CELLS = [  # (folder, its summary's `zodrive evaluate` command rebuilt with toda
 ]
 
 
-@pytest.mark.parametrize("cell", CELLS)
-def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """What `zodrive evaluate` checks before it resumes a folder: the key of the job its command builds."""
+def _key_today(folder: Path) -> dict[str, Any]:
+    """The key of the job that the `zodrive evaluate` command in `folder`'s summary builds with today's parser
+    (as JSON reads it back); run from the repository root, since the commands name repository paths."""
     from zodrive.cli import build_parser
     from zodrive.cli.attack import attack_spec_from_args
     from zodrive.cli.common import preset_of
     from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
     from zodrive.policies.policy import resolve
 
+    args = build_parser().parse_args(shlex.split(store.summary(folder)["command"])[1:])
+    job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
+                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
+    return json.loads(json.dumps(job.key()))
+
+
+@pytest.mark.parametrize("cell", CELLS)
+def test_a_committed_cell_matches_the_key_its_command_builds_today(cell: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What `zodrive evaluate` checks before it resumes a folder: the key of the job its command builds."""
     monkeypatch.chdir(ROOT)  # the commands name repository paths
     folder = ROOT / cell
-    command = store.summary(folder)["command"]
-    args = build_parser().parse_args(shlex.split(command)[1:])
-    spec = attack_spec_from_args(args)
-    job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=spec.to_dict(),
-                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
     on_disk = store.read(folder).key
-    assert same_evaluation(on_disk, json.loads(json.dumps(job.key())))
+    assert same_evaluation(on_disk, _key_today(folder))
 
 
 def test_a_cell_of_an_earlier_defense_version_differs_from_todays_key_in_that_version_alone(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A cell made behind shield v5: its command today builds the same key but for the defense's version, so
     `zodrive evaluate` refuses to resume it with the current shield (never mixes two systems' episodes)."""
-    from zodrive.cli import build_parser
-    from zodrive.cli.attack import attack_spec_from_args
-    from zodrive.cli.common import preset_of
     from zodrive.defense import defense_version
-    from zodrive.evaluation.evaluate import DEFAULT_EVAL_SEED, EvalJob
-    from zodrive.policies.policy import resolve
 
     monkeypatch.chdir(ROOT)
     folder = ROOT / "results/close-rules/attacked/v5-shield@0.02-pgd-eps0.02"
-    args = build_parser().parse_args(shlex.split(store.summary(folder)["command"])[1:])
-    job = EvalJob(model=resolve(args.model).ref, preset=preset_of(args), attack=attack_spec_from_args(args).to_dict(),
-                  seed=DEFAULT_EVAL_SEED if args.seed is None else args.seed, defense=args.defense)
-    on_disk, today = store.read(folder).key, json.loads(json.dumps(job.key()))
+    on_disk, today = store.read(folder).key, _key_today(folder)
     assert on_disk["defense_version"] == 5 and today["defense_version"] == defense_version("shield") != 5
     assert not same_evaluation(on_disk, today)
     assert same_evaluation({**on_disk, "defense_version": today["defense_version"]}, today)

@@ -73,7 +73,7 @@ def test_shielded_actions_are_safe_for_every_corner_of_the_eps_box(name: str) ->
         safe_truth = truth_test.safe_actions(truth)
         passed = vetoed = 0
         escaped = 0
-        true_rooms = truth_test.rooms(truth)
+        true_rooms = truth_test.rooms(truth, top=True)
         for _ in range(8):
             seen = truth.copy()  # every row, the ego's too (its lateral position picks the lanes)
             seen[:, :, 1:] += rng.choice([-eps, eps], size=(len(truth), 5, 4)).astype(np.float32)
@@ -127,7 +127,7 @@ def test_faster_is_tested_at_the_speed_it_reaches() -> None:
         assert shield.safe(obs)[:, FASTER].tolist() == [False, not eps]      # at eps 0.05 the 100 m gap is 10 m less
         final = shield.decide(obs[:1], np.array([FASTER]))[0]              # the rules' choice instead
         assert final != FASTER and shield.safe(obs[:1])[0, final]
-    assert ObservationRules(preset).rooms(obs)["own_top"][0] == pytest.approx(-10.7, abs=0.1)
+    assert ObservationRules(preset).rooms(obs, top=True)["own_top"][0] == pytest.approx(-10.7, abs=0.1)
 
 
 def test_the_fallback_is_always_safe_and_plain_rules_decisions_are_unchanged() -> None:

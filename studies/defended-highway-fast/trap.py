@@ -14,6 +14,7 @@ drivers are read without it.
 from __future__ import annotations
 
 import argparse
+import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -52,7 +53,8 @@ class Log(gym.Wrapper):
 
 
 def rooms_line(rules: ObservationRules, obs: np.ndarray) -> str:
-    r = rules.rooms(obs[None])
+    # `top` (the FASTER test's room) is v6's; the code of an earlier version (run with PYTHONPATH) has no such flag
+    r = rules.rooms(obs[None], top=True) if "top" in inspect.signature(rules.rooms).parameters else rules.rooms(obs[None])
     keys = ("own", "own_top", "left", "right", "left_blocked", "right_blocked", "moving")
     return "  ".join(f"{k} {r[k][0]:.1f}" if r[k].dtype.kind == "f" else f"{k} {bool(r[k][0])}" for k in keys if k in r)
 

@@ -255,9 +255,7 @@ def bench(policy: str, proto: Protocol, out: Path, *, name: str | None = None, e
     # decides): it reads nothing, so no threat model changes what it does
     compare([BRAKE], [], [], n_clean, brake, workers=workers, progress=progress, seed=proto.seed,
             preset=proto.scenario, envs=envs, claim=False, readable=False)
-    key = resolved.key() if defense is None else f"{resolved.key()}+defense:{defense}" + (
-        f":v{defense_version(defense)}" if defense_version(defense) is not None else "")
-    row = bench_row(name or resolved.label, key, proto, out, n, n_clean, defense=defense)
+    row = bench_row(name or resolved.label, row_key(resolved.key(), defense), proto, out, n, n_clean, defense=defense)
     if trust:
         row["trust_model"] = True
     write_json(out / "row.json", row)
@@ -383,6 +381,27 @@ def _row_cells(row: dict[str, Any], policy: str, defense: str | None, reads: str
         white = row.get("white_box") or WHITE_BOX
         cells += [GridCell(policy, white, e, None, defense, is_white_box(white)) for e in eps]
     return cells
+
+
+DEFENSE_KEY = "+defense:"
+"""What joins a row's policy key and its defense (`row_key`)."""
+
+
+def row_key(policy_key: str, defense: str | None) -> str:
+    """A row's key: the policy's content key, and the defense with the version of its behaviour
+    (`POLICY+defense:NAME:vN`; no version for an unversioned defense)."""
+    if defense is None:
+        return policy_key
+    version = defense_version(defense)
+    return f"{policy_key}{DEFENSE_KEY}{defense}" + (f":v{version}" if version is not None else "")
+
+
+def key_parts(key: str) -> tuple[str, int | None]:
+    """`row_key` read back: the policy's key and the defense version the row ran (None: undefended or
+    unversioned)."""
+    policy, joined, defense = key.partition(DEFENSE_KEY)
+    _, marked, version = defense.rpartition(":v")
+    return policy, int(version) if joined and marked and version.isdigit() else None
 
 
 def _read_json_row(path: Path) -> dict[str, Any]:

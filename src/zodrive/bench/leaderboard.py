@@ -12,7 +12,8 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from zodrive.bench.bench import (BRAKE, PROTOCOLS, ROW_NAME, TRACK_PROTOCOLS, Protocol, brake_folder, brake_margin,
-                                 clean_returns, current_protocols, paired, physical_eps, read_table, row_clean_folder)
+                                 clean_returns, current_protocols, key_parts, paired, physical_eps, read_table,
+                                 row_clean_folder)
 from zodrive.bench.exact_board import exact_cells, exact_headers, exact_notes, read_exact
 from zodrive.bench.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
 from zodrive.bench.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
@@ -295,10 +296,9 @@ def defense_cell(row: dict[str, Any]) -> str:
     defense = row.get("defense")
     if not defense:
         return "–"
-    ran = row["key"].rpartition("+defense:")[2].rpartition(":v")
-    current = defense_version(defense)
-    if ran[1] and current is not None and ran[2] != str(current):
-        return f"{defense} v{ran[2]} (now v{current})"
+    ran, current = key_parts(row["key"])[1], defense_version(defense)
+    if ran is not None and current is not None and ran != current:
+        return f"{defense} v{ran} (now v{current})"
     return str(defense)
 
 
@@ -312,7 +312,7 @@ def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     for row, folder in rows:
         if not row.get("defense"):
             continue
-        match = plain.get((row["protocol"], row["key"].split("+defense:")[0]))
+        match = plain.get((row["protocol"], key_parts(row["key"])[0]))
         if match is None:
             continue
         other, other_folder = match

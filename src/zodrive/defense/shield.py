@@ -114,7 +114,7 @@ class Shield:
         """(B, 5) booleans: the actions safe for every true state within eps of each observation: the
         rules' room test, and for FASTER the own lane's safe gap kept at the speed FASTER reaches
         (the top target speed, from the ego's lowest possible speed; v6)."""
-        r = self.rules.rooms(np.asarray(batch)) if rooms is None else rooms
+        r = self.rules.rooms(np.asarray(batch), top=True) if rooms is None else rooms
         safe = self.rules.safe_actions(np.asarray(batch), r)
         safe[:, FASTER] &= r["own_top"] >= 0
         return safe
@@ -123,7 +123,7 @@ class Shield:
         """Final actions (B,): `proposed` where safe, the robust rules' choice where not."""
         batch = np.asarray(batch)
         proposed = np.asarray(proposed, dtype=np.int64)
-        r = self.rules.rooms(batch)
+        r = self.rules.rooms(batch, top=True)
         ok = self.safe(batch, r)[np.arange(len(batch)), proposed]
         if ok.all():
             return proposed
@@ -137,7 +137,7 @@ class Shield:
         change out of an own lane the test rejects even for IDLE, into a lane it accepts IDLE in
         for every true state (`ObservationRules.escapes`: SLOWER never slows the ego below
         20 m/s, so braking behind a slower car is no refuge); else SLOWER."""
-        r = self.rules.rooms(batch) if rooms is None else rooms  # once: the choice, its test, the escape
+        r = self.rules.rooms(batch, top=True) if rooms is None else rooms  # once: the choice, its test, the escape
         safe = self.safe(batch, r)
         rows = np.arange(len(batch))
         act = self.rules.actions(batch, r)
@@ -153,7 +153,7 @@ class Shield:
         row's max + 1. The argmax is the shielded decision."""
         batch = np.asarray(batch)
         scores = np.asarray(scores, dtype=np.float32)
-        r = self.rules.rooms(batch)  # every query of every attack step goes through here: computed once
+        r = self.rules.rooms(batch, top=True)  # every query of every attack step goes through here: computed once
         safe = self.safe(batch, r)
         rows = np.arange(len(scores))
         proposed = scores.argmax(axis=-1)

@@ -106,12 +106,13 @@ class ObservationRules:
         self.slack = eps * self.scale  # [physical units] how far each observed feature may be from the truth
         self.top_speed = top_speed(preset)
 
-    def rooms(self, batch: np.ndarray) -> dict[str, np.ndarray]:
+    def rooms(self, batch: np.ndarray, *, top: bool = False) -> dict[str, np.ndarray]:
         """Per observation (B, V, 5): each lane's room ahead beyond the safe gap [m] (own, left,
         right and the lanes beyond those; -inf where the lane does not exist), whether a vehicle
         may be beside the ego there, whether the ego is centred and whether it may be
-        mid-change; and `own_top`, the own lane's room at the top target speed, which FASTER
-        reaches (the shield's FASTER test); pessimistic within eps."""
+        mid-change; with `top`, also `own_top`, the own lane's room at the top target speed, which
+        FASTER reaches (the shield's FASTER test; the rules' own choices do not read it, so their
+        queries skip it); pessimistic within eps."""
         x = np.asarray(batch, dtype=np.float64) * self.scale  # physical units
         ego, others = x[:, 0], x[:, 1:]
         present = others[:, :, 0] > 0.5
@@ -136,21 +137,19 @@ class ObservationRules:
             nearest = np.where(ahead, dx[:, None, :], np.inf).argmin(axis=2)
             value = np.take_along_axis(gaps, nearest[:, :, None], axis=2)[:, :, 0]
         beside = (within & (np.abs(dx) < BESIDE + sx)[:, None, :]).any(axis=2)  # (see the module docstring)
-        # the own lane's room at the speed FASTER reaches (the top target speed) from the ego's lowest
-        # possible speed: its closing speed on each vehicle grows by the difference
-        reach = np.maximum(self.top_speed - np.maximum(ego[:, 3] - svx, 0.0), 0.0)
-        safe_top = desired_gap(max(self.top_speed, ASSUMED_SPEED), closing + reach[:, None], self.headway)
-        gaps_top = np.where(ahead[:, 0], dx - sx - CAR_LENGTH - safe_top, np.inf)
-        if self.eps > 0:
-            top = gaps_top.min(axis=1)
-        else:
-            top = np.take_along_axis(gaps_top, nearest[:, :1], axis=1)[:, 0]
 
         def exists(offset: int) -> np.ndarray:
             return (lane + offset >= 0) & (lane + offset <= self.lanes - 1)
 
-        out: dict[str, np.ndarray] = {"own": np.where(exists(0), value[:, 0], -np.inf),
-                                      "own_top": np.where(exists(0), top, -np.inf)}
+        out: dict[str, np.ndarray] = {"own": np.where(exists(0), value[:, 0], -np.inf)}
+        if top:  # the own lane's room at the speed FASTER reaches (the top target speed) from the ego's lowest
+            # possible speed: its closing speed on each vehicle grows by the difference
+            reach = np.maximum(self.top_speed - np.maximum(ego[:, 3] - svx, 0.0), 0.0)
+            safe_top = desired_gap(max(self.top_speed, ASSUMED_SPEED), closing + reach[:, None], self.headway)
+            gaps_top = np.where(ahead[:, 0], dx - sx - CAR_LENGTH - safe_top, np.inf)
+            own_top = (gaps_top.min(axis=1) if self.eps > 0
+                       else np.take_along_axis(gaps_top, nearest[:, :1], axis=1)[:, 0])
+            out["own_top"] = np.where(exists(0), own_top, -np.inf)
         for side, sign, near, beyond in (("left", -1, 1, 3), ("right", +1, 2, 4)):
             out[side] = np.where(exists(sign), value[:, near], -np.inf)
             out[f"{side}_blocked"] = beside[:, near] | ~exists(sign)

@@ -155,6 +155,13 @@ ACTING_PREFIXES = {"dqn": ("q_net.q_net", "q_net_target.q_net"), "ddpg": ("actor
 ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # every member of a written zip: the earliest date a zip can hold
 
 
+def _torch_bytes(obj: Any) -> bytes:
+    """`obj` as `torch.save` writes it: a zip member's bytes."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
 def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: str = "dqn") -> None:
     """The source's SB3 zip with its acting network's (and target network's) weights replaced:
     the Q-network of a DQN, the actor of a DDPG/TD3 (whose critic and optimizer states stay
@@ -172,17 +179,13 @@ def _write_zip(source: Path, student: torch.nn.Sequential, target: Path, algo: s
         for index, layer in zip(indices, layers):
             weights[f"{prefix}.{index}.weight"] = layer.weight.detach().clone()
             weights[f"{prefix}.{index}.bias"] = layer.bias.detach().clone()
-    buf = io.BytesIO()
-    torch.save(weights, buf)
-    members["policy.pth"] = buf.getvalue()
+    members["policy.pth"] = _torch_bytes(weights)
     if algo == "dqn" and "policy.optimizer.pth" in members:
         # the teacher's Adam moments belong to its weights, not the student's: keep the optimizer's settings
         # (SB3's loader needs the member) with no moments, as a freshly built optimizer has
         optimizer = torch.load(io.BytesIO(members["policy.optimizer.pth"]), map_location="cpu", weights_only=True)
         optimizer["state"] = {}
-        buf = io.BytesIO()
-        torch.save(optimizer, buf)
-        members["policy.optimizer.pth"] = buf.getvalue()
+        members["policy.optimizer.pth"] = _torch_bytes(optimizer)
     tmp = target.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for name, data in members.items():  # a fixed date: the same seed gives the same SHA-256
