@@ -21,7 +21,6 @@ folder name or a label of its own making); the leaderboard reads the rows (`zodr
 from __future__ import annotations
 
 import json
-import re
 import sys
 import time
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from zodrive.bench.row import read_row
 from zodrive.bench.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
                                   threat_fields)
 from zodrive.defense import defense_version
@@ -148,10 +148,6 @@ TABLE = "table.json"
 made from its cells (`read_table`, `pack_table`)."""
 CLEAN_FOLDER, BRAKE_FOLDER = "clean", "brake"
 """A row's grid of more clean episodes (`clean_folder`) and the brake's grid (`brake_folder`): one clean cell each."""
-
-ROW_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+@=-]{0,99}")
-"""A row's name: one folder name that a Markdown table and a plot legend show as it is (no `|`, no newline)."""
-
 
 def row_folder(board: Path, scenario: str, name: str, track: str = DENSE) -> Path:
     """Where a bench row lives: BOARD/SCENARIO/NAME on the dense track, BOARD/SCENARIO/tracks/TRACK/NAME on another."""
@@ -327,7 +323,7 @@ def cells_table(out: Path) -> list[dict[str, Any]]:
     policy, reads = _grid_policy(cleans[0].name, clean.get("model"), defense)
     row: dict[str, Any] | None = None
     if (out / "row.json").is_file():
-        row = _read_json_row(out / "row.json")
+        row = read_row(out / "row.json")
         cells = _row_cells(row, policy, defense, reads)
     elif out.name in (CLEAN_FOLDER, BRAKE_FOLDER):
         cells = [GridCell(policy, defense=defense)]
@@ -402,18 +398,6 @@ def key_parts(key: str) -> tuple[str, int | None]:
     policy, joined, defense = key.partition(DEFENSE_KEY)
     _, marked, version = defense.rpartition(":v")
     return policy, int(version) if joined and marked and version.isdigit() else None
-
-
-def _read_json_row(path: Path) -> dict[str, Any]:
-    """A `row.json`, with the fields `_row_cells` reads (the leaderboard checks the rest: `leaderboard.read_row`)."""
-    try:
-        row = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(row, dict) or not isinstance(row["protocol"], str) or not isinstance(row["episodes"], int) \
-                or not all(isinstance(p["eps"], (int, float)) for p in row["attacked"]):
-            raise TypeError
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError):
-        raise ZodriveError(f"{path} is not a bench row (damaged): run its bench again") from None
-    return row
 
 
 def pack_table(out: Path) -> str:

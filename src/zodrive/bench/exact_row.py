@@ -14,7 +14,7 @@ from typing import Any
 
 from zodrive.bench.bench import BLACK_BOX
 from zodrive.bench.exact_board import EXACT_FILE
-from zodrive.bench.leaderboard import read_row
+from zodrive.bench.row import read_row
 from zodrive.errors import ZodriveError
 from zodrive.runinfo import command_line, write_json
 

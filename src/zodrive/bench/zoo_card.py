@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 from zodrive.bench.bench import row_folder
 from zodrive.bench.exact_board import read_exact, why_not_shown
-from zodrive.bench.leaderboard import read_row
+from zodrive.bench.row import read_row
 from zodrive.drivers.baselines import get_baseline
 from zodrive.experiments.card import load_record
 from zodrive.runinfo import sha256

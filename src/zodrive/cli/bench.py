@@ -54,7 +54,8 @@ def add_parsers(sub: Any) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
-    from zodrive.bench.bench import ROW_NAME, bench, protocol, row_folder
+    from zodrive.bench.bench import bench, protocol, row_folder
+    from zodrive.bench.row import ROW_NAME
     from zodrive.bench.leaderboard import write_leaderboard
     from zodrive.policies.policy import resolve
 
