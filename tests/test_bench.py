@@ -476,13 +476,19 @@ def test_a_defended_row_is_read_against_its_policy_undefended(tmp_path: Path) ->
     plain = row("m", "sha256:a", None, [10, 10, 12, 12], [2, 2, 4, 4])
     guarded = row("m+smooth", "sha256:a+defense:smooth@0.05:v1", "smooth@0.05", [9, 10, 11, 12], [8, 9, 8, 9])
     other = row("o+smooth", "sha256:b+defense:smooth@0.05:v1", "smooth@0.05", [1, 1, 1, 1], [1, 1, 1, 1])
-    defense_margins([plain, guarded, other])
+    older = row("q", "sha256:c", None, [1, 1, 1, 1], [1, 1, 1, 1])
+    older[0]["protocol"] = "p-v0"  # its policy undefended, but under an earlier protocol: no pair, said so
+    newer = row("q+smooth", "sha256:c+defense:smooth@0.05:v1", "smooth@0.05", [1, 1, 1, 1], [1, 1, 1, 1])
+    defense_margins([plain, guarded, other, older, newer])
     m = guarded[0]["vs_undefended"]
     assert m["policy"] == "m" and m["clean"][0] == pytest.approx(-0.5) and m["attacked"][0] == pytest.approx(5.5)
     assert m["clean"][1] <= -0.5 <= m["clean"][2]
-    assert "vs_undefended" not in other[0] and "vs_undefended" not in plain[0]  # no undefended row of its policy
-    text = "\n".join(_defended([plain[0], guarded[0], other[0]]))
+    assert "vs_undefended" not in plain[0]
+    assert other[0]["vs_undefended"]["policy"] is None and other[0]["vs_undefended"]["clean"] is None
+    text = "\n".join(_defended([plain[0], guarded[0], other[0], newer[0]]))
     assert "| m+smooth | smooth@0.05 | m | -0.50 (" in text and "+5.50 (" in text
+    assert "| o+smooth | smooth@0.05 | – (no row of this policy undefended) | – | – |" in text
+    assert "| q+smooth | smooth@0.05 | – (q ran p-v0: bench it again to pair) | – | – |" in text
 
 
 def test_the_frontier_joins_the_rows_no_other_beats_on_both() -> None:

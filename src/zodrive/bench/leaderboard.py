@@ -167,7 +167,8 @@ def _defended(group: list[dict[str, Any]]) -> list[str]:
              "", f"| Row | Defense | Undefended row | Clean Δ | ε {eps:g} Δ |", "|---|---|---|---|---|"]
     for r in pairs:
         m = r["vs_undefended"]
-        lines.append(f"| {r['policy']} | {r['defense']} | {m['policy']} | {diff(m['clean'])} | {diff(m['attacked'])} |")
+        undefended = m["policy"] or f"– ({m['why']})"
+        lines.append(f"| {r['policy']} | {r['defense']} | {undefended} | {diff(m['clean'])} | {diff(m['attacked'])} |")
     return lines + [""]
 
 
@@ -252,11 +253,18 @@ def defense_margins(rows: list[tuple[dict[str, Any], Path]]) -> None:
     episodes), each paired on the same seeds with its bootstrap 95% CI. What a defense costs clean and what
     it buys under attack, read on one board."""
     plain = {(row["protocol"], row["key"]): (row, folder) for row, folder in rows if not row.get("defense")}
+    elsewhere = {row["key"]: row for row, _ in rows if not row.get("defense")}
     for row, folder in rows:
         if not row.get("defense"):
             continue
-        match = plain.get((row["protocol"], key_parts(row["key"])[0]))
-        if match is None:
+        policy_key = key_parts(row["key"])[0]
+        match = plain.get((row["protocol"], policy_key))
+        if match is None:  # said in the table, never left out silently
+            other_row = elsewhere.get(policy_key)
+            row["vs_undefended"] = {
+                "policy": None, "clean": None, "attacked": None, "eps": row["attacked"][-1]["eps"],
+                "why": (f"{other_row['policy']} ran {other_row['protocol']}: bench it again to pair" if other_row
+                        else "no row of this policy undefended")}
             continue
         other, other_folder = match
         row["vs_undefended"] = {
