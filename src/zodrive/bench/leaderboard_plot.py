@@ -60,6 +60,22 @@ def hash_slot(name: str, n: int) -> int:
     return zlib.crc32(name.encode()) % n
 
 
+PANELS_PER_LINE = 4
+"""A board's plots put at most this many tables side by side, so that a panel stays readable as tables are added."""
+
+
+def _panels(plt: Any, n: int, width: float, height: float) -> tuple[Any, list[Any]]:
+    """A figure of `n` panels of `width` x `height` inches, at most `PANELS_PER_LINE` to a line; the grid's
+    unused panels are hidden."""
+    cols = min(n, PANELS_PER_LINE)
+    lines = -(-n // cols)
+    fig, grid = plt.subplots(lines, cols, figsize=(width * cols, height * lines), squeeze=False)
+    axes = list(grid.flat)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes[:n]
+
+
 def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     """Return against ε per scenario (worst black-box attack), one line per row, a colour per family that
     stays when rows are added; unofficial rows dotted and faded, named so in the legend."""
@@ -68,9 +84,9 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
     plt = headless_pyplot()
     shown = rows
     protocols = sorted({r["protocol"] for r in shown})  # one panel per table of the leaderboard
-    fig, axes = plt.subplots(1, len(protocols), figsize=(4.2 * len(protocols), 5.6), squeeze=False)
+    fig, axes = _panels(plt, len(protocols), 4.2, 7.4)
     palette = plt.get_cmap("tab20")
-    for ax, name in zip(axes[0], protocols):
+    for ax, name in zip(axes, protocols):
         table = sorted((r for r in shown if r["protocol"] == name), key=lambda r: r["policy"])
         colours = family_colours(sorted({family_and_seed(r["policy"])[0] for r in table if not _constant(r)}))
         for r in table:
@@ -89,7 +105,7 @@ def plot_leaderboard(rows: list[dict[str, Any]], path: Path) -> None:
         ax.set_ylabel("mean episode return\n(worst black-box attack at ≤ ε; ε 0: clean)", fontsize=8)
         ax.legend(fontsize=6, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     fig.suptitle("zodrive leaderboard (dashed grey: constant actions; dotted: unofficial rows)", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / fig.get_figheight()))  # room for the title above the panels
     fig.savefig(path, dpi=120, metadata={"Software": WRITER})
     plt.close(fig)
 
@@ -114,8 +130,8 @@ def plot_frontier(rows: list[dict[str, Any]], path: Path) -> None:
     if not protocols:
         raise ZodriveError("no official bench rows of a current protocol: the frontier compares rows of the "
                            "protocols' episodes")
-    fig, axes = plt.subplots(1, len(protocols), figsize=(4.6 * len(protocols), 4.6), squeeze=False)
-    for ax, name in zip(axes[0], protocols):
+    fig, axes = _panels(plt, len(protocols), 4.6, 4.6)
+    for ax, name in zip(axes, protocols):
         table = sorted((r for r in official if r["protocol"] == name), key=lambda r: r["policy"])
         points = [(r["clean"]["return"], r["attacked"][-1]["return"]) for r in table]
         for r, (x, y) in zip(table, points):
@@ -129,6 +145,6 @@ def plot_frontier(rows: list[dict[str, Any]], path: Path) -> None:
         ax.set_ylabel(f"return at ε {table[0]['attacked'][-1]['eps']:g}\n(worst black-box attack)", fontsize=8)
     fig.suptitle("zodrive frontier: clean against attacked (squares: defended; grey: constant actions; "
                  "line: no row beats these on both)", fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / fig.get_figheight()))  # room for the title above the panels
     fig.savefig(path, dpi=130, metadata={"Software": WRITER})
     plt.close(fig)
