@@ -180,8 +180,11 @@ def _bench_grid(board: Path) -> dict[Path, str]:
             write_json(folder / "summary.json", summary)
             rows.append(table_row(cell.entry(reads), summary))
         write_tables(rows, out, readable=False)
-    write_json(row / "row.json", {"protocol": "highway-fast-v4", "episodes": 3, "clean_episodes": 5,
-                                  "query_budget": QUERY_CAP, "attacked": [{"eps": e, "pgd_return": 1.0} for e in eps]})
+    write_json(row / "row.json", {  # a whole row: the bench reads it through the one row reader (bench/row.py)
+        "protocol": "highway-fast-v4", "official": True, "policy": "m", "scenario": "highway-fast", "episodes": 3,
+        "clean_episodes": 5, "query_budget": QUERY_CAP, "robustness_area": None, "eps_collisions_pass_brake": None,
+        "clean": {"return": 1.0, "collision_rate": 0.0, "ci95": [1.0, 1.0], "speed": 20.0},
+        "attacked": [{"eps": e, "return": 1.0, "collision_rate": 0.0, "pgd_return": 1.0} for e in eps]})
     assert len(store.pack_tree(board)) == 3
     return {out / "table.json": (out / "table.json").read_text() for out in grids}
 
