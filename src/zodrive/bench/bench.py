@@ -29,10 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from zodrive.bench.row import read_row
+from zodrive.bench.row import read_row, row_key
 from zodrive.bench.tracks import (DENSE, TRACK_SCENARIOS, TRACKS, TRACKS_FOLDER, is_dense, share_clean,
                                   threat_fields)
-from zodrive.defense import defense_version
 from zodrive.drivers.baselines import PREFIX, get_baseline, is_baseline
 from zodrive.envs import load_preset, scenario
 from zodrive.errors import ZodriveError
@@ -377,27 +376,6 @@ def _row_cells(row: dict[str, Any], policy: str, defense: str | None, reads: str
         white = row.get("white_box") or WHITE_BOX
         cells += [GridCell(policy, white, e, None, defense, is_white_box(white)) for e in eps]
     return cells
-
-
-DEFENSE_KEY = "+defense:"
-"""What joins a row's policy key and its defense (`row_key`)."""
-
-
-def row_key(policy_key: str, defense: str | None) -> str:
-    """A row's key: the policy's content key, and the defense with the version of its behaviour
-    (`POLICY+defense:NAME:vN`; no version for an unversioned defense)."""
-    if defense is None:
-        return policy_key
-    version = defense_version(defense)
-    return f"{policy_key}{DEFENSE_KEY}{defense}" + (f":v{version}" if version is not None else "")
-
-
-def key_parts(key: str) -> tuple[str, int | None]:
-    """`row_key` read back: the policy's key and the defense version the row ran (None: undefended or
-    unversioned)."""
-    policy, joined, defense = key.partition(DEFENSE_KEY)
-    _, marked, version = defense.rpartition(":v")
-    return policy, int(version) if joined and marked and version.isdigit() else None
 
 
 def pack_table(out: Path) -> str:

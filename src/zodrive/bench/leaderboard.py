@@ -9,13 +9,12 @@ import json
 from pathlib import Path
 from typing import Any
 
-
 from zodrive.bench.bench import (BRAKE, PROTOCOLS, TRACK_PROTOCOLS, Protocol, brake_folder, brake_margin,
-                                 clean_returns, current_protocols, key_parts, paired, physical_eps, read_table,
+                                 clean_returns, current_protocols, paired, physical_eps, read_table,
                                  row_clean_folder)
 from zodrive.bench.exact_board import exact_cells, exact_headers, exact_notes, read_exact
 from zodrive.bench.leaderboard_plot import WRITER, plot_frontier, plot_leaderboard
-from zodrive.bench.row import read_row
+from zodrive.bench.row import key_parts, read_row
 from zodrive.bench.tracks import DENSE, TRACKS, TRACKS_FOLDER, is_dense
 from zodrive.defense import defense_version
 from zodrive.drivers.baselines import BASELINES, PREFIX

@@ -1,6 +1,7 @@
-"""A bench row's file, `row.json`: its name's pattern, the fields its readers need, and the one reader that checks
-them (the bench resuming or packing a row, the leaderboard, the exact columns, the zoo's cards): rows come from
-strangers too, so a file that is not one is one line naming it, never a traceback."""
+"""A bench row's file, `row.json`: its name's pattern, its key (`row_key`, read back by `key_parts`), the fields
+its readers need, and the one reader that checks them (the bench resuming or packing a row, the leaderboard, the
+exact columns, the zoo's cards): rows come from strangers too, so a file that is not one is one line naming it,
+never a traceback."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from zodrive.defense import defense_version
 from zodrive.errors import ZodriveError
 
 ROW_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+@=-]{0,99}")
@@ -35,7 +37,7 @@ class _Clean(BaseModel):
 
 
 class _Row(BaseModel):
-    """What the leaderboard reads of a row, checked before it reads it (rows come from strangers too)."""
+    """What the bench and the leaderboard read of a row, checked before they read it (rows come from strangers too)."""
 
     model_config = ConfigDict(extra="allow")
     protocol: str
@@ -73,3 +75,22 @@ def read_row(path: Path) -> dict[str, Any]:
     return row
 
 
+DEFENSE_KEY = "+defense:"
+"""What joins a row's policy key and its defense (`row_key`)."""
+
+
+def row_key(policy_key: str, defense: str | None) -> str:
+    """A row's key: the policy's content key, and the defense with the version of its behaviour
+    (`POLICY+defense:NAME:vN`; no version for an unversioned defense)."""
+    if defense is None:
+        return policy_key
+    version = defense_version(defense)
+    return f"{policy_key}{DEFENSE_KEY}{defense}" + (f":v{version}" if version is not None else "")
+
+
+def key_parts(key: str) -> tuple[str, int | None]:
+    """`row_key` read back: the policy's key and the defense version the row ran (None: undefended or
+    unversioned)."""
+    policy, joined, defense = key.partition(DEFENSE_KEY)
+    _, marked, version = defense.rpartition(":v")
+    return policy, int(version) if joined and marked and version.isdigit() else None

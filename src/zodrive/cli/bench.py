@@ -55,8 +55,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     import time
 
     from zodrive.bench.bench import bench, protocol, row_folder
-    from zodrive.bench.row import ROW_NAME
     from zodrive.bench.leaderboard import write_leaderboard
+    from zodrive.bench.row import ROW_NAME
     from zodrive.policies.policy import resolve
 
     proto = protocol(args.scenario, args.track)
