@@ -12,7 +12,7 @@ from zodrive.attacks.victim import Victim
 from zodrive.defense import keeps_state, make_defense, parse_defense
 from zodrive.defense.randomized import ALPHA, Smoothing
 from zodrive.defense.temporal import TemporalMedian
-from zodrive.defense.wrappers import defended_victim
+from zodrive.defense.wrappers import RowFilters, defended_victim
 from zodrive.envs import load_preset
 from zodrive.errors import ZodriveError
 
@@ -172,6 +172,31 @@ def test_the_attacker_queries_the_smoothed_observation() -> None:
     jumped[1, 1] += 0.05
     defended_victim(Victim(query=query, kind="discrete", obs_shape=(5, 5)), filt).query(jumped[None])
     assert seen[0][0, 1, 1] == pytest.approx(_moved(scene, 2, filt)[1, 1], abs=1e-6)
+
+
+def test_rows_side_by_side_each_see_their_own_episode() -> None:
+    """Lockstep's `RowFilters`: each row's queries through its own filter, as that filter alone would show
+    them; a row that starts again forgets its episode; dropped rows take their filters with them."""
+    rows = RowFilters(lambda: TemporalMedian(FAST, 3))
+    scene = _scene()
+    other = scene.copy()
+    other[1, 1] += 0.03
+    for row, first in enumerate((scene, other)):
+        rows.start(row)
+        rows.receive(row, first)
+    alone = [TemporalMedian(FAST, 3), TemporalMedian(FAST, 3)]
+    alone[0].reset(scene)
+    alone[1].reset(other)
+    queries = np.stack([_moved(scene, 1, alone[0]), _moved(other, 1, alone[1]), _moved(scene, 1, alone[0]) + 0.01])
+    owners = np.array([1, 0, 0])
+    seen = rows.peek(queries, owners)
+    for q, row in enumerate(owners):
+        np.testing.assert_array_equal(seen[q], alone[row].peek(queries[q:q + 1])[0])
+    assert not np.array_equal(seen[0], rows.peek(queries[:1], np.array([0]))[0])  # another row, another history
+    rows.start(0)  # a new episode on row 0: nothing to compare with
+    np.testing.assert_array_equal(rows.peek(queries[:1], np.array([0])), queries[:1])
+    rows.keep_rows(np.array([1]))
+    np.testing.assert_array_equal(rows.peek(queries[:1], np.array([0])), seen[:1])  # row 1 is row 0 now
 
 
 def test_temporal_smoothing_refuses_what_it_cannot_follow() -> None:

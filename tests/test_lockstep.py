@@ -41,6 +41,11 @@ CASES = [("dqn-driver", "discrete", name) for name in available("attacks")] + [
     ("ddpg-driver", "continuous", "pgd", "norm=l2", "eps=0.3"),
     ("dqn-driver", "discrete", "random-search", "eps=0.05", "defense=shield@0.05"),  # a stateless defense
     ("dqn-driver", "discrete", "pgd", "defense=shield@0.02"),
+    # stateful defenses: one filter per row, each row's queries through its own (RowFilters)
+    ("zoo/highway-fast-dqn/seed-0", "highway-fast", "random-search-smooth", "eps=0.05", "defense=temporal@3"),
+    ("dqn-driver", "discrete", "zo-signsgd", "warm_start=true", "defense=kinematic"),
+    ("dqn-driver", "discrete", "pgd", "defense=temporal@3"),  # BPDA through the front
+    ("ddpg-driver", "continuous", "random-search", "defense=kinematic"),
 ]
 
 

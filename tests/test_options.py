@@ -67,8 +67,8 @@ def _error(capsys, args: list[str]) -> str:
     (["robust-train", DQN, "--method", "at", "--dagger", "2", "--eps", "0.1", "--steps", "5", "--out", "{tmp}/r"],
      "--dagger has no effect with --method at"),
     # lockstep and the default attack's switches (issue 21)
-    (["evaluate", DQN, "--attack", "zo-signsgd", "--defense", "kinematic", "--envs", "4"],
-     "cannot run side by side here (the kinematic defense keeps its own state"),
+    (["evaluate", DQN, "--attack", "zo-signsgd", "--attack-share", "0.5", "--envs", "4"],
+     "cannot run side by side here (a frequency budget decides an episode's steps one by one"),
     (["evaluate", "baseline:idm-mobil", "--envs", "2"], "reads its own simulator"),
     (["evaluate", DQN, "--envs", "0"], "--envs"),
     (["evaluate", DQN, "--attack", "zo-signsgd", "--patience", "3", "--no-patience"], "contradict each other"),

@@ -29,6 +29,16 @@ def test_a_meaningless_option_is_refused(args: list[str], says: str, tmp_path: P
     assert says in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("defense", ["shield", "temporal", "smooth@0.02"])
+def test_a_defense_before_a_constant_action_is_refused_before_any_folder(defense: str, tmp_path: Path,
+                                                                          capsys) -> None:
+    """Side by side (two episodes, so lockstep) as one at a time: refused where the job is made."""
+    out = tmp_path / "out"
+    assert main(["evaluate", "baseline:slower", "--preset", "highway-fast", "--defense", defense, "--episodes", "2",
+                 "--out", str(out), "--no-progress"]) == 2
+    assert "changes nothing" in capsys.readouterr().err and not out.exists()
+
+
 def test_sigterm_keeps_what_was_written(tmp_path: Path) -> None:
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "zodrive", "evaluate", "baseline:slower", "--preset", "highway-fast",

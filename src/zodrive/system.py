@@ -23,7 +23,7 @@ from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.spec import AttackSpec, load_attack
 from zodrive.attacks.victim import Victim
 from zodrive.defense import EpisodeFilter, keeps_state, make_defense
-from zodrive.defense.wrappers import FilterWrapper, defended_victim
+from zodrive.defense.wrappers import FilterWrapper, RowFilters, defended_victim
 from zodrive.drivers import baselines as bl
 from zodrive.envs import Scenario, action_kind, attack_context, make_env, n_actions, observation_shape, \
     scenario_of_env
@@ -63,7 +63,8 @@ def referee(result: AttackResult, obs: np.ndarray, oracle: QueryOracle, objectiv
     import torch
 
     n = len(obs)
-    out = oracle.referee(np.concatenate([np.asarray(obs, dtype=np.float32), result.x_adv.astype(np.float32)]))
+    out = oracle.referee(np.concatenate([np.asarray(obs, dtype=np.float32), result.x_adv.astype(np.float32)]),
+                         owners=np.tile(np.arange(n), 2))
     clean, fed = torch.from_numpy(out[:n].astype(np.float32)), torch.from_numpy(out[n:].astype(np.float32))
     result.already = objective.already(clean).numpy()
     result.success = objective.success(fed[:, None], clean)[:, 0].numpy() & ~result.already
@@ -351,9 +352,7 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
     and, with `defense`, in the defense between the (attacked) sensor and the policy; the
     attacker then queries the defended system. `model` is anything `resolve` reads."""
     policy = resolve(model)
-    if defense is not None and policy.reads == "nothing":
-        raise ZodriveError(f"{policy.ref} takes one constant action whatever it observes: the {defense} defense "
-                           "between its sensor and it changes nothing (evaluate it without --defense)")
+    defense_applies(policy, defense)
     if policy.reads_simulator:
         policy.check(preset, attacked=spec is not None)
         if defense is not None:
@@ -377,9 +376,31 @@ def load_policy(model: Policy | str | Any, preset: dict[str, Any], defense: str 
                 trust: bool = False) -> Victim:
     """What drives and what the attacker queries when nothing keeps per-episode state: the
     policy's victim, behind a stateless defense (a shield, smoothing) if one is named."""
-    victim = resolve(model).victim(preset, trust=trust)  # checks that the policy fits the preset
+    policy = resolve(model)
+    defense_applies(policy, defense)
+    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
     if defense is None:
         return victim
     if keeps_state(defense):
         raise ZodriveError(f"the {defense} defense tracks an episode: it wraps the environment (make_policy_env)")
     return make_defense(defense, preset).guard(victim)  # type: ignore[union-attr]
+
+
+def load_policy_rows(model: Policy | str | Any, preset: dict[str, Any], defense: str | None = None, *,
+                     trust: bool = False) -> tuple[Victim, RowFilters | None]:
+    """What drives N episodes side by side: the policy (behind a stateless defense, as `load_policy`),
+    or, for a defense that tracks an episode, the policy alone and one filter per row (`RowFilters`,
+    which `run_lockstep` puts in front of the policy and of the attacker's queries)."""
+    if defense is None or not keeps_state(defense):
+        return load_policy(model, preset, defense, trust=trust), None
+    policy = resolve(model)
+    defense_applies(policy, defense)
+    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
+    return victim, RowFilters(lambda: cast(EpisodeFilter, make_defense(defense, preset)))
+
+
+def defense_applies(policy: Policy, defense: str | None) -> None:
+    """A defense in front of a policy that reads no observation would change nothing: refused, one line."""
+    if defense is not None and policy.reads == "nothing":
+        raise ZodriveError(f"{policy.ref} takes one constant action whatever it observes: the {defense} defense "
+                           "between its sensor and it changes nothing (evaluate it without --defense)")

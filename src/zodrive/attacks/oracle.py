@@ -13,6 +13,8 @@ from zodrive.errors import ZodriveError
 
 Access = Literal["score", "decision"]
 ACCESS = ("score", "decision")
+Front = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(queries, owners) -> what the victim receives for them: row by row, what stands in front of the victim."""
 
 
 def decision_view(victim: Victim) -> Victim:
@@ -60,6 +62,11 @@ class QueryOracle:
     neither a query, nor `gradient`, nor the victim attribute gives an attack the scores. The network's
     calibration copy stays private to the oracle (batch sizes are measured on the scores, a stricter test
     than on the decisions), and its outputs reach no attack.
+
+    `front` (None: nothing) stands between every query and the victim, row by row: in lockstep, a stateful
+    defense keeps one filter per episode row (`zodrive.defense.wrappers.RowFilters`), and each query is seen
+    through the filter of the row it is charged to, as one environment's attacker sees its defended system
+    (`defended_victim`). Gradients pass it by BPDA, as there.
     """
 
     def __init__(self, victim: Victim, query_budget: int | None = None, access: Access = "score") -> None:
@@ -78,6 +85,7 @@ class QueryOracle:
         self.stable_batch: int | None = None  # measured when first needed
         self.calibration_queries = 0
         self.referee_queries = 0
+        self.front: Front | None = None
 
     @property
     def episode_queries(self) -> int:
@@ -140,6 +148,8 @@ class QueryOracle:
         """Send observations (B, *obs) to the victim; query b is charged to row `owners[b]`."""
         owners = self._owners(len(batch), owners)
         self._charge(owners)
+        if self.front is not None:
+            batch = self.front(batch, owners)
         calls = self._calls(owners)
         if len(calls) == 1:
             outputs = np.asarray(self.victim.query(batch))
@@ -153,11 +163,14 @@ class QueryOracle:
         self._count(len(batch))
         return outputs
 
-    def referee(self, batch: np.ndarray) -> np.ndarray:
-        """The HARNESS's look, not an attack's: the victim's outputs on observations (B, *obs), one row per
-        call as the policy acts, to judge a step of an attack that makes no query (`Attack.refereed`: was
-        the target taken on the fed point, and on the clean one?). Called after the attack has returned,
-        its outputs never reach it; counted apart (`referee_queries`), outside every row's budget."""
+    def referee(self, batch: np.ndarray, owners: np.ndarray | None = None) -> np.ndarray:
+        """The HARNESS's look, not an attack's: the victim's outputs on observations (B, *obs) of rows `owners`
+        (default: one each, in order), one row per call as the policy acts, to judge a step of an attack that
+        makes no query (`Attack.refereed`: was the target taken on the fed point, and on the clean one?).
+        Called after the attack has returned, its outputs never reach it; counted apart (`referee_queries`),
+        outside every row's budget."""
+        if self.front is not None:
+            batch = self.front(batch, self._owners(len(batch), owners))
         outputs = np.concatenate([np.asarray(self.victim.query(batch[i:i + 1])) for i in range(len(batch))])
         if not np.all(np.isfinite(outputs)):
             raise ZodriveError("victim returned NaN or infinite outputs (NaN observation?)")
@@ -180,12 +193,15 @@ class QueryOracle:
         owners = self._owners(len(batch), owners)
         self._charge(owners)
         x = torch.tensor(np.asarray(batch, dtype=np.float32), requires_grad=True)
+        fed = x  # BPDA through a front: its value forward, the identity backward
+        if self.front is not None:
+            fed = x + (x.new_tensor(self.front(np.asarray(batch, dtype=np.float32), owners)) - x).detach()
         calls = self._calls(owners)
         if len(calls) == 1:
-            out = self.victim.differentiable(x)
+            out = self.victim.differentiable(fed)
         else:  # each call its own graph (its own kernels), the outputs put back in order
             order = torch.from_numpy(np.argsort(np.concatenate(calls), kind="stable"))
-            out = torch.cat([self.victim.differentiable(x[torch.from_numpy(part)]) for part in calls])[order]
+            out = torch.cat([self.victim.differentiable(fed[torch.from_numpy(part)]) for part in calls])[order]
         loss(out).sum().backward()
         self._count(len(batch))
         assert x.grad is not None  # the outputs are computed from x

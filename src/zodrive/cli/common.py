@@ -163,8 +163,8 @@ def workers_flag(parser: argparse.ArgumentParser, default: int = 1) -> None:
 def envs_flag(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--envs", type=positive_int, default=None,
                         help="episodes each worker runs side by side, attacked in one call per step; the records "
-                             "are the same for every value (default: 8; 1 where the policy keeps state or reads "
-                             "its simulator)")
+                             "are the same for every value (default: 8; 1 under a frequency budget or for a policy "
+                             "that reads its simulator)")
 
 
 def envs_of(args: argparse.Namespace, *jobs: Any) -> int:

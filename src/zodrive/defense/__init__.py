@@ -5,10 +5,10 @@ policy (`guard(victim)` returns it) and episodes run side by side: `shield[@EPS]
 shield that vetoes the policy's action when the pessimistic rules at budget EPS do not find it safe;
 default EPS 0.02; `zodrive.defense.shield`), `close-shield[@EPS]` (the same with `baseline:close-rules`'
 shorter gap) and `smooth@SIGMA` (randomized smoothing: a vote over Gaussian copies;
-`zodrive.defense.randomized`). A stateful one tracks an episode, so it wraps the environment and
-episodes run one at a time: `kinematic` (physics between two decisions; `zodrive.defense.kinematic`)
-and `temporal[@K]` (each row the median of its last K sightings, carried to now;
-`zodrive.defense.temporal`). A stateful defense is an `EpisodeFilter`."""
+`zodrive.defense.randomized`). A stateful one tracks an episode, so it wraps the environment (one
+filter per episode row when episodes run side by side: `wrappers.RowFilters`): `kinematic` (physics
+between two decisions; `zodrive.defense.kinematic`) and `temporal[@K]` (each row the median of its
+last K sightings, carried to now; `zodrive.defense.temporal`). A stateful defense is an `EpisodeFilter`."""
 
 from __future__ import annotations
 
@@ -68,8 +68,8 @@ def parse_defense(name: str) -> str:
 
 
 def keeps_state(name: str) -> bool:
-    """Whether the defense tracks an episode (then it wraps the environment and episodes run one
-    at a time); a stateless one folds into the policy."""
+    """Whether the defense tracks an episode (then it wraps the environment, one filter per episode
+    row); a stateless one folds into the policy."""
     return parse_defense(name).partition("@")[0] in ("kinematic", "temporal")
 
 

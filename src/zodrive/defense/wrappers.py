@@ -1,9 +1,10 @@
 """The stateful defenses in the loop: the defended system as the attacker queries it, and the environment
-wrapper that feeds the policy the filtered observation (any `EpisodeFilter`)."""
+wrapper that feeds the policy the filtered observation (any `EpisodeFilter`); for episodes run side by
+side, one filter per episode row (`RowFilters`)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -49,3 +50,54 @@ class FilterWrapper(gym.ObservationWrapper):
             self._fresh = False
             return self.filt.reset(observation)
         return self.filt.update(observation)
+
+
+class RowFilters:
+    """A stateful defense for N episodes run in lockstep (`zodrive.evaluation.rollout.run_lockstep`): one
+    filter per episode row, each fed that row's (attacked) observations as `FilterWrapper` feeds one
+    environment's, and `peek(queries, owners)` (the oracle's `front`) shows each query through the filter
+    of the row it is charged to, as `defended_victim` does for one environment. So each episode is what it
+    is alone. `make()` builds one filter; the first is built here, so a defense that refuses the scenario
+    says so before any episode runs."""
+
+    def __init__(self, make: Callable[[], EpisodeFilter]) -> None:
+        self.make = make
+        self.filters: list[EpisodeFilter] = [make()]
+        self.fresh: list[bool] = [True]
+        self.rows = 0  # rows in use (the first filter waits for row 0)
+
+    def start(self, row: int) -> None:
+        """Row `row` (an existing one, or the next new one) begins an episode: its filter forgets the last."""
+        if row > self.rows:
+            raise ValueError(f"row {row} of {self.rows}: rows begin in order")
+        if row == self.rows:
+            self.rows += 1
+            if row == len(self.filters):
+                self.filters.append(self.make())
+                self.fresh.append(True)
+        self.filters[row].state = None
+        self.fresh[row] = True
+
+    def receive(self, row: int, obs: np.ndarray) -> np.ndarray:
+        """What the policy of row `row` receives for the observation `obs` it was fed."""
+        if self.fresh[row]:
+            self.fresh[row] = False
+            return self.filters[row].reset(obs)
+        return self.filters[row].update(obs)
+
+    def peek(self, batch: np.ndarray, owners: np.ndarray) -> np.ndarray:
+        """Queries (B, *obs) charged to rows `owners`, each seen through its row's filter (states unchanged)."""
+        out: np.ndarray | None = None
+        for row in np.unique(owners):
+            where = np.flatnonzero(owners == row)
+            seen = np.asarray(self.filters[int(row)].peek(batch[where]))
+            if out is None:
+                out = np.empty((len(batch), *seen.shape[1:]), dtype=seen.dtype)
+            out[where] = seen
+        return batch.copy() if out is None else out
+
+    def keep_rows(self, rows: np.ndarray) -> None:
+        """Only `rows` go on, renumbered in order (their episodes ended with none waiting)."""
+        self.filters = [self.filters[int(r)] for r in rows]
+        self.fresh = [self.fresh[int(r)] for r in rows]
+        self.rows = len(self.filters)

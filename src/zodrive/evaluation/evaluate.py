@@ -26,7 +26,7 @@ from zodrive.attacks.registry import attack_class
 from zodrive.attacks.schema import removed_message, removed_settings, without_removed
 from zodrive.attacks.spec import AttackSpec
 from zodrive.compute import torch_threads
-from zodrive.defense import defense_version, keeps_state, parse_defense
+from zodrive.defense import defense_version, parse_defense
 from zodrive.envs import make_env, scenario
 from zodrive.errors import ZodriveError
 from zodrive.evaluation.report import plural
@@ -36,7 +36,7 @@ from zodrive.policies.policy import Policy, resolve
 from zodrive.runinfo import (LOCK_FILE, command_line, read_json, read_jsonl, run_lock, to_json, versions,
                              write_atomic, write_json)
 from zodrive.seeds import EVAL_SEED
-from zodrive.system import build_attacker, load_policy, make_policy_env
+from zodrive.system import build_attacker, defense_applies, load_policy_rows, make_policy_env
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,7 @@ class EvalJob:
                        else AttackSpec.from_mapping(dict(attack), "the evaluation's attack"))
         self.seed, self.record_steps, self.trust, self.scenario_source = seed, record_steps, trust, scenario_source
         self.defense = None if defense is None else parse_defense(defense)  # one system, one key
+        defense_applies(self.model, self.defense)  # before any folder is written
 
     def key(self) -> dict[str, Any]:
         """What must match for a resumed run to reuse episodes on disk: the policy (a model by
@@ -97,9 +98,8 @@ _WORKER: dict[str, Any] = {}
 
 def lockstep_blocker(job: EvalJob) -> str | None:
     """Why `job`'s episodes cannot run side by side (None: they can). Lockstep needs a
-    policy that reads nothing but the observation and keeps no state between steps."""
-    if job.defense is not None and keeps_state(job.defense):
-        return f"the {job.defense} defense keeps its own state for one episode"
+    policy that reads nothing but the observation and keeps no state between steps (a stateful
+    defense runs one filter per row: `RowFilters`)."""
     if job.attack is not None and job.attack.sparse_in_time:
         return "a frequency budget decides an episode's steps one by one"
     if job.model.reads_simulator:
@@ -114,9 +114,10 @@ def _setup(job: EvalJob, envs: int = 1) -> None:
         victim, env = make_policy_env(job.model, job.preset, job.attack, defense=job.defense, trust=job.trust)
         _WORKER.update(job=job, victim=victim, env=env)
         return
-    victim = load_policy(job.model, job.preset, job.defense, trust=job.trust)  # a defense here keeps no state
+    victim, filters = load_policy_rows(job.model, job.preset, job.defense, trust=job.trust)
     attacker = build_attacker(job.attack, victim, job.preset) if job.attack is not None else None
-    _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker)
+    _WORKER.update(job=job, victim=victim, envs=[make_env(job.preset) for _ in range(envs)], attacker=attacker,
+                   filters=filters)
 
 
 def _release() -> None:
@@ -165,7 +166,7 @@ def _lockstep(indices: list[int], done: Any = None) -> Iterator[tuple[dict[str, 
     tick = _WORKER.get("tick") if done is None else _Ticks(done)
     for record in run_lockstep(_WORKER["envs"], _WORKER["victim"], [(i, job.seed + i) for i in indices],
                                max_return=_max_return(job.preset), attacker=_WORKER["attacker"], on_step=on_step,
-                               on_tick=tick):
+                               on_tick=tick, filters=_WORKER["filters"]):
         item = (record.to_dict(), steps.pop(record.episode))
         if done is not None:
             done.put(item)

@@ -12,6 +12,7 @@ from zodrive.attacks.base import Attack
 from zodrive.attacks.objectives import Objective
 from zodrive.attacks.oracle import QueryOracle
 from zodrive.attacks.victim import Victim
+from zodrive.defense.wrappers import RowFilters
 from zodrive.system import Attacker, AttackWrapper, step_stats
 
 
@@ -206,6 +207,7 @@ def run_lockstep(
     attacker: tuple[Attack, Objective, QueryOracle] | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
     on_tick: Callable[[int], None] | None = None,
+    filters: RowFilters | None = None,
 ) -> Iterator[EpisodeRecord]:
     """Roll out `episodes` ((index, seed) pairs) side by side, one per environment of `envs`;
     an environment whose episode ends starts the next one waiting. Records come out as
@@ -217,15 +219,21 @@ def run_lockstep(
     outputs; the policy acts on each row alone as in `run_episode`. So every episode is,
     bit for bit, what `run_episode` gives for its seed; only the time per step is shared
     (`wall_time` is the step's attack time divided by the rows attacked). The policy must
-    be memoryless and read only the observation (no defense state, no simulator).
+    be memoryless and read only the observation (no simulator); a stateful defense comes as
+    `filters`, one per row: each row's policy receives its own filter's output and the
+    attacker queries each row through it (the oracle's `front`).
     """
     waiting = list(episodes)
     rows: list[tuple[gym.Env, Episode]] = []
     obs: list[np.ndarray] = []
     attack = Attacker(*attacker) if attacker is not None else None
+    if attack is not None and filters is not None:
+        attack.oracle.front = filters.peek  # the attacker queries the defended system, row by row
 
     def start(env: gym.Env, row: int | None) -> None:  # the next waiting episode on `env`
         index, seed = waiting.pop(0)
+        if filters is not None:
+            filters.start(len(rows) if row is None else row)
         first, _ = env.reset(seed=seed)
         tracker = Episode(env, victim, episode=index, seed=seed, max_return=max_return)
         if row is None:
@@ -248,7 +256,8 @@ def run_lockstep(
         ended = []
         for row, (env, tracker) in enumerate(rows):
             pending = None if result is None else step_stats(result, row)
-            action = act(victim, seen[row], env.action_space)
+            fed = seen[row] if filters is None else filters.receive(row, seen[row])
+            action = act(victim, fed, env.action_space)
             tracker.acted(action, pending)
             if pending is not None and on_step is not None:
                 on_step({"episode": tracker.episode, "step": tracker.length, "action": _plain(action), **pending,
@@ -268,6 +277,8 @@ def run_lockstep(
             rows[:], obs[:] = [rows[r] for r in keep], [obs[r] for r in keep]
             if attack is not None:
                 attack.keep_rows(keep)
+            if filters is not None:
+                filters.keep_rows(keep)
 
 
 def left_road(env: gym.Env, terminated: bool, crashed: bool) -> bool:
