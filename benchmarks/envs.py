@@ -19,11 +19,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import subprocess
-import tempfile
 import time
 from pathlib import Path
+
+from alternate import alternate  # benchmarks/alternate.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -52,20 +52,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=1)
     args = parser.parse_args()
-    times: dict[int, list[float]] = {1: [], 8: []}
-    runs = []
-    for _ in range(args.repeats):
-        for envs in (1, 8):
-            out = Path(tempfile.mkdtemp(prefix=f"zodrive-envs{envs}-")) / "run"
-            try:
-                took, records = one(args, envs, out)
-            finally:
-                shutil.rmtree(out.parent, ignore_errors=True)
-            times[envs].append(took)
-            runs.append(records)
-            print(f"envs={envs}: {took:.1f} s", flush=True)
-    med = {e: sorted(t)[len(t) // 2] for e, t in times.items()}
-    same = all(r == runs[0] for r in runs)
+    med, same = alternate((1, 8), lambda envs, folder: one(args, envs, folder / "run"), args.repeats, "envs")
     print(f"envs_1_s={med[1]:.1f} envs_8_s={med[8]:.1f} speedup={med[1] / med[8]:.2f} same_records={same}")
 
 

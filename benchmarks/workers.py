@@ -23,11 +23,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import subprocess
-import tempfile
 import time
 from pathlib import Path
+
+from alternate import alternate  # benchmarks/alternate.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,20 +50,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=1)
     args = parser.parse_args()
-    times: dict[int, list[float]] = {1: [], 2: []}
-    rows = []
-    for _ in range(args.repeats):
-        for workers in (1, 2):
-            board = Path(tempfile.mkdtemp(prefix=f"zodrive-workers{workers}-"))
-            try:
-                took, row = one(args.model, args.scenario, args.episodes, workers, board)
-            finally:
-                shutil.rmtree(board, ignore_errors=True)
-            times[workers].append(took)
-            rows.append(row)
-            print(f"workers={workers}: {took:.1f} s", flush=True)
-    med = {w: sorted(t)[len(t) // 2] for w, t in times.items()}
-    same = all(r == rows[0] for r in rows)
+    med, same = alternate((1, 2), lambda workers, board: one(args.model, args.scenario, args.episodes, workers, board),
+                          args.repeats, "workers")
     print(f"workers_1_s={med[1]:.1f} workers_2_s={med[2]:.1f} speedup={med[1] / med[2]:.2f} same_rows={same}")
 
 

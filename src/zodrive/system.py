@@ -352,7 +352,6 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
     and, with `defense`, in the defense between the (attacked) sensor and the policy; the
     attacker then queries the defended system. `model` is anything `resolve` reads."""
     policy = resolve(model)
-    defense_applies(policy, defense)
     if policy.reads_simulator:
         policy.check(preset, attacked=spec is not None)
         if defense is not None:
@@ -366,7 +365,7 @@ def make_policy_env(model: Policy | str | Any, preset: dict[str, Any], spec: Att
     if defense is None or not keeps_state(defense):
         victim = load_policy(policy, preset, defense, trust=trust)
         return victim, make_attacked_env(preset, victim, spec, render_mode=render_mode, trace=trace)
-    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
+    victim = _own_victim(policy, preset, defense, trust)
     filt = cast(EpisodeFilter, make_defense(defense, preset))  # it keeps state: an EpisodeFilter
     env = make_attacked_env(preset, defended_victim(victim, filt), spec, render_mode=render_mode, trace=trace)
     return victim, FilterWrapper(env, filt)
@@ -376,9 +375,7 @@ def load_policy(model: Policy | str | Any, preset: dict[str, Any], defense: str 
                 trust: bool = False) -> Victim:
     """What drives and what the attacker queries when nothing keeps per-episode state: the
     policy's victim, behind a stateless defense (a shield, smoothing) if one is named."""
-    policy = resolve(model)
-    defense_applies(policy, defense)
-    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
+    victim = _own_victim(model, preset, defense, trust)
     if defense is None:
         return victim
     if keeps_state(defense):
@@ -393,10 +390,16 @@ def load_policy_rows(model: Policy | str | Any, preset: dict[str, Any], defense:
     which `run_lockstep` puts in front of the policy and of the attacker's queries)."""
     if defense is None or not keeps_state(defense):
         return load_policy(model, preset, defense, trust=trust), None
+    return _own_victim(model, preset, defense, trust), RowFilters(lambda: cast(EpisodeFilter,
+                                                                                make_defense(defense, preset)))
+
+
+def _own_victim(model: Policy | str | Any, preset: dict[str, Any], defense: str | None, trust: bool) -> Victim:
+    """The policy's own victim, before any defense: refused in one line where `defense` would stand in front of
+    a policy that reads no observation (`defense_applies`); `Policy.victim` checks that it fits the preset."""
     policy = resolve(model)
     defense_applies(policy, defense)
-    victim = policy.victim(preset, trust=trust)  # checks that the policy fits the preset
-    return victim, RowFilters(lambda: cast(EpisodeFilter, make_defense(defense, preset)))
+    return policy.victim(preset, trust=trust)
 
 
 def defense_applies(policy: Policy, defense: str | None) -> None:

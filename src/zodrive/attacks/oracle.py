@@ -192,10 +192,11 @@ class QueryOracle:
                                "(an SB3 model or a torch module)")
         owners = self._owners(len(batch), owners)
         self._charge(owners)
-        x = torch.tensor(np.asarray(batch, dtype=np.float32), requires_grad=True)
+        points = np.asarray(batch, dtype=np.float32)
+        x = torch.tensor(points, requires_grad=True)
         fed = x  # BPDA through a front: its value forward, the identity backward
         if self.front is not None:
-            fed = x + (x.new_tensor(self.front(np.asarray(batch, dtype=np.float32), owners)) - x).detach()
+            fed = x + (x.new_tensor(self.front(points, owners)) - x).detach()
         calls = self._calls(owners)
         if len(calls) == 1:
             out = self.victim.differentiable(fed)

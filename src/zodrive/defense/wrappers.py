@@ -62,19 +62,16 @@ class RowFilters:
 
     def __init__(self, make: Callable[[], EpisodeFilter]) -> None:
         self.make = make
-        self.filters: list[EpisodeFilter] = [make()]
-        self.fresh: list[bool] = [True]
-        self.rows = 0  # rows in use (the first filter waits for row 0)
+        self.spare: EpisodeFilter | None = make()  # the next new row's
+        self.filters: list[EpisodeFilter] = []
+        self.fresh: list[bool] = []
 
     def start(self, row: int) -> None:
         """Row `row` (an existing one, or the next new one) begins an episode: its filter forgets the last."""
-        if row > self.rows:
-            raise ValueError(f"row {row} of {self.rows}: rows begin in order")
-        if row == self.rows:
-            self.rows += 1
-            if row == len(self.filters):
-                self.filters.append(self.make())
-                self.fresh.append(True)
+        if row == len(self.filters):
+            self.filters.append(self.spare if self.spare is not None else self.make())
+            self.fresh.append(True)
+            self.spare = None
         self.filters[row].state = None
         self.fresh[row] = True
 
@@ -100,4 +97,3 @@ class RowFilters:
         """Only `rows` go on, renumbered in order (their episodes ended with none waiting)."""
         self.filters = [self.filters[int(r)] for r in rows]
         self.fresh = [self.fresh[int(r)] for r in rows]
-        self.rows = len(self.filters)
